@@ -1,0 +1,219 @@
+"""What every wire format shares: the sample block it encodes, saturation counting, frame containers.
+
+firmware_protocols knows nothing of scenes or kernels. An encoder takes a `Samples` block (SI units,
+sensor frame, time as integer nanoseconds on whatever time base the caller declares) and returns
+bytes (serial formats) or an array of CAN frames (CAN formats). Wire units live only in the format
+modules.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Iterable
+
+import numpy as np
+
+
+class EncodeError(ValueError):
+    """Input an encoder refuses (non-finite value, missing field); the message names field and sample."""
+
+
+@dataclass
+class Samples:
+    """A block of n IMU samples in SI units, sensor frame.
+
+    time_ns:        (n,) int64, nanoseconds on the caller's time base (since start, or Unix epoch)
+    accel:          (n, 3) specific force, m/s^2
+    gyro:           (n, 3) angular rate, rad/s
+    mag:            (n, 3) magnetic field, gauss                    (optional)
+    quat:           (n, 4) attitude sensor->nav, scalar FIRST (w, x, y, z)   (optional)
+    euler:          (n, 3) roll, pitch, yaw in rad (z-y-x)          (optional)
+    temperature_c:  (n,) degrees Celsius                            (optional)
+    pressure_pa:    (n,) static pressure, pascal                    (optional)
+    delta_theta:    (n, 3) integrated rate over the sample period, rad      (optional)
+    delta_velocity: (n, 3) integrated specific force over the period, m/s   (optional)
+    Formats that need an optional field which is None use a documented default (usually zeros,
+    identity quaternion, 25 degC, 101325 Pa) rather than failing.
+    """
+
+    time_ns: np.ndarray
+    accel: np.ndarray
+    gyro: np.ndarray
+    mag: np.ndarray | None = None
+    quat: np.ndarray | None = None
+    euler: np.ndarray | None = None
+    temperature_c: np.ndarray | None = None
+    pressure_pa: np.ndarray | None = None
+    delta_theta: np.ndarray | None = None
+    delta_velocity: np.ndarray | None = None
+
+    def __post_init__(self):
+        self.time_ns = np.ascontiguousarray(self.time_ns, dtype=np.int64).reshape(-1)
+        n = self.time_ns.shape[0]
+        for name, width in _FIELD_WIDTHS.items():
+            value = getattr(self, name)
+            if value is None:
+                continue
+            arr = np.ascontiguousarray(value, dtype=np.float64)
+            arr = arr.reshape(n) if width == 0 else arr.reshape(n, width)
+            setattr(self, name, arr)
+
+    def __len__(self) -> int:
+        return int(self.time_ns.shape[0])
+
+    @classmethod
+    def single(cls, time_ns: int, accel, gyro, **optional) -> "Samples":
+        """One sample, for the live path: scalars/3-vectors in, a block of one out."""
+        wrapped = {k: (None if v is None else np.asarray(v, dtype=np.float64)[None, ...]) for k, v in optional.items()}
+        return cls(np.array([time_ns], dtype=np.int64), np.asarray(accel, float)[None, :],
+                   np.asarray(gyro, float)[None, :], **wrapped)
+
+    def slice(self, start: int, stop: int) -> "Samples":
+        kw = {name: (None if getattr(self, name) is None else getattr(self, name)[start:stop])
+              for name in _FIELD_WIDTHS}
+        return Samples(self.time_ns[start:stop], **kw)
+
+    def field_or(self, name: str, default) -> np.ndarray:
+        """The named field, or `default` broadcast to the block's shape."""
+        value = getattr(self, name)
+        if value is not None:
+            return value
+        width = _FIELD_WIDTHS[name]
+        shape = (len(self),) if width == 0 else (len(self), width)
+        return np.broadcast_to(np.asarray(default, dtype=np.float64), shape).copy()
+
+    def require_finite(self, names: Iterable[str]) -> None:
+        """Raise EncodeError naming the first non-finite value among the fields an encoder uses."""
+        for name in names:
+            value = getattr(self, name)
+            if value is None:
+                continue
+            bad = ~np.isfinite(value)
+            if bad.any():
+                index = np.argwhere(bad)[0]
+                where = f"sample {index[0]}" + (f", component {index[1]}" if value.ndim == 2 else "")
+                raise EncodeError(f"non-finite value in field '{name}' at {where}")
+
+
+_FIELD_WIDTHS = {
+    "accel": 3, "gyro": 3, "mag": 3, "quat": 4, "euler": 3,
+    "temperature_c": 0, "pressure_pa": 0, "delta_theta": 3, "delta_velocity": 3,
+}
+
+
+@dataclass
+class SaturationStats:
+    """How many values per wire field were clipped to the field's range (never wrapped)."""
+
+    counts: dict = field(default_factory=dict)
+
+    def add(self, field_name: str, count: int) -> None:
+        if count:
+            self.counts[field_name] = self.counts.get(field_name, 0) + int(count)
+
+    @property
+    def total(self) -> int:
+        return sum(self.counts.values())
+
+    def __str__(self) -> str:
+        if not self.counts:
+            return "none"
+        return ", ".join(f"{k}: {v}" for k, v in sorted(self.counts.items()))
+
+
+def saturate(values: np.ndarray, lo: float, hi: float, field_name: str, stats: SaturationStats) -> np.ndarray:
+    """Clip to [lo, hi] (the field's representable range) and count what was clipped."""
+    clipped = np.clip(values, lo, hi)
+    stats.add(field_name, int(np.count_nonzero((values < lo) | (values > hi))))
+    return clipped
+
+
+def to_int_field(values: np.ndarray, scale: float, offset: float, lo: int, hi: int,
+                 field_name: str, stats: SaturationStats, dtype) -> np.ndarray:
+    """SI value -> integer wire value: (value - offset) / scale, ROUNDED to nearest, saturated and counted."""
+    raw = np.rint((np.asarray(values, dtype=np.float64) - offset) / scale)
+    return saturate(raw, lo, hi, field_name, stats).astype(dtype)
+
+
+def to_float16_field(values: np.ndarray, field_name: str, stats: SaturationStats) -> np.ndarray:
+    """SI value -> IEEE half, round to nearest; beyond +-65504 saturates (counted) instead of becoming inf."""
+    limit = 65504.0
+    return saturate(np.asarray(values, dtype=np.float64), -limit, limit, field_name, stats).astype(np.float16)
+
+
+def to_float32_field(values: np.ndarray, field_name: str, stats: SaturationStats) -> np.ndarray:
+    limit = float(np.finfo(np.float32).max)
+    return saturate(np.asarray(values, dtype=np.float64), -limit, limit, field_name, stats).astype(np.float32)
+
+
+# --- containers for what encoders return ------------------------------------------------------
+
+@dataclass
+class SerialBatch:
+    """Packets of n samples in one contiguous buffer; packet i is data[offsets[i]:offsets[i+1]].
+
+    A sample may produce more than one packet (e.g. several messages); offsets are per SAMPLE, so the
+    live path can write everything belonging to sample i at sample i's deadline.
+    """
+
+    data: bytes
+    offsets: np.ndarray  # (n + 1,) int64
+
+    def __len__(self) -> int:
+        return len(self.offsets) - 1
+
+    def packet(self, i: int) -> bytes:
+        return self.data[self.offsets[i]:self.offsets[i + 1]]
+
+
+#: One CAN frame per row. `sample` is the index (within the encoded block) of the sample the frame belongs to.
+CAN_FRAME_DTYPE = np.dtype([
+    ("sample", "<i8"),
+    ("can_id", "<u4"),
+    ("extended", "?"),
+    ("fd", "?"),
+    ("length", "u1"),
+    ("data", "u1", (64,)),
+])
+
+
+def empty_frames(count: int) -> np.ndarray:
+    return np.zeros(count, dtype=CAN_FRAME_DTYPE)
+
+
+def frame_bytes(frame) -> bytes:
+    """The payload of one row of a CAN_FRAME_DTYPE array."""
+    return bytes(frame["data"][: frame["length"]])
+
+
+# --- decoders --------------------------------------------------------------------------------
+
+@dataclass
+class DecoderStats:
+    packets: int = 0          # valid packets yielded
+    skipped_bytes: int = 0    # bytes discarded while hunting for a sync pattern (serial)
+    bad_checksum: int = 0     # candidate packets dropped for a CRC/checksum mismatch
+    ignored_frames: int = 0   # CAN frames not belonging to this format, or incomplete transfers
+
+
+@dataclass
+class Packet:
+    """A decoded packet: `kind` names the message, `fields` holds values converted back to SI units."""
+
+    kind: str
+    fields: dict
+    raw: bytes = b""
+
+
+def can_bits_worst_case(length: int, extended: bool, fd: bool = False) -> int:
+    """Bits on the bus for one frame with worst-case bit stuffing (classic CAN; CAN FD approximated at
+    nominal rate for the whole frame, an upper bound)."""
+    if not fd:
+        # 11-bit: 44 + 8n bits before stuffing (+ 3 IFS); 29-bit: 64 + 8n. Stuffing adds 1 per 4 of the
+        # 34 + 8n (11-bit) or 54 + 8n (29-bit) stuffable bits.
+        header = 64 if extended else 44
+        stuffable = (54 if extended else 34) + 8 * length
+        return header + 8 * length + (stuffable - 1) // 4 + 3
+    crc_bits = 17 if length <= 16 else 21
+    header = 67 if extended else 47
+    stuffable = (header - 20) + 8 * length
+    return header + 8 * length + crc_bits + (stuffable - 1) // 4 + 3
