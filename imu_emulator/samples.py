@@ -1,0 +1,32 @@
+"""What the kernel hands downstream: a block of samples for every IMU of a scene, plain arrays in SI.
+
+Sample k of a run is at t = t0 + k*dt (k an integer, never accumulated). All IMUs of a scene share one
+body motion, so they share k and t; their outputs differ by lever arm and mounting.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class SampleBlock:
+    k0: int                 # index of the first sample in the block
+    t_s: np.ndarray         # (n,) sample times, seconds on the scene's time base (t0 + k*dt)
+    accel: np.ndarray       # (n_imu, n, 3) specific force in each sensor frame, m/s^2
+    gyro: np.ndarray        # (n_imu, n, 3) angular rate of each sensor frame, rad/s
+    quat: np.ndarray        # (n_imu, n, 4) attitude sensor->navigation frame, scalar first (w, x, y, z)
+    truth: dict | None = None   # with truth requested: "position", "velocity" (n, 3) nav frame,
+                                # "euler" (n, 3) roll, pitch, yaw of the body, "omega_body", "alpha_body" (n, 3)
+
+    def __len__(self) -> int:
+        return int(self.t_s.shape[0])
+
+    @property
+    def n_imu(self) -> int:
+        return int(self.accel.shape[0])
+
+    def time_ns(self, offset_ns: int = 0) -> np.ndarray:
+        """Sample times as integer nanoseconds (exact to the ns for any sane t0), plus an offset."""
+        return np.rint(self.t_s * 1e9).astype(np.int64) + np.int64(offset_ns)
