@@ -16,7 +16,8 @@ class SampleBlock:
     t_s: np.ndarray         # (n,) sample times, seconds on the scene's time base (t0 + k*dt)
     accel: np.ndarray       # (n_imu, n, 3) specific force in each sensor frame, m/s^2
     gyro: np.ndarray        # (n_imu, n, 3) angular rate of each sensor frame, rad/s
-    quat: np.ndarray        # (n_imu, n, 4) attitude sensor->navigation frame, scalar first (w, x, y, z)
+    quat: np.ndarray | None # (n_imu, n, 4) attitude sensor->navigation frame, scalar first (w, x, y, z);
+                            # None when the simulation was built without attitude output
     truth: dict | None = None   # with truth requested: "position", "velocity" (n, 3) nav frame,
                                 # "euler" (n, 3) roll, pitch, yaw of the body, "omega_body", "alpha_body" (n, 3)
 

@@ -1,0 +1,5 @@
+import sys
+
+from imu_emulator.cli import main
+
+sys.exit(main())

@@ -1,0 +1,245 @@
+"""Motion of the body's reference point S: turns the scene's trajectory and attitude into the lines of
+kernel source that produce, per sample, position derivatives (s, v, a[, j]) in the navigation frame and
+the attitude with its rates.
+
+Symbolic input: sympy differentiates the expressions exactly, common subexpressions are shared, and the
+result is printed as straight-line code. Sin/cos/tan of an argument linear in t get their phase reduced
+exactly: the phase in cycles is frac(C0 + k*CS) with CS held as a double-double and k*CS formed with an
+error-free product, so t = 1e7 s is as exact as t = 1 s.
+
+Sampled input: derivative arrays are evaluated per block in Python (imu_emulator.derivatives) and the
+kernel reads them.
+
+Variables the generated code defines, per sample:
+    px py pz, vx vy vz, ax ay az (and jx jy jz when the attitude is tangent): navigation frame
+    cr sr cp sp cy sy: cos/sin of roll, pitch, yaw; dr dp dy, ddr ddp ddy: their rates
+    roll pitch yaw (only when `angles` is requested)
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from imu_emulator import expressions
+from imu_emulator.scene import Expressions, SampledData, Scene
+
+AXES = "xyz"
+ANGLES = ("r", "p", "y")       # roll, pitch, yaw suffixes
+TWO_PI = "6.283185307179586"
+
+
+@dataclass
+class MotionCode:
+    lines: list[str]           # straight-line code inside the per-sample loop (4-space relative indent)
+    constants: dict[str, float]  # module-level constants the lines use
+    needs_jerk: bool
+
+
+def _phase_constants(coef, offset, scene: Scene, index: int) -> dict[str, float]:
+    """C0 = frac((A t0 + B) / 2pi), CS = A dt / 2pi as (hi, lo) doubles, hi pre-split for Dekker."""
+    import mpmath
+    import sympy
+    with mpmath.workdps(50):
+        a_cycles = mpmath.mpf(sympy.N(coef / (2 * sympy.pi), 50))
+        b_cycles = mpmath.mpf(sympy.N(offset / (2 * sympy.pi), 50))
+        # dt is 1/rate exactly, not the rounded double, so phase does not drift over long runs.
+        step = a_cycles / mpmath.mpf(scene.rate_hz)
+        start = a_cycles * mpmath.mpf(scene.t0_s) + b_cycles
+        start = start - mpmath.floor(start)
+        hi = float(step)
+        lo = float(step - mpmath.mpf(hi))
+    split = 134217729.0 * hi
+    hi_h = split - (split - hi)
+    return {f"PH{index}_C0": float(start), f"PH{index}_HI": hi, f"PH{index}_HI_H": hi_h,
+            f"PH{index}_HI_L": hi - hi_h, f"PH{index}_LO": lo}
+
+
+def _phase_lines(index: int) -> list[str]:
+    # Exact product k*HI = p + err (Dekker); frac(p) is exact; the small terms are added after.
+    c = f"PH{index}"
+    return [
+        f"_p = kf * {c}_HI",
+        f"_e = ((kh * {c}_HI_H - _p) + kh * {c}_HI_L + kl * {c}_HI_H) + kl * {c}_HI_L",
+        f"_c = (_p - math.floor(_p)) + ((_e + kf * {c}_LO) + {c}_C0)",
+        f"ph{index} = {TWO_PI} * (_c - math.floor(_c))",
+    ]
+
+
+def _reduce_phases(exprs, t, scene: Scene):
+    """Replace trig functions of A*t + B by the same function of a phase variable ph_i."""
+    import sympy
+    slots: dict[tuple, sympy.Symbol] = {}
+    constants: dict[str, float] = {}
+
+    def replace(fn):
+        def inner(arg):
+            coef = sympy.diff(arg, t)
+            if coef.free_symbols or coef == 0:
+                return fn(arg)
+            offset = sympy.simplify(arg - coef * t)
+            if offset.free_symbols:
+                return fn(arg)
+            key = (sympy.srepr(coef), sympy.srepr(offset))
+            if key not in slots:
+                index = len(slots)
+                slots[key] = sympy.Symbol(f"ph{index}", real=True)
+                constants.update(_phase_constants(coef, offset, scene, index))
+            return fn(slots[key])
+        return inner
+
+    out = []
+    for e in exprs:
+        for fn in (sympy.sin, sympy.cos, sympy.tan):
+            e = e.replace(fn, replace(fn))
+        out.append(e)
+    return out, constants, len(slots)
+
+
+def _symbolic(parts: list[tuple[str, object]], scene: Scene) -> MotionCode:
+    """parts: (variable name, sympy expression in t). Returns CSE'd code assigning every name."""
+    import sympy
+    from sympy.printing.pycode import PythonCodePrinter
+
+    t = sympy.Symbol("t", real=True)
+    names = [name for name, _ in parts]
+    exprs = [sympy.sympify(e).replace(sympy.DiracDelta, lambda *a: sympy.Integer(0)) for _, e in parts]
+    exprs, constants, n_phases = _reduce_phases(exprs, t, scene)
+    replacements, reduced = sympy.cse(exprs, symbols=sympy.numbered_symbols("_x"), optimizations="basic")
+    printer = PythonCodePrinter({"fully_qualified_modules": True, "standard": "python3"})
+    lines = []
+    if n_phases:
+        # Split k once for Dekker's product; every phase slot shares it.
+        lines += ["kf = float(k)", "_s = 134217729.0 * kf", "kh = _s - (_s - kf)", "kl = kf - kh"]
+        for i in range(n_phases):
+            lines += _phase_lines(i)
+    for sym, value in replacements:
+        lines.append(f"{sym} = {printer.doprint(value)}")
+    for name, value in zip(names, reduced):
+        code = printer.doprint(value)
+        lines.append(f"{name} = float({code})")
+    return MotionCode(lines=lines, constants=constants, needs_jerk=False)
+
+
+def translational_parts(exprs: Expressions, scene: Scene, order: int):
+    """sympy expressions of s, v, a[, j] for x, y, z."""
+    import sympy
+    t = sympy.Symbol("t", real=True)
+    parts = []
+    for axis, text in zip(AXES, exprs.texts):
+        tree = expressions.check(text, f"trajectory.{axis}", set(scene.params))
+        e = expressions.to_sympy(tree, scene.params, t)
+        for prefix in "pva" + ("j" if order >= 3 else ""):
+            parts.append((f"{prefix}{axis}", e))
+            e = sympy.diff(e, t)
+    return parts
+
+
+def attitude_parts(exprs: Expressions, scene: Scene, angles: bool):
+    """cos/sin of each angle, first and second derivatives; sympy folds constant angles away."""
+    import sympy
+    t = sympy.Symbol("t", real=True)
+    parts = []
+    for suffix, key, text in zip(ANGLES, ("roll", "pitch", "yaw"), exprs.texts):
+        tree = expressions.check(text, f"attitude.{key}", set(scene.params))
+        e = expressions.to_sympy(tree, scene.params, t)
+        d1 = sympy.diff(e, t)
+        parts += [(f"c{suffix}", sympy.cos(e)), (f"s{suffix}", sympy.sin(e)),
+                  (f"d{suffix}", d1), (f"dd{suffix}", sympy.diff(d1, t))]
+        if angles:
+            parts.append(({"r": "roll", "p": "pitch", "y": "yaw"}[suffix], e))
+    return parts
+
+
+def sampled_translational_lines(order: int) -> list[str]:
+    return [f"{prefix}{axis} = mot[{i}, j, {a}]"
+            for i, prefix in enumerate("pvaj"[: order + 1]) for a, axis in enumerate(AXES)]
+
+
+def sampled_attitude_lines(angles: bool) -> list[str]:
+    lines = ["roll = att[0, j, 0]", "pitch = att[0, j, 1]", "yaw = att[0, j, 2]"]
+    for a, (suffix, name) in enumerate(zip(ANGLES, ("roll", "pitch", "yaw"))):
+        lines += [f"c{suffix} = math.cos({name})", f"s{suffix} = math.sin({name})",
+                  f"d{suffix} = att[1, j, {a}]", f"dd{suffix} = att[2, j, {a}]"]
+    return lines
+
+
+def tangent_lines(angles: bool) -> list[str]:
+    """Attitude along the velocity (roll 0), from v, a, j, without trig: cos/sin come from v itself.
+
+    Where |v| vanishes the last defined attitude is held; where v is vertical the last heading is
+    held. The held cos/sin live in `hold` so they carry across blocks.
+    """
+    lines = [
+        "v2 = vx * vx + vy * vy + vz * vz",
+        "h2 = vx * vx + vy * vy",
+        "if v2 > EPS_V2:",
+        "    if h2 > EPS_V2:",
+        "        h = math.sqrt(h2)",
+        "        cy = vx / h",
+        "        sy = vy / h",
+        "        cross = vx * ay - vy * ax",
+        "        hd = (vx * ax + vy * ay) / h",
+        "        dy = cross / h2",
+        "        ddy = (vx * jy - vy * jx) / h2 - 2.0 * cross * (vx * ax + vy * ay) / (h2 * h2)",
+        "        hdd = (ax * ax + ay * ay + vx * jx + vy * jy - hd * hd) / h",
+        "        hold[0] = cy",
+        "        hold[1] = sy",
+        "    else:",
+        "        h = math.sqrt(h2)",
+        "        cy = hold[0]",
+        "        sy = hold[1]",
+        "        hd = 0.0",
+        "        hdd = 0.0",
+        "        dy = 0.0",
+        "        ddy = 0.0",
+        "    speed = math.sqrt(v2)",
+        "    cp = h / speed",
+        "    sp = -vz / speed",
+        # pitch = -atan2(vz, h): differentiate N/D form once and twice
+        "    num = h * az - vz * hd",
+        "    dp = -num / v2",
+        "    ddp = -((h * jz - vz * hdd) * v2 - num * 2.0 * (vz * az + h * hd)) / (v2 * v2)",
+        "    hold[2] = cp",
+        "    hold[3] = sp",
+        "else:",
+        "    cy = hold[0]",
+        "    sy = hold[1]",
+        "    cp = hold[2]",
+        "    sp = hold[3]",
+        "    dy = 0.0",
+        "    ddy = 0.0",
+        "    dp = 0.0",
+        "    ddp = 0.0",
+        "cr = 1.0",
+        "sr = 0.0",
+        "dr = 0.0",
+        "ddr = 0.0",
+    ]
+    if angles:
+        lines += ["roll = 0.0", "pitch = math.atan2(sp, cp)", "yaw = math.atan2(sy, cy)"]
+    return lines
+
+
+def motion_code(scene: Scene, angles: bool) -> MotionCode:
+    """All motion lines for the kernel: translation first (tangent attitude reads v, a, j)."""
+    tangent = scene.attitude_mode == "tangent"
+    order = 3 if tangent else 2
+    symbolic_parts = []
+    lines: list[str] = []
+    if isinstance(scene.trajectory, Expressions):
+        symbolic_parts += translational_parts(scene.trajectory, scene, order)
+    else:
+        lines += sampled_translational_lines(order)
+    attitude_lines: list[str] = []
+    if tangent:
+        attitude_lines = tangent_lines(angles)
+    elif isinstance(scene.attitude, Expressions):
+        symbolic_parts += attitude_parts(scene.attitude, scene, angles)
+    else:
+        assert isinstance(scene.attitude, SampledData)
+        attitude_lines = sampled_attitude_lines(angles)
+    constants: dict[str, float] = {}
+    if symbolic_parts:
+        sym = _symbolic(symbolic_parts, scene)
+        lines = sym.lines + lines
+        constants.update(sym.constants)
+    return MotionCode(lines=lines + attitude_lines, constants=constants, needs_jerk=tangent)

@@ -1,0 +1,334 @@
+"""Scene files (TOML) and scene dicts -> a frozen, validated Scene.
+
+Validation happens once, here; everything downstream trusts the Scene. Errors name the key
+("trajectory.x", "imu[1].lever_arm_m") and the reason.
+"""
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from imu_emulator import expressions
+from imu_emulator.errors import DataError, SceneError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+FRAMES = ("ENU", "NED")
+SHAPES = ("static", "circle")
+ATTITUDE_MODES = ("euler", "tangent", "file")
+DEFAULT_DERIVATIVE = "spline5"
+#: Effects this kernel can compile in. Only those named true in [effects] are simulated.
+EFFECTS = {
+    "gravity": "specific force includes -g (at rest, level, ENU: f = (0, 0, +g))",
+    "lever_arm": "centripetal and Euler terms w x (w x r) + alpha x r for each IMU's lever arm",
+    "mounting": "each IMU's mounting rotation (sensor frame = body frame rotated by mounting_rpy_deg)",
+}
+
+
+@dataclass(frozen=True)
+class Expressions:
+    """Three expressions as validated text (x, y, z or roll, pitch, yaw)."""
+    texts: tuple[str, str, str]
+
+
+@dataclass(frozen=True)
+class SampledData:
+    """Sampled input: time stamps and columns, with the derivative method chosen for them."""
+    t: np.ndarray = field(repr=False)
+    values: np.ndarray = field(repr=False)   # (n, 3)
+    derivative: str
+    source: str                               # file path or "<array>", for messages
+
+
+@dataclass(frozen=True)
+class ImuSpec:
+    name: str
+    lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    mounting_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class Scene:
+    rate_hz: float
+    duration_s: float
+    frame: str
+    gravity_mps2: float
+    t0_s: float
+    params: Mapping[str, float]
+    trajectory: Expressions | SampledData       # position of S, navigation frame, metres
+    attitude_mode: str                           # "euler", "tangent" or "file"
+    attitude: Expressions | SampledData | None   # None in tangent mode
+    initial_heading_rad: float
+    imus: tuple[ImuSpec, ...]
+    effects: frozenset[str]
+    streams: tuple[dict, ...] = ()
+    seed: int | None = None
+    path: str | None = None
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / self.rate_hz
+
+    @property
+    def n_samples(self) -> int:
+        """Samples at t0, t0 + dt, ... up to but excluding t0 + duration (so a looped periodic scene is seamless)."""
+        return max(1, int(round(self.duration_s * self.rate_hz)))
+
+    @property
+    def imu_names(self) -> tuple[str, ...]:
+        return tuple(imu.name for imu in self.imus)
+
+
+# --- helpers that name the key in their errors ------------------------------------------------
+
+def _table(raw: Mapping, key: str, where: str = "") -> dict:
+    value = raw.get(key, {})
+    if not isinstance(value, Mapping):
+        raise SceneError(f"{where}{key}: expected a table, got {type(value).__name__}")
+    return dict(value)
+
+
+def _no_unknown(table: Mapping, allowed: set[str], where: str) -> None:
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        raise SceneError(f"{where}.{unknown[0]}: unknown key (allowed: {', '.join(sorted(allowed))})")
+
+
+def _number(table: Mapping, key: str, where: str, default=None, positive=False, required=False) -> float:
+    if key not in table:
+        if required:
+            raise SceneError(f"{where}.{key}: missing (a number is required)")
+        return default
+    value = table[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise SceneError(f"{where}.{key}: expected a number, got {value!r}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise SceneError(f"{where}.{key}: must be finite, got {value}")
+    if positive and value <= 0:
+        raise SceneError(f"{where}.{key}: must be positive, got {value}")
+    return value
+
+
+def _vector3(table: Mapping, key: str, where: str) -> tuple[float, float, float]:
+    value = table.get(key, [0.0, 0.0, 0.0])
+    if (not isinstance(value, (list, tuple, np.ndarray)) or len(value) != 3
+            or any(isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) for v in value)):
+        raise SceneError(f"{where}.{key}: expected a list of three numbers, got {value!r}")
+    if not all(math.isfinite(float(v)) for v in value):
+        raise SceneError(f"{where}.{key}: values must be finite, got {value!r}")
+    return tuple(float(v) for v in value)
+
+
+def _choice(table: Mapping, key: str, where: str, choices, default):
+    value = table.get(key, default)
+    if value not in choices:
+        raise SceneError(f"{where}.{key}: {value!r} is not one of {', '.join(map(repr, choices))}")
+    return value
+
+
+# --- the parts of a scene --------------------------------------------------------------------
+
+def _params(raw: Mapping) -> dict[str, float]:
+    table = _table(raw, "params")
+    values: dict[str, float] = {}
+    reserved = {"t", *expressions.CONSTANTS, *expressions.FUNCTIONS}
+    for name, value in table.items():
+        where = f"params.{name}"
+        if not name.isidentifier() or name in reserved:
+            raise SceneError(f"{where}: not a usable name (reserved or not an identifier)")
+        if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+            raise SceneError(f"{where}: expected a number or an expression of earlier params, got {value!r}")
+        tree = expressions.check(value, where, set(values))
+        if expressions.uses_time(tree):
+            raise SceneError(f"{where}: params are constants; 't' is not allowed here")
+        values[name] = expressions.evaluate_constant(tree, values, where)
+    return values
+
+
+def _expressions(table: Mapping, keys, where: str, params: Mapping[str, float]) -> Expressions:
+    texts = []
+    for key in keys:
+        text = table.get(key, 0)
+        expressions.check(text, f"{where}.{key}", set(params))
+        texts.append(str(text))
+    return Expressions(tuple(texts))
+
+
+def _shape(table: Mapping, where: str) -> Expressions:
+    """Built-in shapes are written as expressions, so they take exactly the symbolic path."""
+    shape = _choice(table, "shape", where, SHAPES, None)
+    if shape == "static":
+        _no_unknown(table, {"shape", "position_m"}, where)
+        x, y, z = _vector3(table, "position_m", where)
+        return Expressions((repr(x), repr(y), repr(z)))
+    _no_unknown(table, {"shape", "radius_m", "frequency_hz", "height_m", "center_m"}, where)
+    r = _number(table, "radius_m", where, required=True, positive=True)
+    f = _number(table, "frequency_hz", where, required=True)
+    h = _number(table, "height_m", where, default=0.0)
+    cx, cy, cz = _vector3(table, "center_m", where)
+    return Expressions((f"{cx!r} + {r!r}*cos(2*pi*{f!r}*t)", f"{cy!r} + {r!r}*sin(2*pi*{f!r}*t)", repr(cz + h)))
+
+
+def _sampled_from_track(track, columns: str, derivative: str) -> SampledData:
+    values = track.position if columns == "position" else track.euler
+    return SampledData(t=track.t, values=values, derivative=derivative, source=str(track.source))
+
+
+def _check_derivative(name: str, where: str) -> str:
+    from imu_emulator.derivatives import METHODS
+    if name not in METHODS:
+        raise SceneError(f"{where}: unknown derivative method {name!r} (known: {', '.join(METHODS)})")
+    return name
+
+
+def _load_track(table: Mapping, where: str, base_dir: Path):
+    from imu_emulator import trackfile
+    if "file" in table:
+        path = table["file"]
+        if not isinstance(path, str):
+            raise SceneError(f"{where}.file: expected a path string, got {path!r}")
+        full = (base_dir / path) if not Path(path).is_absolute() else Path(path)
+        if not full.exists():
+            raise SceneError(f"{where}.file: no such file: {full}")
+        try:
+            return trackfile.load_track(full)
+        except DataError as exc:
+            raise SceneError(f"{where}.file: {exc}") from None
+    # Arrays given in code (Python API): t, position[, euler]
+    try:
+        return trackfile.track_from_arrays(np.asarray(table["t"], float), np.asarray(table["position"], float),
+                                           None if table.get("euler") is None else np.asarray(table["euler"], float),
+                                           source="<arrays>")
+    except DataError as exc:
+        raise SceneError(f"{where}: {exc}") from None
+
+
+def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | None = None) -> Scene:
+    """Validate a scene given as nested dicts (the parsed TOML, or built in code)."""
+    if not isinstance(raw, Mapping):
+        raise SceneError("scene: expected a table at the top level")
+    _no_unknown(raw, {"scene", "params", "trajectory", "attitude", "imu", "effects", "stream"}, "scene file")
+    base_dir = Path(base_dir)
+    warnings: list[str] = []
+
+    head = _table(raw, "scene")
+    _no_unknown(head, {"rate_hz", "duration_s", "frame", "gravity_mps2", "t0_s", "seed", "name"}, "scene")
+    rate = _number(head, "rate_hz", "scene", required=True, positive=True)
+    frame = _choice(head, "frame", "scene", FRAMES, "ENU")
+    gravity = _number(head, "gravity_mps2", "scene", default=9.80665)
+    seed = head.get("seed")
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int)):
+        raise SceneError(f"scene.seed: expected an integer, got {seed!r}")
+
+    params = _params(raw)
+
+    traj_table = _table(raw, "trajectory")
+    if not traj_table:
+        raise SceneError("trajectory: missing (give x/y/z expressions, a shape, or a file)")
+    track = None
+    if "shape" in traj_table:
+        trajectory = _shape(traj_table, "trajectory")
+    elif "file" in traj_table or "t" in traj_table:
+        _no_unknown(traj_table, {"file", "derivative", "t", "position", "euler"}, "trajectory")
+        derivative = _check_derivative(traj_table.get("derivative", DEFAULT_DERIVATIVE), "trajectory.derivative")
+        track = _load_track(traj_table, "trajectory", base_dir)
+        trajectory = _sampled_from_track(track, "position", derivative)
+    else:
+        _no_unknown(traj_table, {"x", "y", "z"}, "trajectory")
+        trajectory = _expressions(traj_table, ("x", "y", "z"), "trajectory", params)
+
+    att_table = _table(raw, "attitude")
+    mode = _choice(att_table, "mode", "attitude", ATTITUDE_MODES, "euler")
+    heading = math.radians(_number(att_table, "initial_heading_deg", "attitude", default=0.0))
+    if mode == "euler":
+        _no_unknown(att_table, {"mode", "roll", "pitch", "yaw"}, "attitude")
+        attitude = _expressions(att_table, ("roll", "pitch", "yaw"), "attitude", params)
+    elif mode == "tangent":
+        _no_unknown(att_table, {"mode", "initial_heading_deg"}, "attitude")
+        attitude = None
+    else:
+        _no_unknown(att_table, {"mode", "derivative"}, "attitude")
+        if track is None or track.euler is None:
+            raise SceneError("attitude.mode: 'file' needs a trajectory file with roll, pitch, yaw columns")
+        derivative = _check_derivative(att_table.get("derivative", trajectory.derivative), "attitude.derivative")
+        attitude = _sampled_from_track(track, "euler", derivative)
+
+    # Sampled input sets the time span unless the scene says otherwise.
+    if isinstance(trajectory, SampledData):
+        span = float(trajectory.t[-1] - trajectory.t[0])
+        t0 = _number(head, "t0_s", "scene", default=float(trajectory.t[0]))
+        duration = _number(head, "duration_s", "scene", default=span, positive=True)
+        if t0 < trajectory.t[0] or t0 + duration - 1.0 / rate > trajectory.t[-1] + 1e-9:
+            raise SceneError(f"scene.duration_s: {t0}..{t0 + duration} s reaches beyond the data "
+                             f"({trajectory.t[0]}..{trajectory.t[-1]} s in {trajectory.source})")
+    else:
+        t0 = _number(head, "t0_s", "scene", default=0.0)
+        duration = _number(head, "duration_s", "scene", required=True, positive=True)
+
+    effects_table = _table(raw, "effects")
+    for name, value in effects_table.items():
+        if name not in EFFECTS:
+            raise SceneError(f"effects.{name}: unknown effect (known: {', '.join(EFFECTS)})")
+        if not isinstance(value, bool):
+            raise SceneError(f"effects.{name}: expected true or false, got {value!r}")
+    effects = frozenset(name for name, on in effects_table.items() if on)
+
+    imu_list = raw.get("imu", [])
+    if isinstance(imu_list, Mapping):
+        imu_list = [imu_list]
+    if not isinstance(imu_list, list) or not imu_list:
+        raise SceneError("imu: at least one [[imu]] table is required")
+    imus = []
+    for i, table in enumerate(imu_list):
+        where = f"imu[{i}]"
+        if not isinstance(table, Mapping):
+            raise SceneError(f"{where}: expected a table")
+        _no_unknown(table, {"name", "lever_arm_m", "mounting_rpy_deg"}, where)
+        name = table.get("name", f"imu{i}")
+        if not isinstance(name, str) or not name or "," in name:
+            raise SceneError(f"{where}.name: expected a non-empty name without commas, got {name!r}")
+        if name in {imu.name for imu in imus}:
+            raise SceneError(f"{where}.name: {name!r} is used twice")
+        imu = ImuSpec(name, _vector3(table, "lever_arm_m", where), _vector3(table, "mounting_rpy_deg", where))
+        for key, effect in (("lever_arm_m", "lever_arm"), ("mounting_rpy_deg", "mounting")):
+            if any(getattr(imu, key)) and effect not in effects:
+                warnings.append(f"{where}.{key} is ignored because effects.{effect} is not true")
+        imus.append(imu)
+
+    streams = raw.get("stream", [])
+    if isinstance(streams, Mapping):
+        streams = [streams]
+    if not isinstance(streams, list) or not all(isinstance(s, Mapping) for s in streams):
+        raise SceneError("stream: expected [[stream]] tables")
+
+    return Scene(rate_hz=rate, duration_s=duration, frame=frame, gravity_mps2=gravity, t0_s=t0,
+                 params=params, trajectory=trajectory, attitude_mode=mode, attitude=attitude,
+                 initial_heading_rad=heading, imus=tuple(imus), effects=effects,
+                 streams=tuple(dict(s) for s in streams), seed=seed, path=path, warnings=tuple(warnings))
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read and validate a TOML scene file."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise SceneError(f"{path}: cannot read scene file: {exc.strerror}") from None
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{path}: not valid TOML: {exc}") from None
+    try:
+        return from_dict(raw, base_dir=path.parent, path=str(path))
+    except SceneError as exc:
+        raise SceneError(f"{path}: {exc}") from None

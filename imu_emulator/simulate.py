@@ -1,0 +1,104 @@
+"""Drive the kernel block by block: evaluate sampled motion for the block (if any), call the compiled
+kernel once per block, check the result is finite, hand back a SampleBlock."""
+from __future__ import annotations
+
+import numpy as np
+
+from imu_emulator.errors import DataError
+from imu_emulator.kernel import compile_kernel
+from imu_emulator.samples import SampleBlock
+from imu_emulator.scene import SampledData, Scene
+
+_EMPTY3 = np.zeros((0, 0, 0))
+_EMPTY2 = np.zeros((0, 0))
+
+
+class Simulation:
+    """IMU samples for a scene. `block(k0, n)` gives samples k0 .. k0+n-1 for any k0 >= 0."""
+
+    def __init__(self, scene: Scene, attitude: bool = True, truth: bool = False):
+        self.scene = scene
+        self.attitude = attitude
+        self.truth = truth
+        self.kernel = compile_kernel(scene, attitude=attitude, truth=truth)
+        self._position = self._series(scene.trajectory, 3 if scene.attitude_mode == "tangent" else 2, "trajectory")
+        self._euler = self._series(scene.attitude, 2, "attitude")
+        # Tangent attitude holds the last defined heading (cos, sin) and pitch (cos, sin) across blocks.
+        h = scene.initial_heading_rad
+        self._hold = np.array([np.cos(h), np.sin(h), 1.0, 0.0])
+
+    @staticmethod
+    def _series(part, order: int, where: str):
+        if not isinstance(part, SampledData):
+            return None
+        from imu_emulator.derivatives import SampledSeries, unwrap_angles
+        values = unwrap_angles(part.values) if where == "attitude" else part.values
+        return SampledSeries(part.t, values, part.derivative, max_order=order, name=part.source), order
+
+    @property
+    def n_samples(self) -> int:
+        return self.scene.n_samples
+
+    @property
+    def imu_names(self) -> tuple[str, ...]:
+        return self.scene.imu_names
+
+    def times(self, k0: int, n: int) -> np.ndarray:
+        return self.scene.t0_s + (k0 + np.arange(n, dtype=np.float64)) * (1.0 / self.scene.rate_hz)
+
+    def block(self, k0: int, n: int) -> SampleBlock:
+        n_imu = len(self.scene.imus)
+        t = self.times(k0, n)
+        mot = self._evaluate(self._position, t)
+        att = self._evaluate(self._euler, t)
+        acc = np.empty((n_imu, n, 3))
+        gyro = np.empty((n_imu, n, 3))
+        quat = np.empty((n_imu, n, 4)) if self.attitude else _EMPTY3
+        tr = [np.empty((n, 3)) for _ in range(5)] if self.truth else [_EMPTY2] * 5
+        self.kernel(np.int64(k0), np.int64(n), mot, att, self._hold, acc, gyro, quat, *tr)
+        self._check_finite(acc, gyro, t)
+        truth = dict(zip(("position", "velocity", "euler", "omega_body", "alpha_body"), tr)) if self.truth else None
+        return SampleBlock(k0=k0, t_s=t, accel=acc, gyro=gyro, quat=quat if self.attitude else None, truth=truth)
+
+    @staticmethod
+    def _evaluate(series, t):
+        if series is None:
+            return _EMPTY3
+        fitted, order = series
+        return np.ascontiguousarray(fitted.evaluate(t, order))
+
+    def _check_finite(self, acc, gyro, t) -> None:
+        # A NaN must never reach a wire or a file: name the first bad sample instead.
+        bad = ~(np.isfinite(acc).all(axis=(0, 2)) & np.isfinite(gyro).all(axis=(0, 2)))
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise DataError(f"the motion gives a non-finite value at t = {t[i]!r} s "
+                            f"(sample {int(i)} of the block); check the expressions' domains "
+                            f"(log, sqrt, asin, division by zero)")
+
+    def run(self, block_size: int = 65536, progress=None) -> SampleBlock:
+        """The whole scene in one SampleBlock (blocks computed and concatenated)."""
+        n_total = self.n_samples
+        blocks = []
+        for k0 in range(0, n_total, block_size):
+            blocks.append(self.block(k0, min(block_size, n_total - k0)))
+            if progress is not None:
+                progress(min(k0 + block_size, n_total), n_total)
+        return concatenate(blocks)
+
+
+def concatenate(blocks: list[SampleBlock]) -> SampleBlock:
+    first = blocks[0]
+    truth = None
+    if first.truth is not None:
+        truth = {k: np.concatenate([b.truth[k] for b in blocks]) for k in first.truth}
+    return SampleBlock(k0=first.k0, t_s=np.concatenate([b.t_s for b in blocks]),
+                       accel=np.concatenate([b.accel for b in blocks], axis=1),
+                       gyro=np.concatenate([b.gyro for b in blocks], axis=1),
+                       quat=None if first.quat is None else np.concatenate([b.quat for b in blocks], axis=1),
+                       truth=truth)
+
+
+def simulate(scene: Scene, truth: bool = False) -> SampleBlock:
+    """Python API: all samples of a scene."""
+    return Simulation(scene, attitude=True, truth=truth).run()
