@@ -1,0 +1,324 @@
+"""Derivatives of sampled motion: position and attitude given on a time vector, evaluated at output times.
+
+A `SampledSeries` is fitted once and then asked, block by block, for the value and its derivatives at the
+kernel's output times (which need not be input times, nor at the input rate).  Position needs derivatives
+up to the third (tangent attitude turns acceleration into angular rate and jerk into angular acceleration),
+attitude angles up to the second.
+
+Methods (`METHODS`), with the error orders measured by tests/test_derivatives.py on a smooth signal,
+uniform input step h, d = derivative order:
+
+=========  ===========================================================  ==================================
+method     how                                                          max error, interior / at the ends
+=========  ===========================================================  ==================================
+gradient   MATLAB's `gradient`, applied d times (as the original tool    O(h^2) / d=1: O(h), d=2: O(1),
+           did); values between samples by linear interpolation.         d=3: O(1/h) -- grows as h shrinks
+central4   4th-order finite differences on a uniform grid: central       O(h^4) / O(h^4)
+           stencils inside, one-sided stencils of the same order near
+           the ends, a direct stencil for each d; cubic (4-point)
+           Lagrange interpolation between samples.
+central6   as central4 with 6th-order stencils and quintic (6-point)     O(h^6) / O(h^6)
+           Lagrange interpolation.
+spline5    quintic interpolating spline, not-a-knot ends.                O(h^(6-d)) / O(h^(6-d))
+spline3    cubic interpolating spline, not-a-knot ends; the jerk is      O(h^(4-d)) / O(h^(4-d))
+           piecewise constant and jumps at every sample.
+=========  ===========================================================  ==================================
+
+Measured slopes of log(max error) vs log(h) for d = 0..3, h = 1/100 .. 1/283 s on sin 2πt + 0.3 cos 6πt:
+gradient 2.0 2.0 2.0 2.0 inside, 2.0 1.0 0.0 -1.0 over the whole span; central4 4.0 4.0 4.0 4.0 (whole span
+>= 3.9); central6 6.0 6.0 6.0 6.0 (whole span >= 5.8); spline5 6.0 5.0 4.0 3.0; spline3 4.0 3.0 2.0 1.0.
+The error constants are larger near the ends (spline5 jerk ~150x, central6 jerk ~35x the interior error),
+and so is the gain on noise in the input: central6's one-sided 9-point jerk stencil at the first and last
+sample has sum |w| = 956/h^3, its central stencil inside 7.5/h^3.
+
+Choices worth knowing:
+
+- `gradient` is MATLAB's function exactly, also on non-uniform time: interior (y[i+1]-y[i-1])/(t[i+1]-t[i-1]),
+  one-sided first differences at the two ends.  On a uniform grid that equals numpy.gradient(edge_order=1);
+  on a non-uniform grid numpy uses a different (second-order) interior formula, MATLAB's is first order.
+  We follow MATLAB so that results match the original tool's.  Repeating it multiplies the end error by 1/h
+  per derivative order; the first and last few samples of acceleration and jerk are not to be trusted.
+- Finite-difference derivatives are computed on the input grid; between grid points each derivative array
+  is interpolated by a local Lagrange polynomial through the nearest p samples (p = the method's order), so
+  interpolation costs no order and grid times return the grid values exactly (the node's weight is exactly
+  one, the others exactly zero).
+- central4/central6 assume a uniform grid and refuse a non-uniform one (DataError naming the first
+  irregular sample) rather than silently resampling: use spline5 or gradient for irregular time stamps.
+  Spacing counts as uniform when every step is within 1e-6*h (plus a few ulps of |t|, the float
+  resolution of the time stamps themselves) of the median step; the differences then use the mean step h.
+- Spline boundary conditions are not-a-knot: the first two (last two) spans share one polynomial.  This
+  assumes nothing about the motion at the ends; "natural" conditions would force zero high derivatives
+  (zero jerk for spline5) at both ends and cost accuracy there.
+- Large coordinates (ECEF, ~6.4e6 m): the first sample is subtracted before fitting or differencing and
+  added back to the values only, so derivatives are as accurate as for the same track near the origin.
+  Likewise time is measured from the first time stamp.
+- Output times may lie up to 1e-6 of a mean step outside the input span (t0 + k*dt rounding); further out
+  is a DataError -- there is no extrapolation.
+
+Angles: differentiate `unwrap_angles(angles)`, never wrapped angles (a jump of 2*pi is a huge false rate);
+`wrap_angles` brings yaw back to (-pi, pi] for output.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from scipy.interpolate import make_interp_spline
+
+from imu_emulator.errors import DataError
+
+METHODS: dict[str, str] = {
+    "gradient": "MATLAB's gradient applied repeatedly (2nd order inside, 1st order at the ends), as the original",
+    "central4": "4th-order central differences, same-order one-sided at the ends; uniform time steps only",
+    "central6": "6th-order central differences, same-order one-sided at the ends; uniform time steps only",
+    "spline5": "quintic interpolating spline (not-a-knot): smooth jerk, error O(h^(6-d)) for derivative d",
+    "spline3": "cubic interpolating spline (not-a-knot), as most simulators: jerk piecewise constant",
+}
+
+# Relative tolerance on the step for central4/6 (see module docstring) and on output times past the ends.
+_UNIFORM_RTOL = 1e-6
+_SPAN_RTOL = 1e-6
+
+
+@dataclass(frozen=True)
+class _MethodSpec:
+    kind: str       # "matlab", "central" or "spline"
+    order: int      # accuracy order p of the differences / degree k of the spline
+
+    def min_samples(self, max_order: int) -> int:
+        if self.kind == "matlab":
+            return 3                            # at least one central difference
+        if self.kind == "central":
+            return self.order + max_order       # the one-sided stencil for the highest derivative
+        return self.order + 1                   # one polynomial piece of degree k
+
+
+_SPECS = {
+    "gradient": _MethodSpec("matlab", 2),
+    "central4": _MethodSpec("central", 4),
+    "central6": _MethodSpec("central", 6),
+    "spline5": _MethodSpec("spline", 5),
+    "spline3": _MethodSpec("spline", 3),
+}
+assert _SPECS.keys() == METHODS.keys()
+
+
+def unwrap_angles(angles: np.ndarray) -> np.ndarray:
+    """Remove 2*pi jumps along time (axis 0), so that the angles can be differentiated."""
+    return np.unwrap(np.asarray(angles, dtype=float), axis=0)
+
+
+def wrap_angles(angles: np.ndarray) -> np.ndarray:
+    """Map angles to (-pi, pi]; -pi itself becomes +pi."""
+    return np.pi - np.mod(np.pi - np.asarray(angles, dtype=float), 2.0 * np.pi)
+
+
+def matlab_gradient(values: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """MATLAB's gradient(values, t) along axis 0, including its interior formula on non-uniform t."""
+    y = np.asarray(values, dtype=float)
+    t = np.asarray(t, dtype=float)
+    shape = (-1,) + (1,) * (y.ndim - 1)
+    g = np.empty_like(y)
+    g[0] = (y[1] - y[0]) / (t[1] - t[0])
+    g[-1] = (y[-1] - y[-2]) / (t[-1] - t[-2])
+    g[1:-1] = (y[2:] - y[:-2]) / (t[2:] - t[:-2]).reshape(shape)
+    return g
+
+
+def fd_weights(offsets: np.ndarray, order: int) -> np.ndarray:
+    """Weights w with sum_j w_j f(x_j) ~ f^(order)(0) for nodes x_j = offsets (Fornberg 1988).
+
+    Exact for polynomials of degree < len(offsets); stable for the small stencils used here.
+    """
+    x = np.asarray(offsets, dtype=float)
+    c = np.zeros((x.size, order + 1))
+    c[0, 0] = 1.0
+    c1 = 1.0
+    c4 = x[0]
+    for i in range(1, x.size):
+        mn = min(i, order)
+        c2 = 1.0
+        c5 = c4
+        c4 = x[i]
+        for j in range(i):
+            c3 = x[i] - x[j]
+            c2 *= c3
+            if j == i - 1:
+                for k in range(mn, 0, -1):
+                    c[i, k] = c1 * (k * c[i - 1, k - 1] - c5 * c[i - 1, k]) / c2
+                c[i, 0] = -c1 * c5 * c[i - 1, 0] / c2
+            for k in range(mn, 0, -1):
+                c[j, k] = (c4 * c[j, k] - k * c[j, k - 1]) / c3
+            c[j, 0] = c4 * c[j, 0] / c3
+        c1 = c2
+    return c[:, order]
+
+
+def _central_derivative(y: np.ndarray, h: float, d: int, p: int) -> np.ndarray:
+    """d-th derivative of uniformly sampled y (axis 0) with accuracy O(h^p) at every sample.
+
+    A direct stencil per derivative order rather than a first-derivative stencil applied d times: the
+    repeated one-sided end stencils would lose an order per application.
+    """
+    n = y.shape[0]
+    half = (d + 1) // 2 + p // 2 - 1    # the central stencil has 2*half+1 points
+    scale = h ** -d
+    w = fd_weights(np.arange(-half, half + 1), d) * scale
+    out = np.empty_like(y)
+    inner = n - 2 * half
+    acc = w[0] * y[0:inner]
+    for j in range(1, 2 * half + 1):
+        acc = acc + w[j] * y[j:j + inner]
+    out[half:n - half] = acc
+    width = d + p                       # one-sided stencil of accuracy p
+    for i in (*range(half), *range(n - half, n)):
+        s = min(max(i - width // 2, 0), n - width)
+        out[i] = (fd_weights(np.arange(s, s + width) - i, d) * scale) @ y[s:s + width]
+    return out
+
+
+def _lagrange_weights(tau: np.ndarray, tau_out: np.ndarray, npts: int) -> tuple[np.ndarray, np.ndarray]:
+    """Indices (N, npts) of the nearest npts samples around each output time and their Lagrange weights."""
+    n = tau.size
+    i = np.clip(np.searchsorted(tau, tau_out, side="right") - 1, 0, n - 2)
+    start = np.clip(i - (npts // 2 - 1), 0, n - npts)
+    idx = start[:, None] + np.arange(npts)
+    nodes = tau[idx]
+    dt = tau_out[:, None] - nodes
+    w = np.ones_like(nodes)
+    for j in range(npts):
+        for k in range(npts):
+            if k != j:
+                w[:, j] *= dt[:, k] / (nodes[:, j] - nodes[:, k])
+    return idx, w
+
+
+class _GridFit:
+    """Derivatives precomputed on the input grid, interpolated to output times."""
+
+    def __init__(self, tau: np.ndarray, y: np.ndarray, spec: _MethodSpec, max_order: int, h: float):
+        self.tau = tau
+        self.npts = spec.order
+        self.arrays = [y]
+        for d in range(1, max_order + 1):
+            if spec.kind == "matlab":
+                self.arrays.append(matlab_gradient(self.arrays[-1], tau))
+            else:
+                self.arrays.append(_central_derivative(y, h, d, spec.order))
+
+    def evaluate(self, tau_out: np.ndarray, order: int) -> np.ndarray:
+        idx, w = _lagrange_weights(self.tau, tau_out, self.npts)
+        return np.stack([np.einsum("nj,njm->nm", w, a[idx]) for a in self.arrays[:order + 1]])
+
+
+class _SplineFit:
+    def __init__(self, tau: np.ndarray, y: np.ndarray, spec: _MethodSpec):
+        self.spline = make_interp_spline(tau, y, k=spec.order, bc_type="not-a-knot", check_finite=False)
+
+    def evaluate(self, tau_out: np.ndarray, order: int) -> np.ndarray:
+        return np.stack([self.spline(tau_out, nu=d) for d in range(order + 1)])
+
+
+def _default_row_label(i: int) -> str:
+    return f"sample {i}"
+
+
+def validate_samples(t: np.ndarray, values: np.ndarray, *, where: str, columns: tuple[str, ...],
+                     row_label: Callable[[int], str] = _default_row_label) -> None:
+    """DataError for the first non-finite cell or time stamp that does not increase.
+
+    `row_label(i)` turns a 0-based sample index into what the user should look for ("row 17" in a CSV).
+    Shared with the track loader so that both speak of rows and columns the same way.
+    """
+    bad_t = ~np.isfinite(t)
+    bad_v = ~np.isfinite(values)
+    bad_rows = bad_t | bad_v.any(axis=1)
+    if bad_rows.any():
+        i = int(np.argmax(bad_rows))
+        if bad_t[i]:
+            raise DataError(f"{where}: {row_label(i)}: time stamp {float(t[i])!r} is not finite")
+        j = int(np.argmax(bad_v[i]))
+        raise DataError(f"{where}: {row_label(i)}, column '{columns[j]}': value {float(values[i, j])!r} "
+                        "is not finite")
+    not_after = np.diff(t) <= 0
+    if not_after.any():
+        i = int(np.argmax(not_after)) + 1
+        raise DataError(f"{where}: {row_label(i)}: time stamp {float(t[i])!r} not after previous "
+                        f"{float(t[i - 1])!r}")
+
+
+class SampledSeries:
+    """Values sampled at times t (n,), shape (n, m) or (n,), with derivatives up to `max_order`.
+
+    `evaluate(t_out, order)` returns an array (order+1, len(t_out), m): the values, then derivatives 1..order.
+    `columns` names the m columns and `row_label` the samples in error messages (defaults: "column j",
+    "sample i").
+    """
+
+    def __init__(self, t, values, method: str, max_order: int, name: str = "sampled series",
+                 columns: tuple[str, ...] | None = None,
+                 row_label: Callable[[int], str] = _default_row_label):
+        if method not in _SPECS:
+            raise DataError(f"{name}: unknown derivative method '{method}' (known: {', '.join(METHODS)})")
+        spec = _SPECS[method]
+        if not 0 <= max_order <= 3:
+            raise ValueError(f"max_order must be 0..3, got {max_order}")
+        t = np.asarray(t, dtype=float)
+        y = np.asarray(values, dtype=float)
+        if y.ndim == 1:
+            y = y[:, None]
+        if t.ndim != 1 or y.ndim != 2 or y.shape[0] != t.shape[0]:
+            raise DataError(f"{name}: time stamps {t.shape} and values {y.shape} do not match "
+                            "(expected (n,) and (n, m))")
+        if columns is None:
+            columns = tuple(f"column {j}" for j in range(y.shape[1]))
+        need = spec.min_samples(max_order)
+        if t.size < need:
+            raise DataError(f"{name}: method '{method}' needs at least {need} samples for derivatives "
+                            f"up to order {max_order}, got {t.size}")
+        validate_samples(t, y, where=name, columns=columns, row_label=row_label)
+
+        self.name = name
+        self.method = method
+        self.max_order = max_order
+        self.t_start = float(t[0])
+        self.t_end = float(t[-1])
+        tau = t - t[0]
+        h = float(tau[-1]) / (t.size - 1)
+        self._span_tol = _SPAN_RTOL * h
+        if spec.kind == "central":
+            self._require_uniform(tau, h, t, row_label)
+        self._origin = y[0].copy()
+        local = y - self._origin
+        self._fit = _SplineFit(tau, local, spec) if spec.kind == "spline" else \
+            _GridFit(tau, local, spec, max_order, h)
+
+    def _require_uniform(self, tau, h, t, row_label) -> None:
+        steps = np.diff(tau)
+        # compared with the median step, so that the message points at the irregular sample itself
+        usual = float(np.median(steps))
+        tol = _UNIFORM_RTOL * h + 4 * np.spacing(max(abs(t[0]), abs(t[-1])))
+        off = np.abs(steps - usual) > tol
+        if off.any():
+            i = int(np.argmax(off)) + 1
+            raise DataError(f"{self.name}: method '{self.method}' needs uniformly spaced time stamps; "
+                            f"{row_label(i)} is {float(steps[i - 1])!r} s after the previous one, the usual "
+                            f"step is {usual!r} s (use spline5 or gradient for irregular time stamps)")
+
+    def evaluate(self, t_out, order: int | None = None) -> np.ndarray:
+        if order is None:
+            order = self.max_order
+        if not 0 <= order <= self.max_order:
+            raise ValueError(f"order must be 0..{self.max_order} (the max_order fitted), got {order}")
+        t_out = np.atleast_1d(np.asarray(t_out, dtype=float))
+        tau_out = t_out - self.t_start
+        span = self.t_end - self.t_start
+        inside = (tau_out >= -self._span_tol) & (tau_out <= span + self._span_tol)
+        if not inside.all():
+            i = int(np.argmin(inside))
+            raise DataError(f"{self.name}: output time {float(t_out[i])!r} s is outside the input time span "
+                            f"[{self.t_start!r}, {self.t_end!r}] s")
+        out = self._fit.evaluate(np.clip(tau_out, 0.0, span), order)
+        out[0] += self._origin
+        return out
