@@ -1,0 +1,655 @@
+"""VectorNav (VN-100/200/300) serial output: user-configured binary packets, $VNYMR / $VNIMU ASCII
+sentences, stream decoders for both, and the replies a driver waits for while it configures the unit.
+
+Binary frame (wire-formats.md, "VectorNav binary output"):
+
+    FA  groups(u8)  mask(u16 LE) per set group bit, ascending  payload(LE)  crc(u16 BIG-endian)
+
+CRC-16/XMODEM over groups .. payload, so a receiver's CRC over groups .. crc is 0. Fields appear in
+group-bit, then field-bit order. Field sizes are VectorNav's own `BinaryPacketGroupLengths` table
+(vnproglib 1.1, dawonn/vectornav libvnc/src/vnupack.c; the newer libvnc adds Time bits 8-9,
+SyncOutCnt 4 and TimeStatus 1). GPS and INS groups are left out: their last bits differ between
+library versions, so a frame that sets them is not one this decoder can size and is skipped.
+
+What the encoder can fill, wire units, and the Samples field each comes from:
+
+    TimeStartup     u64 ns          time_ns (negative times saturate to 0, counted)
+    YawPitchRoll    3 x f32 deg     euler, reordered yaw, pitch, roll         default 0, 0, 0
+    Quaternion      4 x f32         quat, reordered x, y, z, w (scalar LAST)  default identity
+    AngularRate,
+    UncompGyro      3 x f32 rad/s   gyro
+    Accel,
+    UncompAccel     3 x f32 m/s^2   accel
+    Mag, UncompMag  3 x f32 gauss   mag                                       default 0, 0, 0
+    Temp            f32 degC        temperature_c                             default 25
+    Pres            f32 kPa         pressure_pa / 1000                        default 101.325
+    Common.Imu      UncompAccel + UncompGyro;  Common.MagPres  Mag + Temp + Pres
+
+The emulator has one accel/gyro/mag measurement, so the "uncompensated" fields carry the same values
+as the compensated ones. Every f32 saturates at +-float32 max (counted per wire field in
+`encoder.saturated`, e.g. "imu.accel"); non-finite input raises EncodeError naming field and sample.
+Fields the table knows but the emulator has no data for (TimeGps, Position, DeltaTheta, ...) can be
+decoded (as raw bytes) but not selected for encoding.
+
+ASCII number formats are the device's own, read off published output with valid checksums: VectorNav's
+programming-library example `$VNYMR,+100.949,-007.330,+000.715,-00.0049,...*69` and a VN-200 capture
+`$VNIMU,-00.0350,+00.4222,-00.6643,-00.015,+00.019,+09.948,+00.002066,...,+20.7,+084.322*66`:
+angles %+08.3f, mag %+08.4f, accel %+07.3f, gyro %+010.6f, temperature %+05.1f, pressure %+08.3f
+(kPa). Values are rounded to float32 first, as the device prints its float registers. Wider values
+simply widen the field, as printf does; `bytes_per_sample` is the nominal (fixed-width) length.
+"""
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from functools import reduce
+
+import numba
+import numpy as np
+
+from firmware_protocols.base import (DecoderStats, EncodeError, Packet, SaturationStats, Samples, SerialBatch,
+                                     to_float32_field)
+from firmware_protocols.crc import crc16_ccitt, crc16_ccitt_bytes
+from firmware_protocols.registry import FormatInfo, register
+
+SYNC = 0xFA
+_DEG = 180.0 / np.pi
+_F32_MAX = float(np.finfo(np.float32).max)
+
+# --- field table -----------------------------------------------------------------------------
+
+# Samples sources the packing kernel can read; the index is what the kernel switches on.
+_SOURCES = ("time_ns", "accel", "gyro", "mag", "quat", "euler", "temperature_c", "pressure_pa")
+_SOURCE_ID = {name: i for i, name in enumerate(_SOURCES)}
+# Documented defaults for optional Samples fields a selected wire field needs (one row, broadcast).
+_DEFAULTS = {
+    "mag": (0.0, 0.0, 0.0),
+    "quat": (1.0, 0.0, 0.0, 0.0),
+    "euler": (0.0, 0.0, 0.0),
+    "temperature_c": (25.0,),
+    "pressure_pa": (101325.0,),
+}
+
+
+@dataclass(frozen=True)
+class _Quantity:
+    """One physical quantity inside a wire field: `order[k]` is the Samples component written k-th."""
+
+    label: str          # key suffix in decoded packets ("" when the field holds one quantity)
+    source: str         # Samples attribute
+    order: tuple        # Samples component index for each wire slot
+    scale: float        # wire value = SI value * scale
+    wire: str           # struct code: "Q" (u64) or "f" (f32)
+
+
+@dataclass(frozen=True)
+class _Field:
+    group: str
+    name: str
+    bit: int
+    size: int
+    quantities: tuple = ()      # empty: decode-only, kept as raw bytes
+
+    @property
+    def key(self) -> str:
+        return f"{self.group}.{self.name.lower()}"
+
+
+def _q(source, n=3, order=None, scale=1.0, label="", wire="f"):
+    return _Quantity(label, source, tuple(order if order is not None else range(n)), scale, wire)
+
+
+_TIME = (_q("time_ns", 1, wire="Q"),)
+_YPR = (_q("euler", order=(2, 1, 0), scale=_DEG),)
+_QUAT = (_q("quat", order=(1, 2, 3, 0)),)
+_GYRO = (_q("gyro"),)
+_ACCEL = (_q("accel"),)
+_MAG = (_q("mag"),)
+_TEMP = (_q("temperature_c", 1),)
+_PRES = (_q("pressure_pa", 1, scale=1e-3),)
+
+
+def _lbl(quantities, label):
+    return tuple(_Quantity(label, q.source, q.order, q.scale, q.wire) for q in quantities)
+
+
+# (group name, group bit, [(field name, size, quantities)] in field-bit order). Sizes: vnupack.c
+# BinaryPacketGroupLengths (see module docstring); names: VectorNav's COMMONGROUP_*/TIMEGROUP_*/...
+# enums in the same library and PX4/ArduPilot drivers.
+_GROUP_TABLE = (
+    ("common", 0, [
+        ("TimeStartup", 8, _TIME), ("TimeGps", 8, ()), ("TimeSyncIn", 8, ()), ("YawPitchRoll", 12, _YPR),
+        ("Quaternion", 16, _QUAT), ("AngularRate", 12, _GYRO), ("Position", 24, ()), ("Velocity", 12, ()),
+        ("Accel", 12, _ACCEL), ("Imu", 24, _lbl(_ACCEL, "accel") + _lbl(_GYRO, "gyro")),
+        ("MagPres", 20, _lbl(_MAG, "mag") + _lbl(_TEMP, "temperature_c") + _lbl(_PRES, "pressure_pa")),
+        ("DeltaTheta", 28, ()), ("InsStatus", 2, ()), ("SyncInCnt", 4, ()), ("TimeGpsPps", 8, ())]),
+    ("time", 1, [
+        ("TimeStartup", 8, _TIME), ("TimeGps", 8, ()), ("GpsTow", 8, ()), ("GpsWeek", 2, ()),
+        ("TimeSyncIn", 8, ()), ("TimeGpsPps", 8, ()), ("TimeUtc", 8, ()), ("SyncInCnt", 4, ()),
+        ("SyncOutCnt", 4, ()), ("TimeStatus", 1, ())]),
+    ("imu", 2, [
+        ("ImuStatus", 2, ()), ("UncompMag", 12, _MAG), ("UncompAccel", 12, _ACCEL), ("UncompGyro", 12, _GYRO),
+        ("Temp", 4, _TEMP), ("Pres", 4, _PRES), ("DeltaTheta", 16, ()), ("DeltaVel", 12, ()), ("Mag", 12, _MAG),
+        ("Accel", 12, _ACCEL), ("AngularRate", 12, _GYRO), ("SensSat", 2, ()), ("Raw", 40, ())]),
+    # Attitude bits 9-11 exist on some units but their names and sizes vary by library version.
+    ("attitude", 4, [
+        ("VpeStatus", 2, ()), ("YawPitchRoll", 12, _YPR), ("Quaternion", 16, _QUAT), ("Dcm", 36, ()),
+        ("MagNed", 12, ()), ("AccelNed", 12, ()), ("LinearAccelBody", 12, ()), ("LinearAccelNed", 12, ()),
+        ("YprU", 12, ())]),
+)
+
+_GROUP_BIT = {name: bit for name, bit, _ in _GROUP_TABLE}
+_FIELDS = {bit: {fbit: _Field(gname, fname, fbit, size, qs) for fbit, (fname, size, qs) in enumerate(fields)}
+           for gname, bit, fields in _GROUP_TABLE}
+_BY_NAME = {gname: {f.name.lower(): f for f in _FIELDS[bit].values()} for gname, bit, _ in _GROUP_TABLE}
+
+for _bit, _fields in _FIELDS.items():   # the table is transcribed by hand: keep it honest
+    for _f in _fields.values():
+        assert not _f.quantities or _f.size == sum(struct.calcsize(q.wire) * len(q.order) for q in _f.quantities), _f
+
+DEFAULT_FIELDS = "time:timestartup;imu:accel,angularrate"
+# PX4's binary output 1 (src/drivers/ins/vectornav/VectorNav.cpp). Most revisions of that driver ask for
+# IMU Accel|AngularRate (the spec's vector); one asks for UncompAccel|UncompGyro instead: pass
+# fields="time:timestartup;imu:uncompaccel,uncompgyro" to emulate that one.
+
+
+# --- layout ----------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Layout:
+    """One binary output configuration: which fields, in wire order, and the header announcing them."""
+
+    groups: int
+    masks: tuple            # one u16 per set group bit, ascending
+    fields: tuple           # _Field in wire order
+
+    @property
+    def header(self) -> bytes:
+        return bytes([self.groups]) + b"".join(struct.pack("<H", m) for m in self.masks)
+
+    @property
+    def payload_size(self) -> int:
+        return sum(f.size for f in self.fields)
+
+    @property
+    def packet_size(self) -> int:
+        return 1 + len(self.header) + self.payload_size + 2
+
+
+def _layout_from_selection(selection: dict) -> Layout:
+    """{group bit: field-bit mask} -> Layout; None when a bit is outside the known table."""
+    groups, masks, fields = 0, [], []
+    for gbit in sorted(selection):
+        mask = selection[gbit]
+        if gbit not in _FIELDS or mask == 0:
+            return None
+        groups |= 1 << gbit
+        masks.append(mask)
+        for fbit in range(16):
+            if mask >> fbit & 1:
+                if fbit not in _FIELDS[gbit]:
+                    return None
+                fields.append(_FIELDS[gbit][fbit])
+    return Layout(groups, tuple(masks), tuple(fields))
+
+
+def parse_fields(fields) -> Layout:
+    """A field selection -> Layout. Accepts a spec string "common:timestartup,accel;imu:uncompgyro",
+    a dict {group: [field names] or int mask}, or a Layout. Names are case-insensitive; order given
+    does not matter (the wire order is fixed by the bits)."""
+    if fields is None:
+        fields = DEFAULT_FIELDS
+    if isinstance(fields, Layout):
+        return fields
+    if isinstance(fields, str):
+        parsed = {}
+        for part in filter(None, (p.strip() for p in fields.split(";"))):
+            group, sep, names = part.partition(":")
+            if not sep:
+                raise ValueError(f"VectorNav fields: expected 'group:field,field' but got {part!r}")
+            parsed.setdefault(group.strip(), []).extend(n.strip() for n in names.split(",") if n.strip())
+        fields = parsed
+    if not isinstance(fields, dict) or not fields:
+        raise ValueError(f"VectorNav fields: expected a spec string or a dict of groups, got {fields!r}")
+    selection = {}
+    for group, names in fields.items():
+        gname = str(group).strip().lower()
+        if gname not in _BY_NAME:
+            raise ValueError(f"VectorNav fields: unknown group {group!r} (known: {', '.join(_BY_NAME)})")
+        gbit = _GROUP_BIT[gname]
+        if isinstance(names, (int, np.integer)):
+            known = sum(1 << b for b in _FIELDS[gbit])
+            if not 0 < int(names) <= 0xFFFF or int(names) & ~known:
+                raise ValueError(f"VectorNav fields: mask {int(names):#06x} has bits outside group {gname!r}")
+            chosen = [_FIELDS[gbit][b] for b in _FIELDS[gbit] if int(names) >> b & 1]
+        else:
+            if isinstance(names, str):
+                names = [names]
+            chosen = []
+            for name in names:
+                field = _BY_NAME[gname].get(str(name).strip().lower())
+                if field is None:
+                    raise ValueError(f"VectorNav fields: unknown field {name!r} in group {gname!r} "
+                                     f"(known: {', '.join(_BY_NAME[gname])})")
+                chosen.append(field)
+        if not chosen:
+            raise ValueError(f"VectorNav fields: group {gname!r} selects no field")
+        selection[gbit] = selection.get(gbit, 0) | sum(1 << f.bit for f in chosen)
+    return _layout_from_selection(selection)
+
+
+# --- binary encoder --------------------------------------------------------------------------
+
+@numba.njit(cache=True, nogil=True)
+def _pack(out, size, header, items, scales, time_ns, accel, gyro, mag, quat, euler, temp, pres, steps, sat):
+    """Write len(time_ns) packets of `size` bytes into `out`. items[j] = (source id, column, wire type
+    0 f32 / 1 u64) in wire order. Returns the first sample with a non-finite value, or -1."""
+    scratch = np.empty(1, np.float32)
+    bits = scratch.view(np.uint32)
+    n_head = header.shape[0]
+    for i in range(time_ns.shape[0]):
+        base = i * size
+        out[base] = 0xFA
+        for h in range(n_head):
+            out[base + 1 + h] = header[h]
+        p = base + 1 + n_head
+        for j in range(items.shape[0]):
+            src = items[j, 0]
+            if items[j, 2] == 1:
+                t = time_ns[i]
+                if t < 0:
+                    t = 0
+                    sat[j] += 1
+                for b in range(8):
+                    out[p + b] = (t >> (8 * b)) & 0xFF
+                p += 8
+                continue
+            col = items[j, 1]
+            if src == 1:
+                v = accel[i * steps[1], col]
+            elif src == 2:
+                v = gyro[i * steps[2], col]
+            elif src == 3:
+                v = mag[i * steps[3], col]
+            elif src == 4:
+                v = quat[i * steps[4], col]
+            elif src == 5:
+                v = euler[i * steps[5], col]
+            elif src == 6:
+                v = temp[i * steps[6], col]
+            else:
+                v = pres[i * steps[7], col]
+            if not np.isfinite(v):
+                return i
+            v *= scales[j]
+            if v > 3.4028234663852886e38:
+                v = 3.4028234663852886e38
+                sat[j] += 1
+            elif v < -3.4028234663852886e38:
+                v = -3.4028234663852886e38
+                sat[j] += 1
+            scratch[0] = v
+            u = bits[0]
+            out[p] = u & 0xFF
+            out[p + 1] = (u >> 8) & 0xFF
+            out[p + 2] = (u >> 16) & 0xFF
+            out[p + 3] = (u >> 24) & 0xFF
+            p += 4
+        crc = crc16_ccitt(out, base + 1, base + size - 2, 0)
+        out[base + size - 2] = (crc >> 8) & 0xFF
+        out[base + size - 1] = crc & 0xFF
+    return -1
+
+
+class BinaryEncoder:
+    """Samples -> VectorNav binary packets for one output configuration (`fields`, see parse_fields)."""
+
+    def __init__(self, fields=None):
+        self.layout = parse_fields(fields)
+        undecodable = [f.key for f in self.layout.fields if not f.quantities]
+        if undecodable:
+            raise ValueError(f"VectorNav fields: the emulator has no data for {', '.join(undecodable)}")
+        self.bytes_per_sample = self.layout.packet_size
+        self.saturated = SaturationStats()
+        rows, scales, self._item_field = [], [], []
+        for field in self.layout.fields:
+            for q in field.quantities:
+                for col in q.order:
+                    rows.append((_SOURCE_ID[q.source], col, 1 if q.wire == "Q" else 0))
+                    scales.append(q.scale)
+                    self._item_field.append(field.key)
+        self._items = np.array(rows, dtype=np.int64).reshape(-1, 3)
+        self._scales = np.array(scales, dtype=np.float64)
+        self._header = np.frombuffer(self.layout.header, dtype=np.uint8).copy()
+        self._sources = sorted({q.source for f in self.layout.fields for q in f.quantities} - {"time_ns"})
+        self._defaults = {name: np.array([value], dtype=np.float64) for name, value in _DEFAULTS.items()}
+        self._unused = np.zeros((1, 4), dtype=np.float64)
+        self._offsets = np.zeros(1, dtype=np.int64)   # reused while block sizes repeat (the live path)
+
+    def _columns(self, samples: Samples):
+        """Each kernel source as a 2-D array plus its row step (0: one default row for every sample).
+        Sources the layout does not use get a dummy row the kernel never reads."""
+        arrays = [self._unused] * (len(_SOURCES) - 1)
+        steps = np.zeros(len(_SOURCES), dtype=np.int64)
+        for name in self._sources:
+            k = _SOURCE_ID[name]
+            value = getattr(samples, name)
+            if value is None:
+                value = self._defaults[name]
+            else:
+                steps[k] = 1
+                if value.ndim == 1:
+                    value = value.reshape(-1, 1)
+            arrays[k - 1] = value
+        return arrays, steps
+
+    def encode(self, samples: Samples) -> SerialBatch:
+        n, size = len(samples), self.bytes_per_sample
+        out = np.empty(n * size, dtype=np.uint8)
+        arrays, steps = self._columns(samples)
+        sat = np.zeros(len(self._items), dtype=np.int64)
+        bad = _pack(out, size, self._header, self._items, self._scales, samples.time_ns, *arrays, steps, sat)
+        if bad >= 0:
+            samples.require_finite(self._sources)     # names field and sample
+            raise EncodeError(f"non-finite value at sample {bad}")
+        if sat.any():
+            for j in np.flatnonzero(sat):
+                self.saturated.add(self._item_field[j], int(sat[j]))
+        if len(self._offsets) != n + 1:
+            self._offsets = np.arange(n + 1, dtype=np.int64) * size
+            self._offsets.flags.writeable = False
+        return SerialBatch(out.tobytes(), self._offsets)
+
+
+# --- binary decoder --------------------------------------------------------------------------
+
+def _field_values(field: _Field, raw: bytes, offset: int) -> dict:
+    """One field's wire bytes -> {packet key: SI value}."""
+    if not field.quantities:
+        return {field.key: bytes(raw[offset:offset + field.size])}
+    values = {}
+    for q in field.quantities:
+        count = len(q.order)
+        wire = struct.unpack_from("<" + q.wire * count, raw, offset)
+        offset += struct.calcsize(q.wire) * count
+        key = f"{field.key}.{q.label}" if q.label else field.key
+        if q.wire == "Q":
+            values[key] = int(wire[0])
+            continue
+        si = np.empty(count, dtype=np.float64)
+        si[list(q.order)] = np.asarray(wire, dtype=np.float64) / q.scale
+        values[key] = float(si[0]) if count == 1 else si
+    return values
+
+
+class BinaryDecoder:
+    """Stream decoder for VectorNav binary output. The header names the layout, so any layout made of
+    known fields is decoded; pass `fields` to accept only that one configuration (others are skipped
+    like noise). `stats.skipped_bytes` counts every byte that did not end up in a yielded packet."""
+
+    def __init__(self, fields=None):
+        self.only = None if fields is None else parse_fields(fields).header
+        self.stats = DecoderStats()
+        self._buf = bytearray()
+        self._layouts: dict = {}
+        self._max_header = 1 + 2 * len(_FIELDS)
+
+    def _layout(self, header: bytes):
+        if header not in self._layouts:
+            gbits = [b for b in range(8) if header[0] >> b & 1]
+            masks = struct.unpack_from(f"<{len(gbits)}H", header, 1)
+            self._layouts[header] = _layout_from_selection(dict(zip(gbits, masks)))
+        return self._layouts[header]
+
+    def feed(self, chunk: bytes) -> list:
+        buf = self._buf
+        buf += chunk
+        packets, pos = [], 0
+        while True:
+            start = buf.find(SYNC, pos)
+            if start < 0:
+                self.stats.skipped_bytes += len(buf) - pos
+                pos = len(buf)
+                break
+            self.stats.skipped_bytes += start - pos
+            pos = start
+            if len(buf) - pos < 2:
+                break
+            header_len = 1 + 2 * bin(buf[pos + 1]).count("1")
+            if len(buf) - pos < 1 + header_len:
+                break
+            header = bytes(buf[pos + 1:pos + 1 + header_len])
+            layout = None if buf[pos + 1] == 0 or header_len > self._max_header else self._layout(header)
+            if layout is None or (self.only is not None and header != self.only):
+                self.stats.skipped_bytes += 1
+                pos += 1
+                continue
+            size = layout.packet_size
+            if len(buf) - pos < size:
+                break
+            frame = bytes(buf[pos:pos + size])
+            if crc16_ccitt_bytes(frame[1:]) != 0:
+                # A false sync or a damaged packet: resume the hunt one byte on, since a real packet may
+                # start inside what looked like this one.
+                self.stats.bad_checksum += 1
+                self.stats.skipped_bytes += 1
+                pos += 1
+                continue
+            fields, offset = {}, 1 + header_len
+            for field in layout.fields:
+                fields.update(_field_values(field, frame, offset))
+                offset += field.size
+            packets.append(Packet("vectornav-binary", fields, frame))
+            self.stats.packets += 1
+            pos += size
+        del buf[:pos]
+        return packets
+
+
+# --- ASCII sentences -------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class _Sentence:
+    name: str
+    parts: tuple    # (Samples field, component order, scale SI -> wire, printf format)
+
+
+_SENTENCES = {
+    "VNYMR": _Sentence("VNYMR", (("euler", (2, 1, 0), _DEG, "%+08.3f"), ("mag", (0, 1, 2), 1.0, "%+08.4f"),
+                                 ("accel", (0, 1, 2), 1.0, "%+07.3f"), ("gyro", (0, 1, 2), 1.0, "%+010.6f"))),
+    "VNIMU": _Sentence("VNIMU", (("mag", (0, 1, 2), 1.0, "%+08.4f"), ("accel", (0, 1, 2), 1.0, "%+07.3f"),
+                                 ("gyro", (0, 1, 2), 1.0, "%+010.6f"), ("temperature_c", (0,), 1.0, "%+05.1f"),
+                                 ("pressure_pa", (0,), 1e-3, "%+08.3f"))),
+}
+_CHECKSUM_KINDS = ("xor", "crc")
+
+
+def _check_kind(checksum: str) -> str:
+    if checksum not in _CHECKSUM_KINDS:
+        raise ValueError(f"VectorNav checksum: expected 'xor' or 'crc', got {checksum!r}")
+    return checksum
+
+
+def checksum_text(body: bytes, kind: str) -> bytes:
+    """What follows '*': the 8-bit XOR of `body` as 2 hex digits, or its CRC-16/XMODEM as 4."""
+    if kind == "xor":
+        return b"%02X" % reduce(int.__xor__, body, 0)
+    return b"%04X" % crc16_ccitt_bytes(body)
+
+
+def sentence(body: bytes, kind: str = "xor") -> bytes:
+    """`$body*CS\\r\\n`."""
+    return b"$" + body + b"*" + checksum_text(body, kind) + b"\r\n"
+
+
+class AsciiEncoder:
+    """Samples -> $VNYMR or $VNIMU lines, one per sample."""
+
+    def __init__(self, name: str, checksum: str = "xor"):
+        self.spec = _SENTENCES[name]
+        self.checksum = _check_kind(checksum)
+        self.saturated = SaturationStats()
+        self._format = (name + "," + ",".join(fmt for _, order, _, fmt in self.spec.parts for _ in order))
+        widths = sum(int(fmt[2:fmt.index(".")]) * len(order) + len(order) for _, order, _, fmt in self.spec.parts)
+        self.bytes_per_sample = 1 + len(name) + widths + 1 + (2 if checksum == "xor" else 4) + 2
+
+    def encode(self, samples: Samples) -> SerialBatch:
+        sources = [src for src, *_ in self.spec.parts]
+        samples.require_finite(sources)
+        columns = []
+        for src, order, scale, _ in self.spec.parts:
+            value = samples.field_or(src, _DEFAULTS.get(src, 0.0))
+            value = value.reshape(len(samples), -1)[:, list(order)] * scale
+            # The device prints its float32 registers: round there first so the last digit agrees.
+            columns.append(to_float32_field(value, f"{self.spec.name.lower()}.{src}", self.saturated))
+        rows = np.concatenate(columns, axis=1).astype(np.float64).tolist()
+        lines = [sentence((self._format % tuple(row)).encode(), self.checksum) for row in rows]
+        offsets = np.zeros(len(lines) + 1, dtype=np.int64)
+        np.cumsum([len(line) for line in lines], out=offsets[1:])
+        return SerialBatch(b"".join(lines), offsets)
+
+
+def verify_line(line: bytes):
+    """`$body*CS` (line ending stripped) -> body if CS is a valid XOR (2 hex) or CRC (4 hex), else None."""
+    if not line.startswith(b"$") or line.count(b"*") != 1:
+        return None
+    body, _, cs = line[1:].partition(b"*")
+    try:
+        value = int(cs, 16)
+    except ValueError:
+        return None
+    if len(cs) == 2 and value == reduce(int.__xor__, body, 0):
+        return body
+    if len(cs) == 4 and value == crc16_ccitt_bytes(body):
+        return body
+    return None
+
+
+class AsciiDecoder:
+    """Stream decoder for $VNYMR / $VNIMU lines. Valid sentences of other kinds (register replies,
+    $VNERR) count as ignored_frames; anything outside a `$...\\r\\n` line counts as skipped bytes."""
+
+    MAX_LINE = 256
+
+    def __init__(self, checksum: str | None = None):
+        # Both checksum kinds are accepted whatever the option says: a receiver cannot know which one
+        # the device was told to use, and the kinds are told apart by their length.
+        if checksum is not None:
+            _check_kind(checksum)
+        self.stats = DecoderStats()
+        self._buf = bytearray()
+
+    def _parse(self, body: bytes):
+        name, _, rest = body.partition(b",")
+        spec = _SENTENCES.get(name.decode("ascii", "replace"))
+        if spec is None:
+            return None
+        try:
+            numbers = [float(t) for t in rest.split(b",")]
+        except ValueError:
+            return None
+        if len(numbers) != sum(len(order) for _, order, _, _ in spec.parts):
+            return None
+        fields, k = {}, 0
+        for src, order, scale, _ in spec.parts:
+            si = np.empty(len(order))
+            si[list(order)] = np.asarray(numbers[k:k + len(order)]) / scale
+            fields[src] = float(si[0]) if len(order) == 1 else si
+            k += len(order)
+        return Packet(spec.name, fields)
+
+    def feed(self, chunk: bytes) -> list:
+        buf = self._buf
+        buf += chunk
+        packets, pos = [], 0
+        while True:
+            start = buf.find(b"$", pos)
+            if start < 0:
+                self.stats.skipped_bytes += len(buf) - pos
+                pos = len(buf)
+                break
+            self.stats.skipped_bytes += start - pos
+            pos = start
+            end = buf.find(b"\r\n", pos)
+            restart = buf.find(b"$", pos + 1, end if end >= 0 else len(buf))
+            if restart >= 0:       # a line cut short by a new '$': drop the fragment
+                self.stats.skipped_bytes += restart - pos
+                pos = restart
+                continue
+            if end < 0:
+                if len(buf) - pos > self.MAX_LINE:
+                    self.stats.skipped_bytes += 1
+                    pos += 1
+                    continue
+                break
+            line = bytes(buf[pos:end])
+            body = verify_line(line)
+            if body is None:
+                self.stats.bad_checksum += 1
+                self.stats.skipped_bytes += end + 2 - pos
+            else:
+                packet = self._parse(body)
+                if packet is None:
+                    self.stats.ignored_frames += 1
+                    self.stats.skipped_bytes += end + 2 - pos
+                else:
+                    packet.raw = bytes(buf[pos:end + 2])
+                    packets.append(packet)
+                    self.stats.packets += 1
+            pos = end + 2
+        del buf[:pos]
+        return packets
+
+
+# --- command replies -------------------------------------------------------------------------
+
+DEFAULT_MODEL = "VN-100T-CR"
+# VectorNav error codes (vnproglib sensors.h): the ones a command parser can raise.
+_ERR_INVALID_CHECKSUM, _ERR_INVALID_COMMAND, _ERR_INVALID_REGISTER = 3, 4, 8
+
+
+def respond_to_command(line: bytes, model: str = DEFAULT_MODEL) -> bytes | None:
+    """The device's reply to one command line, or None when it would not answer.
+
+    Reads of register 1 (model number) answer `$VNRRG,01,<model>`; `$VNWRG,...` and `$VNASY,...` are
+    echoed, which is the acknowledgement drivers wait for (VectorNav's library example shows
+    `$VNWRG,07,2*6F` answering a write of 2 to register 7). The reply uses the command's checksum kind;
+    a command sent with the `*XX` wildcard gets an 8-bit checksum. A bad checksum answers $VNERR,03.
+    """
+    line = line.strip(b"\r\n")
+    if not line.startswith(b"$"):
+        return None
+    body, star, cs = line[1:].partition(b"*")
+    kind = "crc" if len(cs) == 4 else "xor"
+    if star and cs.upper() != b"XX" and verify_line(line) is None:
+        return sentence(b"VNERR,%02d" % _ERR_INVALID_CHECKSUM, kind)
+    command, _, args = body.partition(b",")
+    if command == b"VNRRG":
+        register_id = args.split(b",")[0]
+        if register_id.isdigit() and int(register_id) == 1:
+            return sentence(b"VNRRG,%02d," % 1 + model.encode("ascii"), kind)
+        return sentence(b"VNERR,%02d" % _ERR_INVALID_REGISTER, kind)
+    if command in (b"VNWRG", b"VNASY"):
+        return sentence(body, kind)
+    return sentence(b"VNERR,%02d" % _ERR_INVALID_COMMAND, kind)
+
+
+# --- registry --------------------------------------------------------------------------------
+
+register(FormatInfo(
+    name="vectornav-binary", kind="serial",
+    description="VectorNav binary output (0xFA, user-chosen groups/fields, CRC-16/XMODEM)",
+    encoder=BinaryEncoder, decoder=BinaryDecoder,
+    bytes_per_sample=parse_fields(DEFAULT_FIELDS).packet_size,
+    options={"fields": f"groups and fields, e.g. 'common:timestartup,accel;imu:uncompgyro' "
+                       f"(default {DEFAULT_FIELDS!r}, PX4's binary output 1)"},
+))
+for _name in _SENTENCES:
+    register(FormatInfo(
+        name=f"vectornav-{_name.lower()}", kind="serial",
+        description=f"VectorNav ${_name} ASCII sentence",
+        encoder=lambda checksum="xor", _n=_name: AsciiEncoder(_n, checksum),
+        decoder=AsciiDecoder,
+        bytes_per_sample=AsciiEncoder(_name).bytes_per_sample,
+        options={"checksum": "'xor' (8-bit, 2 hex digits, default) or 'crc' (CRC-16/XMODEM, 4 hex digits)"},
+    ))
