@@ -1,0 +1,357 @@
+"""Xsens MTi "MTData2" output (Xbus message 0x36): encoder and stream decoder.
+
+Frame (Xbus, as sent over a serial port):
+
+    FA  FF  36  len  payload  checksum             payload length 0..254
+    FA  FF  36  FF  len_hi len_lo  payload  checksum    payload length 255..8185
+
+- FA is the preamble, FF the master bus id, 36 the MTData2 message id.
+- The checksum makes the byte sum from FF through the checksum 0 mod 256.
+- A length byte of 0xFF announces a 2-byte big-endian length (high byte first), used for any payload
+  longer than 254 bytes. Verified against Movella's own xstypes/xsmessage.c
+  (XsMessage_constructSized: `if (dataSize > 254) { m_length = XS_EXTLENCODE; ptr[0] = dataSize >> 8;
+  ptr[1] = dataSize; }`, XsMessageHeader_dataSize rejects extended lengths < 255 or > XS_MAXMSGLEN;
+  XS_MAXDATALEN = 8192 - 7). Note ethz-asl/ethzasl_xsens_driver's write_msg puts the two bytes the
+  other way round, but its own read_msg (and the SDK) read them big-endian.
+- Payload: a sequence of items `XDI (u16 BE) size (u8) data (big-endian)`, in the order the output
+  configuration lists them (the recorded MTi-300 packet is not sorted by XDI).
+
+Data identifier low nibble: bits 0-1 precision (0 float32, 1 fixed 12.20, 2 fixed 16.32, 3 float64);
+bits 2-3 coordinate system (0 ENU, 4 NED, 8 NWU). The SDK names the coordinate-system mask "the
+coordinate system part of the orientation data identifier" (xstypes/xsdataidentifier.h) and sets it only
+on orientation (and velocity/position) items when converting legacy packets, so this encoder declares the
+frame on Quaternion and EulerAngles only. The caller supplies data already expressed in that frame.
+
+Fixed point (xstypes/xsmessage.c, XsMessage_setDataF1220 / XsMessage_setDataFP1632):
+- 12.20: int32 = value * 2**20, range [-2048, 2048 - 2**-20].
+- 16.32: 48 bits = value * 2**32, sent as the low 32 bits (fraction) FIRST, then the high 16 bits
+  (integer part), each big-endian; range [-32768, 32768 - 2**-32]. (The SDK also copies the float's
+  last mantissa bit into the lowest wire bit; that is below one LSB and not reproduced.)
+
+Items, units on the wire, source in `Samples`:
+
+| item               | XDI    | wire                               | from                         |
+|--------------------|--------|------------------------------------|------------------------------|
+| packet_counter     | 0x1020 | u16, +1 per packet, wraps 65535->0 | encoder state                |
+| sample_time_fine   | 0x1060 | u32, 10 kHz ticks, wraps at 2**32  | time_ns // 100 000           |
+| sample_time_coarse | 0x1070 | u32, whole seconds                 | time_ns // 10**9             |
+| quaternion         | 0x2010 | 4 reals (w, x, y, z)               | quat (default identity)      |
+| euler_angles       | 0x2030 | 3 reals roll, pitch, yaw in DEGREES| euler (rad; default zeros)   |
+| baro_pressure      | 0x3010 | u32 Pa                             | pressure_pa (default 101325) |
+| delta_v            | 0x4010 | 3 reals m/s                        | delta_velocity (default 0)   |
+| acceleration       | 0x4020 | 3 reals m/s^2                      | accel                        |
+| acceleration_hr    | 0x4040 | 3 reals m/s^2                      | accel                        |
+| rate_of_turn       | 0x8020 | 3 reals rad/s                      | gyro                         |
+| delta_q            | 0x8030 | 4 reals (w, x, y, z)               | delta_theta (rotation vector)|
+| rate_of_turn_hr    | 0x8040 | 3 reals rad/s                      | gyro                         |
+| magnetic_field     | 0xC020 | 3 reals, arbitrary units           | mag / mag_reference_gauss    |
+| temperature        | 0x0810 | 1 real, deg C                      | temperature_c (default 25)   |
+| status_word        | 0xE020 | u32                                | the `status_word` option     |
+
+SampleTimeFine is in 10 kHz ticks: Movella's ROS 2 driver (xsenssupport/Xsens_MTi_ROS_Driver_and_Ntrip_Client,
+messagepublishers/timereferencepublisher.h) converts it with SAMPLE_TIME_FINE_HZ = 10000.
+
+MagneticField is not in gauss: the same driver (magneticfieldpublisher.h) says "Sensor gives normalized
+magnetic field vector with unknown units"; Xsens calls them arbitrary units, normalised to the field
+strength where the device was calibrated. `mag_reference_gauss` is the field strength that reads 1.0
+(default 0.5 G, a mid-latitude Earth field); the decoder multiplies back by the same option.
+
+"reals" are float32 / 12.20 / 16.32 / float64 by the `precision` option. Values outside a type's range
+saturate to the nearest representable value and are counted in `encoder.saturated` (for float32 that is
++-3.4e38; for float64 nothing finite saturates except after unit scaling overflows).
+
+The batch packer and the frame scanner are format-neutral and live in firmware_protocols.packing, shared
+with firmware_protocols.microstrain (MIP).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from firmware_protocols.base import (DecoderStats, Packet, SaturationStats, Samples,
+                                     SerialBatch)
+from firmware_protocols.packing import (
+    CHECKSUM_XBUS, Column, FROM_CONSTANT, FROM_COUNTER, FROM_FIELD, FROM_TIME_DIV, FixedPacketPacker, FrameScanner, KIND_F32, KIND_F64, KIND_FP1220, KIND_FP1632, KIND_SIZE, KIND_U16, KIND_U32, NEED_MORE, NOT_A_FRAME, as_int, parse_names)
+from firmware_protocols.registry import FormatInfo, register
+
+# ============================================================================================
+# Xsens MTData2
+# ============================================================================================
+
+PREAMBLE = 0xFA
+BUS_MASTER = 0xFF
+MID_MTDATA2 = 0x36
+EXTENDED_LENGTH = 0xFF
+MAX_DATA_LENGTH = 8192 - 7          # XS_MAXDATALEN in xsmessage.h
+TICKS_PER_SECOND = 10_000           # SampleTimeFine
+NS_PER_TICK = 1_000_000_000 // TICKS_PER_SECOND
+
+PRECISIONS = {"float32": (0, KIND_F32, 4), "fp1220": (1, KIND_FP1220, 4),
+              "fp1632": (2, KIND_FP1632, 6), "float64": (3, KIND_F64, 8)}
+FRAMES = {"ENU": 0x0, "NED": 0x4, "NWU": 0x8}
+
+
+@dataclass(frozen=True)
+class Item:
+    xdi: int
+    count: int            # values in the item
+    real: bool            # takes the precision bits (else a fixed integer kind)
+    int_kind: int = KIND_U32
+    has_frame: bool = False
+    source: str = ""      # Samples field the values come from ("" for time, state and options)
+    unit: float = 1.0     # SI -> wire multiplier
+
+
+ITEMS = {
+    "packet_counter": Item(0x1020, 1, False, KIND_U16),
+    "sample_time_fine": Item(0x1060, 1, False, KIND_U32),
+    "sample_time_coarse": Item(0x1070, 1, False, KIND_U32),
+    "quaternion": Item(0x2010, 4, True, has_frame=True, source="quat"),
+    "euler_angles": Item(0x2030, 3, True, has_frame=True, source="euler", unit=180.0 / math.pi),
+    "baro_pressure": Item(0x3010, 1, False, KIND_U32, source="pressure_pa"),
+    "delta_v": Item(0x4010, 3, True, source="delta_velocity"),
+    "acceleration": Item(0x4020, 3, True, source="accel"),
+    "acceleration_hr": Item(0x4040, 3, True, source="accel"),
+    "rate_of_turn": Item(0x8020, 3, True, source="gyro"),
+    "delta_q": Item(0x8030, 4, True, source="delta_q"),
+    "rate_of_turn_hr": Item(0x8040, 3, True, source="gyro"),
+    "magnetic_field": Item(0xC020, 3, True, source="mag"),
+    "temperature": Item(0x0810, 1, True, source="temperature_c"),
+    "status_word": Item(0xE020, 1, False, KIND_U32),
+}
+_ITEM_BY_XDI = {item.xdi: name for name, item in ITEMS.items()}
+# Decoded but never encoded: free acceleration needs gravity removed in the navigation frame, which is
+# the kernel's business, not the packetizer's. The recorded MTi-300 packet carries it.
+_DECODE_ONLY = {0x4030: ("free_acceleration", Item(0x4030, 3, True))}
+
+DEFAULT_ITEMS = ("packet_counter", "sample_time_fine", "acceleration", "rate_of_turn")
+_DEFAULTS = {"quat": (1.0, 0.0, 0.0, 0.0), "euler": (0.0, 0.0, 0.0), "pressure_pa": (101325.0,),
+             "delta_velocity": (0.0, 0.0, 0.0), "mag": (0.0, 0.0, 0.0), "temperature_c": (25.0,),
+             "delta_q": (1.0, 0.0, 0.0, 0.0)}
+
+
+
+
+
+
+def rotation_vector_to_quat(theta: np.ndarray) -> np.ndarray:
+    """(n, 3) rotation vectors -> (n, 4) unit quaternions (w, x, y, z); exact near zero via sinc."""
+    angle = np.sqrt(np.einsum("ij,ij->i", theta, theta))
+    half = 0.5 * angle
+    # sin(half) / angle = 0.5 * sinc(half / pi), with numpy's sinc(x) = sin(pi x) / (pi x)
+    k = 0.5 * np.sinc(half / np.pi)
+    return np.column_stack((np.cos(half), theta * k[:, None]))
+
+
+class XsensEncoder:
+    """Samples -> MTData2 packets, one per sample. Stateful: the packet counter continues across calls."""
+
+    def __init__(self, items=DEFAULT_ITEMS, precision: str = "float32", frame: str = "ENU",
+                 mag_reference_gauss: float = 0.5, status_word: int = 0, packet_counter_start: int = 0):
+        self.items = parse_names(items, ITEMS, "items")
+        if precision not in PRECISIONS:
+            raise ValueError(f"precision: {precision!r}; choose from {', '.join(PRECISIONS)}")
+        frame = str(frame).upper()
+        if frame not in FRAMES:
+            raise ValueError(f"frame: {frame!r}; choose from {', '.join(FRAMES)}")
+        mag_reference_gauss = float(mag_reference_gauss)
+        if not (mag_reference_gauss > 0 and math.isfinite(mag_reference_gauss)):
+            raise ValueError(f"mag_reference_gauss: must be a positive number, got {mag_reference_gauss!r}")
+        status_word, packet_counter_start = as_int(status_word), as_int(packet_counter_start)
+        if not 0 <= status_word <= 0xFFFFFFFF:
+            raise ValueError(f"status_word: must fit in 32 bits, got {status_word!r}")
+        self.precision, self.frame = precision, frame
+        self.mag_reference_gauss = mag_reference_gauss
+        self.status_word = status_word
+        self.packet_counter = packet_counter_start & 0xFFFF
+        self.saturated = SaturationStats()
+
+        prec_bits, real_kind, real_size = PRECISIONS[precision]
+        payload = bytearray()
+        placed = []                   # (item name, payload offset of its data, value kind, value width)
+        for name in self.items:
+            item = ITEMS[name]
+            kind, width = (real_kind, real_size) if item.real else (item.int_kind, KIND_SIZE[item.int_kind])
+            xdi = item.xdi | (prec_bits if item.real else 0) | (FRAMES[frame] if item.has_frame else 0)
+            payload += bytes((xdi >> 8, xdi & 0xFF, item.count * width))
+            placed.append((name, len(payload), kind, width))
+            payload += bytes(item.count * width)
+        if len(payload) <= 254:
+            header = bytes((PREAMBLE, BUS_MASTER, MID_MTDATA2, len(payload)))
+        else:
+            header = bytes((PREAMBLE, BUS_MASTER, MID_MTDATA2, EXTENDED_LENGTH, len(payload) >> 8,
+                            len(payload) & 0xFF))
+        columns = []
+        for name, offset, kind, width in placed:
+            columns += self._columns(name, len(header) + offset, kind, width)
+        self._packer = FixedPacketPacker(header + bytes(payload) + b"\x00", columns, CHECKSUM_XBUS, _DEFAULTS)
+        self._wants_delta_q = "delta_q" in self.items
+
+    def _columns(self, name: str, position: int, kind: int, width: int) -> list:
+        if name == "packet_counter":
+            return [Column(kind, position, name, FROM_COUNTER, modulus=1 << 16)]
+        if name == "sample_time_fine":
+            return [Column(kind, position, name, FROM_TIME_DIV, divisor=NS_PER_TICK, modulus=1 << 32)]
+        if name == "sample_time_coarse":
+            return [Column(kind, position, name, FROM_TIME_DIV, divisor=1_000_000_000, modulus=1 << 32)]
+        if name == "status_word":
+            return [Column(kind, position, name, FROM_CONSTANT, constant=float(self.status_word))]
+        item = ITEMS[name]
+        unit = item.unit / self.mag_reference_gauss if name == "magnetic_field" else item.unit
+        return [Column(kind, position + c * width, name, FROM_FIELD, item.source, c, unit) for c in range(item.count)]
+
+    @property
+    def bytes_per_sample(self) -> int:
+        return self._packer.packet_size
+
+    def encode(self, samples: Samples) -> SerialBatch:
+        extra = None
+        if self._wants_delta_q and samples.delta_theta is not None:
+            samples.require_finite(["delta_theta"])     # name the caller's field, not the derived one
+            extra = {"delta_q": rotation_vector_to_quat(samples.delta_theta)}
+        batch = self._packer.pack(samples, self.saturated, self.packet_counter, extra)
+        self.packet_counter = (self.packet_counter + len(samples)) & 0xFFFF
+        return batch
+
+
+# --- decoding --------------------------------------------------------------------------------
+
+def _xbus_length(buf: bytearray, j: int) -> int:
+    if len(buf) - j < 4:
+        return NEED_MORE
+    length = buf[j + 3]
+    if length != EXTENDED_LENGTH:
+        return 4 + length + 1
+    if len(buf) - j < 6:
+        return NEED_MORE
+    length = (buf[j + 4] << 8) | buf[j + 5]
+    if length < 255 or length > MAX_DATA_LENGTH:   # the SDK's sanity check (XsMessageHeader_dataSize)
+        return NOT_A_FRAME
+    return 6 + length + 1
+
+
+def _xbus_checksum_ok(frame: bytes) -> bool:
+    return sum(frame[1:]) & 0xFF == 0
+
+
+def _read_reals(data: bytes, precision: int, count: int):
+    """Big-endian reals of the given precision bits -> tuple of floats, or None if the size is wrong."""
+    width = (4, 4, 6, 8)[precision]
+    if len(data) != width * count:
+        return None
+    if precision == 0:
+        return tuple(float(v) for v in np.frombuffer(data, dtype=">f4"))
+    if precision == 3:
+        return tuple(float(v) for v in np.frombuffer(data, dtype=">f8"))
+    if precision == 1:
+        return tuple(float(v) / 2.0 ** 20 for v in np.frombuffer(data, dtype=">i4"))
+    out = []
+    for k in range(count):
+        frac = int.from_bytes(data[6 * k:6 * k + 4], "big")
+        whole = int.from_bytes(data[6 * k + 4:6 * k + 6], "big", signed=True)
+        out.append(((whole << 32) | frac) / 2.0 ** 32)
+    return tuple(out)
+
+
+class XsensDecoder:
+    """Bytes -> Packets. MTData2 messages become kind "mtdata2" with SI fields; any other Xbus message
+    (acks, errors) becomes kind "xbus" with its message id and raw data. Never raises."""
+
+    def __init__(self, mag_reference_gauss: float = 0.5):
+        self.mag_reference_gauss = float(mag_reference_gauss)
+        self._scanner = FrameScanner(bytes((PREAMBLE, BUS_MASTER)), _xbus_length, _xbus_checksum_ok)
+
+    @property
+    def stats(self) -> DecoderStats:
+        return self._scanner.stats
+
+    def feed(self, chunk: bytes) -> list[Packet]:
+        packets = []
+        for frame in self._scanner.frames(chunk):
+            header = 6 if frame[3] == EXTENDED_LENGTH else 4
+            data = frame[header:-1]
+            if frame[2] == MID_MTDATA2:
+                packets.append(Packet("mtdata2", self._mtdata2_fields(data), frame))
+            else:
+                packets.append(Packet("xbus", {"mid": frame[2], "data": data}, frame))
+            self.stats.packets += 1
+        return packets
+
+    def _mtdata2_fields(self, payload: bytes) -> dict:
+        fields: dict = {"xdis": []}
+        k = 0
+        while k < len(payload):
+            if len(payload) - k < 3 or len(payload) - k - 3 < payload[k + 2]:
+                fields["malformed"] = True      # an item runs past the payload: keep what came before
+                break
+            xdi = (payload[k] << 8) | payload[k + 1]
+            data = payload[k + 3:k + 3 + payload[k + 2]]
+            k += 3 + payload[k + 2]
+            fields["xdis"].append(xdi)
+            self._decode_item(xdi, data, fields)
+        return fields
+
+    def _decode_item(self, xdi: int, data: bytes, fields: dict) -> None:
+        name = _ITEM_BY_XDI.get(xdi & 0xFFF0)
+        item = ITEMS.get(name)
+        if item is None and (xdi & 0xFFF0) in _DECODE_ONLY:
+            name, item = _DECODE_ONLY[xdi & 0xFFF0]
+        if item is None:
+            fields.setdefault("unknown", {})[xdi] = data
+            return
+        if not item.real:
+            width = KIND_SIZE[item.int_kind]
+            if len(data) != width:
+                fields.setdefault("unknown", {})[xdi] = data
+                return
+            value = int.from_bytes(data, "big")
+            if name == "sample_time_fine":
+                fields["sample_time_fine"] = value
+                fields["time_ns"] = value * NS_PER_TICK     # modulo the 2**32-tick wrap (~5 days)
+            elif name == "sample_time_coarse":
+                fields["sample_time_coarse"] = value
+            elif name == "baro_pressure":
+                fields["pressure_pa"] = float(value)
+            else:
+                fields[name] = value
+            return
+        values = _read_reals(data, xdi & 0x3, item.count)
+        if values is None:
+            fields.setdefault("unknown", {})[xdi] = data
+            return
+        fields.setdefault("precision", {})[name] = next(p for p, v in PRECISIONS.items() if v[0] == xdi & 0x3)
+        if item.has_frame:
+            fields["frame"] = next((f for f, bits in FRAMES.items() if bits == xdi & 0xC), "reserved")
+        si = {"quaternion": "quat", "euler_angles": "euler", "delta_v": "delta_velocity",
+              "acceleration": "accel", "acceleration_hr": "accel_hr", "rate_of_turn": "gyro",
+              "rate_of_turn_hr": "gyro_hr", "magnetic_field": "mag", "temperature": "temperature_c",
+              "delta_q": "delta_q", "free_acceleration": "free_accel"}[name]
+        if name == "magnetic_field":
+            fields["mag_au"] = values
+            values = tuple(v * self.mag_reference_gauss for v in values)
+        elif name == "euler_angles":
+            values = tuple(math.radians(v) for v in values)
+        fields[si] = values[0] if item.count == 1 else values
+
+
+_OPTIONS = {
+    "items": f"comma-separated MTData2 items in wire order (default {','.join(DEFAULT_ITEMS)}); "
+             f"known: {', '.join(ITEMS)}",
+    "precision": "float32 (default), float64, fp1220 or fp1632 for real-valued items",
+    "frame": "ENU (default), NED or NWU: declared in the orientation XDIs; data must already be in it",
+    "mag_reference_gauss": "field strength in gauss that reads 1.0 arbitrary unit (default 0.5)",
+    "status_word": "constant StatusWord value (default 0)",
+    "packet_counter_start": "first PacketCounter value (default 0); wraps 65535 -> 0",
+}
+
+register(FormatInfo(
+    name="xsens-mtdata2",
+    kind="serial",
+    description="Xsens MTi MTData2 (Xbus MID 0x36), big-endian items, byte-sum checksum",
+    encoder=XsensEncoder,
+    decoder=XsensDecoder,
+    bytes_per_sample=XsensEncoder().bytes_per_sample,
+    options=_OPTIONS,
+))

@@ -1,0 +1,278 @@
+"""MicroStrain MIP (descriptor set 0x80): the spec's published vector byte for byte, our packets read by a
+decoder written here from the spec (struct, big-endian, Fletcher-16), and by MicroStrain's own library
+(pymscl) through a pty."""
+import os
+import struct
+import time
+import tty
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from firmware_protocols import registry
+from firmware_protocols.base import EncodeError, Samples
+from firmware_protocols.microstrain import FIELDS, MipDecoder, MipEncoder
+
+SETTINGS = settings(derandomize=True, deadline=None, max_examples=60,
+                    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+F32_MAX = float(np.finfo(np.float32).max)
+G = 9.80665
+WEEK_NS = 604_800 * 10 ** 9
+
+# wire-formats.md, "MicroStrain MIP": accel in g from the common sample, gyro, mag, pressure 1013.25 mbar,
+# quaternion (1, 0, 0, 0), GPS timestamp tow 123456.789 week 2300 flags 7.
+SPEC_VECTOR = bytes.fromhex(
+    "756580500e043c2711ffbca711ffbf8000000e053c23d70abca3d70a3cf5c28f0e063e570a3d3c23d70abed70a3d0617447d50"
+    "00120a3f8000000000000000000000000000000e1240fe240c9fbe76c908fc000740f1")
+SPEC_SAMPLE = Samples.single(123_456_789_000_000, [0.1, -0.2, -9.80665], [0.01, -0.02, 0.03],
+                             mag=[0.21, 0.01, -0.42], pressure_pa=101_325.0, quat=[1.0, 0.0, 0.0, 0.0])
+
+
+# --- an independent reader, from the spec ------------------------------------------------------
+
+def spec_fletcher(data: bytes):
+    a = b = 0
+    for byte in data:
+        a = (a + byte) % 256
+        b = (b + a) % 256
+    return a, b
+
+
+def spec_fields(packet: bytes):
+    """{descriptor: data} of one 0x80 packet; asserts the spec's framing and checksum."""
+    assert packet[:2] == b"\x75\x65" and packet[2] == 0x80
+    assert len(packet) == 4 + packet[3] + 2 <= 261
+    assert spec_fletcher(packet[:-2]) == (packet[-2], packet[-1])
+    fields, k, payload = {}, 0, packet[4:-2]
+    while k < len(payload):
+        size, descriptor = payload[k], payload[k + 1]
+        fields[descriptor] = payload[k + 2:k + size]
+        k += size
+    assert k == len(payload)
+    return fields
+
+
+def f32(values):
+    return [float(np.float32(v)) for v in values]
+
+
+# --- published vector --------------------------------------------------------------------------
+
+def test_spec_vector_byte_for_byte():
+    encoder = registry._REGISTRY["microstrain-mip"].encoder(gps_week_offset=2300, gps_flags=7)
+    assert encoder.encode(SPEC_SAMPLE).data == SPEC_VECTOR
+    assert encoder.bytes_per_sample == len(SPEC_VECTOR) == registry._REGISTRY["microstrain-mip"].bytes_per_sample
+
+
+def test_spec_vector_read_by_spec_decoder_and_ours():
+    fields = spec_fields(SPEC_VECTOR)
+    assert list(fields) == [0x04, 0x05, 0x06, 0x17, 0x0A, 0x12]
+    assert list(struct.unpack(">3f", fields[0x04])) == f32(np.array([0.1, -0.2, -9.80665]) / G)
+    assert struct.unpack(">f", fields[0x17]) == (1013.25,)
+    assert struct.unpack(">dHH", fields[0x12]) == (123456.789, 2300, 7)
+    decoder = MipDecoder(gps_week_offset=2300)
+    (packet,) = decoder.feed(SPEC_VECTOR)
+    f = packet.fields
+    assert packet.kind == "mip-sensor" and f["descriptors"] == list(fields)
+    assert f["accel"] == pytest.approx((0.1, -0.2, -9.80665), rel=1e-7)
+    assert f["gyro"] == tuple(f32([0.01, -0.02, 0.03]))
+    assert f["mag"] == tuple(f32([0.21, 0.01, -0.42]))
+    assert f["pressure_pa"] == 101_325.0 and f["quat"] == (1.0, 0.0, 0.0, 0.0)
+    assert f["time_ns"] == 123_456_789_000_000 and f["gps_flags"] == 7
+
+
+def test_every_field_read_by_spec_decoder():
+    encoder = MipEncoder(fields=tuple(FIELDS), gps_week_offset=2000)
+    sample = Samples.single(5 * WEEK_NS + 1_500_000_001, [1.0, 2.0, 3.0], [0.1, 0.2, 0.3], mag=[0.2, 0.3, 0.4],
+                            quat=[0.5, 0.5, 0.5, 0.5], euler=[0.1, 0.2, 0.3], pressure_pa=95_000.0,
+                            delta_theta=[1e-4, 2e-4, 3e-4], delta_velocity=[0.01, 0.02, 0.03])
+    fields = spec_fields(encoder.encode(sample).packet(0))
+    assert list(fields) == [FIELDS[name].descriptor for name in FIELDS]
+    assert list(struct.unpack(">3f", fields[0x04])) == f32(np.array([1.0, 2.0, 3.0]) / G)
+    assert list(struct.unpack(">3f", fields[0x08])) == f32(np.array([0.01, 0.02, 0.03]) / G)  # g*s
+    assert list(struct.unpack(">3f", fields[0x07])) == f32([1e-4, 2e-4, 3e-4])
+    assert list(struct.unpack(">4f", fields[0x0A])) == [0.5] * 4
+    assert list(struct.unpack(">3f", fields[0x0C])) == f32([0.1, 0.2, 0.3])
+    assert struct.unpack(">f", fields[0x17]) == (950.0,)                         # mbar
+    assert struct.unpack(">dHH", fields[0x12]) == (1.500000001, 2005, 0x1C)
+
+
+# --- round trips over the full range -----------------------------------------------------------
+
+any_double = st.floats(allow_nan=False, allow_infinity=False)
+
+
+@SETTINGS
+@given(st.lists(st.tuples(any_double, any_double, any_double), min_size=1, max_size=6), any_double)
+def test_float_round_trip_and_saturation(vectors, pressure):
+    accel = np.array(vectors)
+    n = len(accel)
+    encoder = MipEncoder(fields="accel,gyro,pressure")
+    batch = encoder.encode(Samples(np.arange(n, dtype=np.int64), accel, accel * 0.5,
+                                   pressure_pa=np.full(n, pressure)))
+    packets = MipDecoder().feed(batch.data)
+    assert len(packets) == n
+    wire_accel = np.clip(accel / G, -F32_MAX, F32_MAX).astype(np.float32)
+    wire_gyro = np.clip(accel * 0.5, -F32_MAX, F32_MAX).astype(np.float32)
+    wire_pressure = np.float32(np.clip(pressure / 100.0, -F32_MAX, F32_MAX))
+    for i, p in enumerate(packets):
+        assert p.fields["accel"] == tuple(float(v) * G for v in wire_accel[i])
+        assert p.fields["gyro"] == tuple(float(v) for v in wire_gyro[i])
+        assert p.fields["pressure_pa"] == float(wire_pressure) * 100.0
+    counts = encoder.saturated.counts
+    assert counts.get("accel", 0) == np.count_nonzero(np.abs(accel / G) > F32_MAX)
+    assert counts.get("gyro", 0) == np.count_nonzero(np.abs(accel * 0.5) > F32_MAX)
+    assert counts.get("pressure", 0) == n * int(abs(pressure / 100.0) > F32_MAX)
+
+
+@SETTINGS
+@given(st.integers(-3 * WEEK_NS, 12_000 * WEEK_NS), st.integers(0, 3000), st.integers(0, 0xFFFF))
+def test_gps_timestamp_round_trip_and_week_saturation(time_ns, week_offset, flags):
+    # int64 nanoseconds reach only ~15 000 weeks, so only weeks before the GPS epoch can saturate
+    encoder = MipEncoder(fields=("gps_timestamp",), gps_week_offset=week_offset, gps_flags=flags)
+    packet = encoder.encode(Samples.single(time_ns, [0, 0, 0], [0, 0, 0])).packet(0)
+    tow, week, got_flags = struct.unpack(">dHH", spec_fields(packet)[0x12])
+    gps_ns = time_ns + week_offset * WEEK_NS
+    true_week, tow_ns = divmod(gps_ns, WEEK_NS)
+    assert tow == tow_ns / 1e9 and got_flags == flags
+    assert week == min(max(true_week, 0), 0xFFFF)
+    assert encoder.saturated.counts.get("gps_timestamp.week", 0) == int(week != true_week)
+    (decoded,) = MipDecoder(gps_week_offset=week_offset).feed(packet)
+    if week == true_week:
+        assert decoded.fields["time_ns"] == time_ns                  # exact to the nanosecond
+
+
+def test_max_packet_size_is_enforced():
+    assert MipEncoder(fields=tuple(FIELDS)).bytes_per_sample <= 261
+    with pytest.raises(ValueError):
+        MipEncoder(fields="accel,bogus")
+
+
+@pytest.mark.parametrize("field, fields", [("accel", "accel"), ("gyro", "gyro"), ("mag", "mag"),
+                                           ("quat", "quaternion"), ("pressure_pa", "pressure"),
+                                           ("delta_velocity", "delta_velocity")])
+def test_non_finite_input_names_the_field(field, fields):
+    n = 3
+    data = dict(accel=np.ones((n, 3)), gyro=np.ones((n, 3)), mag=np.ones((n, 3)), quat=np.ones((n, 4)),
+                pressure_pa=np.ones(n), delta_velocity=np.ones((n, 3)))
+    data[field] = data[field].copy()
+    data[field].reshape(n, -1)[1, -1] = np.inf
+    with pytest.raises(EncodeError, match=rf"'{field}'.*sample 1"):
+        MipEncoder(fields=fields).encode(Samples(np.arange(n, dtype=np.int64), **data))
+
+
+# --- the stream decoder ------------------------------------------------------------------------
+
+def stream_of(n=15):
+    rng = np.random.default_rng(5)
+    samples = Samples(np.arange(n, dtype=np.int64) * 10_000_000, rng.normal(size=(n, 3)), rng.normal(size=(n, 3)),
+                      mag=rng.normal(size=(n, 3)))
+    return MipEncoder().encode(samples)
+
+
+def test_byte_by_byte_and_other_descriptor_sets():
+    batch = stream_of()
+    reply = bytes([0x75, 0x65, 0x01, 0x04, 0x04, 0xF1, 0x01, 0x00])      # base command ACK (ping), set 0x01
+    reply += bytes(spec_fletcher(reply))
+    stream = batch.data + reply
+    decoder = MipDecoder()
+    packets = [p for b in stream for p in decoder.feed(bytes([b]))]
+    assert [p.raw for p in packets[:-1]] == [batch.packet(i) for i in range(len(batch))]
+    assert packets[-1].kind == "mip" and packets[-1].fields == {"descriptor_set": 0x01,
+                                                                 "fields": [(0xF1, b"\x01\x00")]}
+    assert decoder.stats.packets == len(batch) + 1 and decoder.stats.skipped_bytes == 0
+
+
+def test_corrupted_packet_is_counted_and_the_rest_survive():
+    batch = stream_of(4)
+    data = bytearray(batch.data)
+    data[int(batch.offsets[1]) + 20] ^= 0x80
+    decoder = MipDecoder()
+    packets = decoder.feed(bytes(data))
+    assert [p.raw for p in packets] == [batch.packet(i) for i in (0, 2, 3)]
+    assert decoder.stats.bad_checksum == 1 and decoder.stats.skipped_bytes == len(batch.packet(1))
+
+
+@SETTINGS
+@given(st.lists(st.binary(max_size=40).map(lambda b: b.replace(b"\x75", b"")), min_size=16, max_size=16),
+       st.integers(1, 120))
+def test_garbage_between_packets_is_skipped(garbage, cut):
+    batch = stream_of()
+    stream = b"".join(garbage[i] + batch.packet(i) for i in range(len(batch))) + garbage[-1]
+    decoder = MipDecoder()
+    packets = [p for k in range(0, len(stream), cut) for p in decoder.feed(stream[k:k + cut])]
+    assert [p.raw for p in packets] == [batch.packet(i) for i in range(len(batch))]
+    assert decoder.stats.skipped_bytes == sum(len(g) for g in garbage) and decoder.stats.bad_checksum == 0
+
+
+@SETTINGS
+@given(st.lists(st.one_of(st.binary(max_size=60), st.just(b"\x75\x65\x80"), st.integers(0, 14)), max_size=40),
+       st.integers(0, 2 ** 32 - 1))
+def test_fuzz_never_raises_never_yields_bad_checksum(parts, seed):
+    batch = stream_of()
+    rng = np.random.default_rng(seed)
+    stream = bytearray()
+    for part in parts:
+        if isinstance(part, int):
+            packet = bytearray(batch.packet(part))
+            if rng.random() < 0.3:
+                packet[rng.integers(len(packet))] ^= 1 << int(rng.integers(8))
+            if rng.random() < 0.2:
+                packet = packet[:rng.integers(len(packet))]
+            stream += packet
+        else:
+            stream += part
+    decoder = MipDecoder()
+    packets = [p for k in range(0, len(stream), 29) for p in decoder.feed(bytes(stream[k:k + 29]))]
+    for p in packets:
+        assert p.raw[:2] == b"\x75\x65" and spec_fletcher(p.raw[:-2]) == (p.raw[-2], p.raw[-1])
+    assert decoder.stats.packets == len(packets)
+
+
+# --- MicroStrain's own library reads our packets from a pty ------------------------------------
+
+def test_pymscl_reads_our_packets_from_a_pty():
+    try:
+        import mscl
+    except ImportError as exc:           # pymscl publishes wheels for some platforms only
+        pytest.skip(f"pymscl (MicroStrain's MSCL) does not import here: {exc}")
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    n = 6
+    rng = np.random.default_rng(11)
+    accel, gyro, mag = rng.normal(size=(n, 3)), rng.normal(size=(n, 3)) * 0.1, rng.normal(size=(n, 3)) * 0.3
+    quat = rng.normal(size=(n, 4))
+    quat /= np.linalg.norm(quat, axis=1, keepdims=True)
+    time_ns = 100_000 * 10 ** 9 + np.arange(n, dtype=np.int64) * 5_000_000
+    samples = Samples(time_ns, accel, gyro, mag=mag, quat=quat, pressure_pa=np.linspace(90_000, 101_000, n))
+    data = MipEncoder(gps_week_offset=2345).encode(samples).data
+    connection = mscl.Connection.Serial(os.ttyname(slave), 921600)
+    try:
+        node = mscl.InertialNode(connection)
+        os.write(master, data)
+        received, deadline = [], time.monotonic() + 5.0
+        while len(received) < n and time.monotonic() < deadline:
+            received += list(node.getDataPackets(200))
+    finally:
+        connection.disconnect()
+        for fd in (master, slave):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+    assert len(received) == n
+    for i, packet in enumerate(received):
+        assert packet.descriptorSet() == 0x80
+        points = {p.channelName(): p for p in packet.data()}
+        got = [points[f"scaledAccel{a}"].as_float() for a in "XYZ"]
+        assert got == f32(accel[i] / G)
+        assert [points[f"scaledGyro{a}"].as_float() for a in "XYZ"] == f32(gyro[i])
+        assert [points[f"scaledMag{a}"].as_float() for a in "XYZ"] == f32(mag[i])
+        assert points["scaledAmbientPressure"].as_float() == f32([samples.pressure_pa[i] / 100])[0]
+        q = points["orientQuaternion"].as_Vector()
+        assert [q.as_floatAt(k) for k in range(4)] == f32(quat[i])
+        assert points["gpsCorrelTimestampWeekNum"].as_uint16() == 2345
+        assert points["gpsCorrelTimestampTow"].as_double() == (time_ns[i] % WEEK_NS) / 1e9
+        assert points["gpsCorrelTimestampFlags"].as_uint16() == 0x1C
