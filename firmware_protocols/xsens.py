@@ -72,8 +72,10 @@ import numpy as np
 
 from firmware_protocols.base import (DecoderStats, Packet, SaturationStats, Samples,
                                      SerialBatch)
-from firmware_protocols.packing import (
-    CHECKSUM_XBUS, Column, FROM_CONSTANT, FROM_COUNTER, FROM_FIELD, FROM_TIME_DIV, FixedPacketPacker, FrameScanner, KIND_F32, KIND_F64, KIND_FP1220, KIND_FP1632, KIND_SIZE, KIND_U16, KIND_U32, NEED_MORE, NOT_A_FRAME, as_int, parse_names)
+from firmware_protocols.packing import (CHECKSUM_XBUS, FROM_CONSTANT, FROM_COUNTER, FROM_FIELD, FROM_TIME_DIV,
+                                        KIND_F32, KIND_F64, KIND_FP1220, KIND_FP1632, KIND_SIZE, KIND_U16, KIND_U32,
+                                        NEED_MORE, NOT_A_FRAME, Column, FixedPacketPacker, FrameScanner, as_int,
+                                        parse_names)
 from firmware_protocols.registry import FormatInfo, register
 
 # ============================================================================================

@@ -74,6 +74,8 @@ METHODS: dict[str, str] = {
     "central6": "6th-order central differences, same-order one-sided at the ends; uniform time steps only",
     "spline5": "quintic interpolating spline (not-a-knot): smooth jerk, error O(h^(6-d)) for derivative d",
     "spline3": "cubic interpolating spline (not-a-knot), as most simulators: jerk piecewise constant",
+    "spline5c": "quintic interpolating spline clamped at the ends: first and second derivatives there from a "
+                "degree-9 least-squares polynomial through the 14 end samples; ends about as accurate as inside",
 }
 
 # Relative tolerance on the step for central4/6 (see module docstring) and on output times past the ends.
@@ -85,12 +87,15 @@ _SPAN_RTOL = 1e-6
 class _MethodSpec:
     kind: str       # "matlab", "central" or "spline"
     order: int      # accuracy order p of the differences / degree k of the spline
+    end_fit: tuple[int, int] | None = None   # spline clamped with d=1,2 from a (degree, points) end fit
 
     def min_samples(self, max_order: int) -> int:
         if self.kind == "matlab":
             return 3                            # at least one central difference
         if self.kind == "central":
             return self.order + max_order       # the one-sided stencil for the highest derivative
+        if self.end_fit is not None:
+            return self.end_fit[1]              # the end fit's points
         return self.order + 1                   # one polynomial piece of degree k
 
 
@@ -100,6 +105,7 @@ _SPECS = {
     "central6": _MethodSpec("central", 6),
     "spline5": _MethodSpec("spline", 5),
     "spline3": _MethodSpec("spline", 3),
+    "spline5c": _MethodSpec("spline", 5, end_fit=(9, 14)),
 }
 assert _SPECS.keys() == METHODS.keys()
 
@@ -212,9 +218,31 @@ class _GridFit:
         return np.stack([np.einsum("nj,njm->nm", w, a[idx]) for a in self.arrays[:order + 1]])
 
 
+def end_derivative_weights(offsets: np.ndarray, degree: int, d: int) -> np.ndarray:
+    """Weights w with sum_j w_j f(x_j) ~ f^(d)(0): derivative at 0 of the least-squares polynomial of `degree`
+    through the nodes x_j = offsets (len(offsets) >= degree + 1; equal: Fornberg's finite differences).
+
+    Legendre basis on the nodes scaled to [-1, 1], so the fit stays well conditioned at degree 11.
+    """
+    x = np.asarray(offsets, dtype=float)
+    scale = float(np.abs(x).max())
+    basis = np.polynomial.legendre.legvander(x / scale, degree)
+    at_zero = np.array([np.polynomial.legendre.legval(0.0, np.polynomial.legendre.legder(np.eye(degree + 1)[j], d))
+                        for j in range(degree + 1)])
+    return (at_zero @ np.linalg.pinv(basis)) / scale ** d
+
+
+def _clamped_ends(tau: np.ndarray, y: np.ndarray, degree: int, points: int):
+    """bc_type for make_interp_spline: first and second derivatives at both ends from the end fit."""
+    left = [(d, end_derivative_weights(tau[:points] - tau[0], degree, d) @ y[:points]) for d in (1, 2)]
+    right = [(d, end_derivative_weights(tau[-points:] - tau[-1], degree, d) @ y[-points:]) for d in (1, 2)]
+    return left, right
+
+
 class _SplineFit:
     def __init__(self, tau: np.ndarray, y: np.ndarray, spec: _MethodSpec):
-        self.spline = make_interp_spline(tau, y, k=spec.order, bc_type="not-a-knot", check_finite=False)
+        bc = "not-a-knot" if spec.end_fit is None else _clamped_ends(tau, y, *spec.end_fit)
+        self.spline = make_interp_spline(tau, y, k=spec.order, bc_type=bc, check_finite=False)
 
     def evaluate(self, tau_out: np.ndarray, order: int) -> np.ndarray:
         return np.stack([self.spline(tau_out, nu=d) for d in range(order + 1)])

@@ -5,7 +5,7 @@ the attitude with its rates.
 Symbolic input: sympy differentiates the expressions exactly, common subexpressions are shared, and the
 result is printed as straight-line code. Sin/cos/tan of an argument linear in t get their phase reduced
 exactly: the phase in cycles is frac(C0 + k*CS) with CS held as a double-double and k*CS formed with an
-error-free product, so t = 1e7 s is as exact as t = 1 s.
+error-free product, so t = 1e7 s is as exact as t = 1 s; sin and cos of it come from imu_emulator.phase.
 
 Sampled input: derivative arrays are evaluated per block in Python (imu_emulator.derivatives) and the
 kernel reads them.
@@ -24,7 +24,6 @@ from imu_emulator.scene import Expressions, SampledData, Scene
 
 AXES = "xyz"
 ANGLES = ("r", "p", "y")       # roll, pitch, yaw suffixes
-TWO_PI = "6.283185307179586"
 
 
 @dataclass
@@ -60,14 +59,14 @@ def _phase_lines(index: int) -> list[str]:
         f"_p = kf * {c}_HI",
         f"_e = ((kh * {c}_HI_H - _p) + kh * {c}_HI_L + kl * {c}_HI_H) + kl * {c}_HI_L",
         f"_c = (_p - math.floor(_p)) + ((_e + kf * {c}_LO) + {c}_C0)",
-        f"ph{index} = {TWO_PI} * (_c - math.floor(_c))",
+        f"sph{index}, cph{index} = sincos_cycles(_c)",
     ]
 
 
 def _reduce_phases(exprs, t, scene: Scene):
-    """Replace trig functions of A*t + B by the same function of a phase variable ph_i."""
+    """Replace sin/cos/tan of A*t + B by sph_i, cph_i (sin and cos of the exactly reduced phase i)."""
     import sympy
-    slots: dict[tuple, sympy.Symbol] = {}
+    slots: dict[tuple, tuple] = {}
     constants: dict[str, float] = {}
 
     def replace(fn):
@@ -81,9 +80,10 @@ def _reduce_phases(exprs, t, scene: Scene):
             key = (sympy.srepr(coef), sympy.srepr(offset))
             if key not in slots:
                 index = len(slots)
-                slots[key] = sympy.Symbol(f"ph{index}", real=True)
+                slots[key] = (sympy.Symbol(f"sph{index}", real=True), sympy.Symbol(f"cph{index}", real=True))
                 constants.update(_phase_constants(coef, offset, scene, index))
-            return fn(slots[key])
+            sin_, cos_ = slots[key]
+            return sin_ if fn is sympy.sin else cos_ if fn is sympy.cos else sin_ / cos_
         return inner
 
     out = []
@@ -103,6 +103,8 @@ def _symbolic(parts: list[tuple[str, object]], scene: Scene) -> MotionCode:
     names = [name for name, _ in parts]
     exprs = [sympy.sympify(e).replace(sympy.DiracDelta, lambda *a: sympy.Integer(0)) for _, e in parts]
     exprs, constants, n_phases = _reduce_phases(exprs, t, scene)
+    # Fold numeric constants (pi**3 etc.) to 30 digits now, not per sample in the kernel.
+    exprs = [sympy.N(e, 30) for e in exprs]
     replacements, reduced = sympy.cse(exprs, symbols=sympy.numbered_symbols("_x"), optimizations="basic")
     printer = PythonCodePrinter({"fully_qualified_modules": True, "standard": "python3"})
     lines = []
@@ -168,43 +170,49 @@ def tangent_lines(angles: bool) -> list[str]:
     Where |v| vanishes the last defined attitude is held; where v is vertical the last heading is
     held. The held cos/sin live in `hold` so they carry across blocks.
     """
+    # Reciprocals once: divisions are the slow part of this block. The held cos/sin are locals
+    # (hcy, hsy, hcp, hsp) loaded before the loop and stored after it, so nothing aliases the outputs.
     lines = [
         "v2 = vx * vx + vy * vy + vz * vz",
         "h2 = vx * vx + vy * vy",
         "if v2 > EPS_V2:",
         "    if h2 > EPS_V2:",
-        "        h = math.sqrt(h2)",
-        "        cy = vx / h",
-        "        sy = vy / h",
+        "        ih = 1.0 / math.sqrt(h2)",
+        "        h = h2 * ih",
+        "        ih2 = ih * ih",
+        "        cy = vx * ih",
+        "        sy = vy * ih",
         "        cross = vx * ay - vy * ax",
-        "        hd = (vx * ax + vy * ay) / h",
-        "        dy = cross / h2",
-        "        ddy = (vx * jy - vy * jx) / h2 - 2.0 * cross * (vx * ax + vy * ay) / (h2 * h2)",
-        "        hdd = (ax * ax + ay * ay + vx * jx + vy * jy - hd * hd) / h",
-        "        hold[0] = cy",
-        "        hold[1] = sy",
+        "        dot = vx * ax + vy * ay",
+        "        hd = dot * ih",
+        "        dy = cross * ih2",
+        "        ddy = ((vx * jy - vy * jx) - 2.0 * cross * dot * ih2) * ih2",
+        "        hdd = (ax * ax + ay * ay + vx * jx + vy * jy - hd * hd) * ih",
+        "        hcy = cy",
+        "        hsy = sy",
         "    else:",
         "        h = math.sqrt(h2)",
-        "        cy = hold[0]",
-        "        sy = hold[1]",
+        "        cy = hcy",
+        "        sy = hsy",
         "        hd = 0.0",
         "        hdd = 0.0",
         "        dy = 0.0",
         "        ddy = 0.0",
-        "    speed = math.sqrt(v2)",
-        "    cp = h / speed",
-        "    sp = -vz / speed",
-        # pitch = -atan2(vz, h): differentiate N/D form once and twice
+        "    iv = 1.0 / math.sqrt(v2)",
+        "    iv2 = iv * iv",
+        "    cp = h * iv",
+        "    sp = -vz * iv",
+        # pitch = -atan2(vz, h): differentiate the N/D form once and twice
         "    num = h * az - vz * hd",
-        "    dp = -num / v2",
-        "    ddp = -((h * jz - vz * hdd) * v2 - num * 2.0 * (vz * az + h * hd)) / (v2 * v2)",
-        "    hold[2] = cp",
-        "    hold[3] = sp",
+        "    dp = -num * iv2",
+        "    ddp = -((h * jz - vz * hdd) - num * 2.0 * (vz * az + h * hd) * iv2) * iv2",
+        "    hcp = cp",
+        "    hsp = sp",
         "else:",
-        "    cy = hold[0]",
-        "    sy = hold[1]",
-        "    cp = hold[2]",
-        "    sp = hold[3]",
+        "    cy = hcy",
+        "    sy = hsy",
+        "    cp = hcp",
+        "    sp = hsp",
         "    dy = 0.0",
         "    ddy = 0.0",
         "    dp = 0.0",

@@ -28,6 +28,13 @@ class SampleBlock:
     def n_imu(self) -> int:
         return int(self.accel.shape[0])
 
+    def view(self, start: int, stop: int) -> "SampleBlock":
+        """Samples start..stop-1 of this block as views (writing to them writes to this block)."""
+        return SampleBlock(k0=self.k0 + start, t_s=self.t_s[start:stop], accel=self.accel[:, start:stop],
+                           gyro=self.gyro[:, start:stop],
+                           quat=None if self.quat is None else self.quat[:, start:stop],
+                           truth=None if self.truth is None else {k: v[start:stop] for k, v in self.truth.items()})
+
     def time_ns(self, offset_ns: int = 0) -> np.ndarray:
         """Sample times as integer nanoseconds (exact to the ns for any sane t0), plus an offset."""
         return np.rint(self.t_s * 1e9).astype(np.int64) + np.int64(offset_ns)

@@ -9,6 +9,7 @@ from imu_emulator.kernel import compile_kernel
 from imu_emulator.samples import SampleBlock
 from imu_emulator.scene import SampledData, Scene
 
+TRUTH_KEYS = ("position", "velocity", "euler", "omega_body", "alpha_body")
 _EMPTY3 = np.zeros((0, 0, 0))
 _EMPTY2 = np.zeros((0, 0))
 
@@ -46,19 +47,25 @@ class Simulation:
     def times(self, k0: int, n: int) -> np.ndarray:
         return self.scene.t0_s + (k0 + np.arange(n, dtype=np.float64)) * (1.0 / self.scene.rate_hz)
 
-    def block(self, k0: int, n: int) -> SampleBlock:
+    def block(self, k0: int, n: int, out: SampleBlock | None = None) -> SampleBlock:
+        """Samples k0 .. k0+n-1. With `out` (a block of the right shape, e.g. views into larger arrays)
+        the kernel writes there instead of allocating."""
         n_imu = len(self.scene.imus)
         t = self.times(k0, n)
         mot = self._evaluate(self._position, t)
         att = self._evaluate(self._euler, t)
-        acc = np.empty((n_imu, n, 3))
-        gyro = np.empty((n_imu, n, 3))
-        quat = np.empty((n_imu, n, 4)) if self.attitude else _EMPTY3
-        tr = [np.empty((n, 3)) for _ in range(5)] if self.truth else [_EMPTY2] * 5
-        self.kernel(np.int64(k0), np.int64(n), mot, att, self._hold, acc, gyro, quat, *tr)
-        self._check_finite(acc, gyro, t)
-        truth = dict(zip(("position", "velocity", "euler", "omega_body", "alpha_body"), tr)) if self.truth else None
-        return SampleBlock(k0=k0, t_s=t, accel=acc, gyro=gyro, quat=quat if self.attitude else None, truth=truth)
+        if out is None:
+            out = SampleBlock(k0=k0, t_s=t, accel=np.empty((n_imu, n, 3)), gyro=np.empty((n_imu, n, 3)),
+                              quat=np.empty((n_imu, n, 4)) if self.attitude else None,
+                              truth={k: np.empty((n, 3)) for k in TRUTH_KEYS} if self.truth else None)
+        else:
+            out.k0 = k0
+            out.t_s[:] = t
+        quat = out.quat if self.attitude else _EMPTY3
+        tr = [out.truth[k] for k in TRUTH_KEYS] if self.truth else [_EMPTY2] * 5
+        self.kernel(np.int64(k0), np.int64(n), mot, att, self._hold, out.accel, out.gyro, quat, *tr)
+        self._check_finite(out.accel, out.gyro, t)
+        return out
 
     @staticmethod
     def _evaluate(series, t):
@@ -68,23 +75,29 @@ class Simulation:
         return np.ascontiguousarray(fitted.evaluate(t, order))
 
     def _check_finite(self, acc, gyro, t) -> None:
-        # A NaN must never reach a wire or a file: name the first bad sample instead.
+        # A NaN must never reach a wire or a file. A sum is non-finite iff some term is (or the sum
+        # overflows, which values this large deserve a look at too); only then search for the first.
+        if np.isfinite(np.sum(acc) + np.sum(gyro)):
+            return
         bad = ~(np.isfinite(acc).all(axis=(0, 2)) & np.isfinite(gyro).all(axis=(0, 2)))
-        if bad.any():
-            i = int(np.argmax(bad))
-            raise DataError(f"the motion gives a non-finite value at t = {t[i]!r} s "
-                            f"(sample {int(i)} of the block); check the expressions' domains "
-                            f"(log, sqrt, asin, division by zero)")
+        i = int(np.argmax(bad))
+        raise DataError(f"the motion gives a non-finite value at t = {t[i]!r} s (sample {int(i)} of the block); "
+                        f"check the expressions' domains (log, sqrt, asin, division by zero)")
 
     def run(self, block_size: int = 65536, progress=None) -> SampleBlock:
-        """The whole scene in one SampleBlock (blocks computed and concatenated)."""
+        """The whole scene in one SampleBlock; the kernel writes straight into the full arrays."""
         n_total = self.n_samples
-        blocks = []
+        n_imu = len(self.scene.imus)
+        whole = SampleBlock(k0=0, t_s=np.empty(n_total), accel=np.empty((n_imu, n_total, 3)),
+                            gyro=np.empty((n_imu, n_total, 3)),
+                            quat=np.empty((n_imu, n_total, 4)) if self.attitude else None,
+                            truth={k: np.empty((n_total, 3)) for k in TRUTH_KEYS} if self.truth else None)
         for k0 in range(0, n_total, block_size):
-            blocks.append(self.block(k0, min(block_size, n_total - k0)))
+            self.block(k0, min(block_size, n_total - k0), out=whole.view(k0, min(k0 + block_size, n_total)))
             if progress is not None:
                 progress(min(k0 + block_size, n_total), n_total)
-        return concatenate(blocks)
+        whole.k0 = 0
+        return whole
 
 
 def concatenate(blocks: list[SampleBlock]) -> SampleBlock:
