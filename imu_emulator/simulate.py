@@ -81,7 +81,7 @@ class Simulation:
             return
         bad = ~(np.isfinite(acc).all(axis=(0, 2)) & np.isfinite(gyro).all(axis=(0, 2)))
         i = int(np.argmax(bad))
-        raise DataError(f"the motion gives a non-finite value at t = {t[i]!r} s (sample {int(i)} of the block); "
+        raise DataError(f"the motion gives a non-finite value at t = {float(t[i])!r} s (sample {int(i)} of the block); "
                         f"check the expressions' domains (log, sqrt, asin, division by zero)")
 
     def run(self, block_size: int = 65536, progress=None) -> SampleBlock:
