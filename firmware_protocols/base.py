@@ -165,19 +165,29 @@ class SerialBatch:
         return self.data[self.offsets[i]:self.offsets[i + 1]]
 
 
-#: One CAN frame per row. `sample` is the index (within the encoded block) of the sample the frame belongs to.
-CAN_FRAME_DTYPE = np.dtype([
-    ("sample", "<i8"),
-    ("can_id", "<u4"),
-    ("extended", "?"),
-    ("fd", "?"),
-    ("length", "u1"),
-    ("data", "u1", (64,)),
-])
+def _frame_dtype(data_bytes: int) -> np.dtype:
+    return np.dtype([
+        ("sample", "<i8"),
+        ("can_id", "<u4"),
+        ("extended", "?"),
+        ("fd", "?"),
+        ("length", "u1"),
+        ("data", "u1", (data_bytes,)),
+    ])
 
 
-def empty_frames(count: int) -> np.ndarray:
-    return np.zeros(count, dtype=CAN_FRAME_DTYPE)
+#: One CAN frame per row. `sample` is the index (within the encoded block) of the sample the frame belongs
+#: to; `data[:length]` is the payload. Classic-CAN encoders return the 8-byte-data rows (23 bytes a frame,
+#: which matters for an hour of 7-frame transfers), CAN FD encoders the 64-byte ones. Consumers index
+#: `data[:length]` and so accept either.
+CLASSIC_FRAME_DTYPE = _frame_dtype(8)
+FD_FRAME_DTYPE = _frame_dtype(64)
+CAN_FRAME_DTYPE = FD_FRAME_DTYPE     # wide enough for any frame
+FRAME_DTYPES = (CLASSIC_FRAME_DTYPE, FD_FRAME_DTYPE)
+
+
+def empty_frames(count: int, fd: bool = False) -> np.ndarray:
+    return np.zeros(count, dtype=FD_FRAME_DTYPE if fd else CLASSIC_FRAME_DTYPE)
 
 
 def frame_bytes(frame) -> bytes:

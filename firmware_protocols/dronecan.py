@@ -46,7 +46,7 @@ import math
 import numba
 import numpy as np
 
-from firmware_protocols.base import (CAN_FRAME_DTYPE, DecoderStats, EncodeError, Packet, SaturationStats,
+from firmware_protocols.base import (CLASSIC_FRAME_DTYPE, FD_FRAME_DTYPE, DecoderStats, EncodeError, Packet, SaturationStats,
                                      Samples, empty_frames)
 from firmware_protocols.crc import crc16_ccitt, crc16_ccitt_bytes
 from firmware_protocols.registry import FormatInfo, register
@@ -330,17 +330,18 @@ class _DroneCanEncoder:
         raise NotImplementedError
 
     def encode(self, samples: Samples) -> np.ndarray:
-        frames = empty_frames(len(samples) * len(self._lengths))
+        frames = empty_frames(len(samples) * len(self._lengths), fd=self.fd)
         self.encode_into(samples, frames)
         return frames
 
     def encode_into(self, samples: Samples, frames: np.ndarray) -> int:
-        """Encode into a caller's CAN_FRAME_DTYPE array (reused across blocks, so a long run does not
-        fault in fresh memory for every block); returns the number of frames written from row 0."""
+        """Encode into a caller's frame array (empty_frames(..., fd=...), reused across blocks, so a long run
+        does not fault in fresh memory for every block); returns the number of frames written from row 0."""
         n = len(samples)
         needed = n * len(self._lengths)
-        if frames.dtype != CAN_FRAME_DTYPE or frames.ndim != 1 or frames.shape[0] < needed:
-            raise ValueError(f"frames must be a CAN_FRAME_DTYPE array of at least {needed} rows")
+        wanted = FD_FRAME_DTYPE if self.fd else CLASSIC_FRAME_DTYPE
+        if frames.dtype not in (wanted, FD_FRAME_DTYPE) or frames.ndim != 1 or frames.shape[0] < needed:
+            raise ValueError(f"frames must be an empty_frames(count, fd={self.fd}) array of at least {needed} rows")
         message, sources = self._program(samples)
         params = self._params
         params[4] = self.transfer_id
