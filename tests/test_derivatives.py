@@ -73,6 +73,7 @@ INTERIOR_ORDER = {           # expected slope of log(max error) vs log(h), deriv
     "central6": [6, 6, 6, 6],
     "spline5": [6, 5, 4, 3],
     "spline3": [4, 3, 2, 1],
+    "spline5c": [6, 5, 4, 3],
 }
 STEPS = 1.0 / np.array([100, 141, 200, 283])
 
@@ -95,7 +96,7 @@ def test_interior_convergence_order(method):
     np.testing.assert_allclose(slopes, INTERIOR_ORDER[method], atol=0.6)
 
 
-@pytest.mark.parametrize("method", ["central4", "central6", "spline5", "spline3"])
+@pytest.mark.parametrize("method", ["central4", "central6", "spline5", "spline3", "spline5c"])
 def test_end_error_no_worse_in_order(method):
     slopes = error_slopes(method, lambda h: np.linspace(0.0, 1.0, 2001))
     assert np.all(slopes >= np.array(INTERIOR_ORDER[method]) - 0.6), slopes
@@ -146,6 +147,35 @@ def test_resampling_100hz_to_1khz_with_spline5():
         assert np.abs(out[d] - truth)[inner].max() < inside * scale
         assert np.abs(out[d] - truth).max() < anywhere * scale
     np.testing.assert_allclose(out[0, ::10], loop(t, 0), rtol=0, atol=1e-15)
+
+
+def test_spline5c_ends_as_accurate_as_the_interior():
+    # not-a-knot spline5: ends ~150-500x the interior error; the clamped ends (first and second derivatives
+    # from a degree-9 least-squares fit through 14 end samples) bring that to 4x at 100 Hz (this loop has a
+    # 3 Hz harmonic: 33 samples per period) and below 2x at 200 Hz
+    for rate, limit in ((100, 5.0), (200, 2.0)):
+        t = np.arange(5 * rate + 1) / rate
+        t_out = np.linspace(0.0, 5.0, 5001)
+        inner = (t_out > 0.25) & (t_out < 4.75)
+        ratios = {}
+        for method in ("spline5", "spline5c"):
+            out = SampledSeries(t, loop(t, 0, offset=np.array([3.0, -2.0, 1.0])), method, 3).evaluate(t_out, 3)
+            ratios[method] = [np.abs(out[d] - loop(t_out, d)).max() / np.abs(out[d] - loop(t_out, d))[inner].max()
+                              for d in (1, 2, 3)]
+        assert max(ratios["spline5c"]) < limit, ratios
+        assert min(ratios["spline5"]) > 20, ratios
+
+
+def test_end_derivative_weights_are_finite_differences_when_points_equal_degree_plus_one():
+    from imu_emulator.derivatives import end_derivative_weights, fd_weights
+    x = 0.01 * np.arange(10)
+    for d in (1, 2):
+        np.testing.assert_allclose(end_derivative_weights(x, 9, d), fd_weights(x, d), rtol=1e-6)
+    # least squares over more points is still exact for polynomials of the degree
+    x = 0.01 * np.arange(14)
+    y = 1.0 + 2.0 * x - 3.0 * x ** 2 + 5.0 * x ** 9
+    assert abs(end_derivative_weights(x, 9, 1) @ y - 2.0) < 1e-9
+    assert abs(end_derivative_weights(x, 9, 2) @ y + 6.0) < 1e-6
 
 
 def test_large_coordinates_differentiate_like_the_origin_exactly_representable():
@@ -237,7 +267,7 @@ def test_time_not_increasing_names_row(previous):
 
 @pytest.mark.parametrize("method, max_order, minimum", [
     ("gradient", 3, 3), ("central4", 1, 5), ("central4", 3, 7), ("central6", 3, 9), ("central6", 2, 8),
-    ("spline5", 3, 6), ("spline3", 3, 4)])
+    ("spline5", 3, 6), ("spline3", 3, 4), ("spline5c", 3, 14), ("spline5c", 1, 14)])
 def test_too_few_samples_names_method_and_minimum(method, max_order, minimum):
     t = np.arange(float(minimum - 1))
     bad(rf"^track: method '{method}' needs at least {minimum} samples for derivatives up to order "
@@ -274,7 +304,7 @@ def test_output_time_outside_span():
 
 def test_unknown_method_and_shape_mismatch():
     bad(r"^track: unknown derivative method 'spline7' \(known: gradient, central4, central6, spline5, "
-        r"spline3\)$", np.arange(10.0), np.zeros(10), "spline7")
+        r"spline3, spline5c\)$", np.arange(10.0), np.zeros(10), "spline7")
     bad(r"^track: time stamps \(10,\) and values \(9, 3\) do not match", np.arange(10.0), np.zeros((9, 3)))
 
 
