@@ -68,8 +68,11 @@ def matrix_to_euler(R) -> np.ndarray:
     and their sum/difference is put into yaw with roll 0."""
     R = np.asarray(R, dtype=float)
     pitch = np.arctan2(-R[..., 2, 0], np.hypot(R[..., 2, 1], R[..., 2, 2]))
-    roll = np.arctan2(R[..., 2, 1], R[..., 2, 2])
     yaw = np.arctan2(R[..., 1, 0], R[..., 0, 0])
+    # Roll from O(1) elements: atan2(r21, r22) divides two elements of size cos(pitch), so near
+    # +-90 degrees ordinary rounding of R would swing it by eps/cos(pitch).
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    roll = np.arctan2(sy * R[..., 0, 2] - cy * R[..., 1, 2], cy * R[..., 1, 1] - sy * R[..., 0, 1])
     locked = np.hypot(R[..., 0, 0], R[..., 1, 0]) < 1e-12
     if np.any(locked):
         # R = Rz(yaw) Ry(+-90) Rx(roll) depends only on yaw -+ roll: report it as yaw, roll 0.

@@ -24,7 +24,7 @@ else:  # pragma: no cover
 FRAMES = ("ENU", "NED")
 SHAPES = ("static", "circle")
 ATTITUDE_MODES = ("euler", "tangent", "file")
-DEFAULT_DERIVATIVE = "spline5"
+DEFAULT_DERIVATIVE = "spline5c"   # see README "What accuracy costs in time"
 #: Effects this kernel can compile in. Only those named true in [effects] are simulated.
 EFFECTS = {
     "gravity": "specific force includes -g (at rest, level, ENU: f = (0, 0, +g))",
