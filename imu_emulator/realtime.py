@@ -1,0 +1,128 @@
+"""Pacing to absolute deadlines on the monotonic clock, and statistics of how late we were.
+
+Deadlines are computed from the sample index (start + k * period), never by adding periods or
+sleeping fixed intervals, so lateness never accumulates into drift.
+"""
+from __future__ import annotations
+
+import ctypes
+import os
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+_PR_SET_TIMERSLACK = 29
+# Below SCHED_FIFO we sleep to this much before the deadline and spin the rest: plain sleeps wake
+# about 75 us late with the default timer slack.
+_SPIN_NS = 200_000
+
+
+@dataclass(frozen=True)
+class RealtimeSetup:
+    fifo: bool          # SCHED_FIFO granted
+    timer_slack: bool   # 1 ns timer slack set
+    note: str           # why not, when not
+
+    def describe(self) -> str:
+        parts = ["SCHED_FIFO" if self.fifo else "normal scheduling",
+                 "timer slack 1 ns" if self.timer_slack else "default timer slack"]
+        return ", ".join(parts) + (f" ({self.note})" if self.note else "")
+
+
+def enable_realtime(want_fifo: bool = True, priority: int = 20) -> RealtimeSetup:
+    """Ask for SCHED_FIFO (calling thread only) and 1 ns timer slack; fall back quietly when refused."""
+    notes = []
+    slack = False
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        slack = libc.prctl(_PR_SET_TIMERSLACK, 1, 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        notes.append("prctl unavailable")
+    fifo = False
+    if want_fifo and hasattr(os, "sched_setscheduler"):
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+            fifo = True
+        except (PermissionError, OSError) as exc:
+            notes.append(f"SCHED_FIFO refused: {exc.strerror or exc}")
+    return RealtimeSetup(fifo, slack, "; ".join(notes))
+
+
+def drop_realtime() -> None:
+    """Back to normal scheduling for the calling thread (helpers that compute must never run RT)."""
+    if hasattr(os, "sched_setscheduler"):
+        try:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        except OSError:
+            pass
+
+
+class Pacer:
+    """Wait until an absolute monotonic deadline.
+
+    Under SCHED_FIFO only sleep: spinning there starves the kernel and RT throttling then stalls us for
+    tens of milliseconds. Otherwise sleep to shortly before the deadline and spin the rest.
+    """
+
+    def __init__(self, fifo: bool):
+        self.spin_ns = 0 if fifo else _SPIN_NS
+
+    def wait_until(self, deadline_ns: int) -> int:
+        """Returns the time we woke (ns, monotonic), at or after the deadline."""
+        now = time.monotonic_ns()
+        early = deadline_ns - now - self.spin_ns
+        if early > 0:
+            time.sleep(early / 1e9)
+            now = time.monotonic_ns()
+        while now < deadline_ns:
+            if self.spin_ns:
+                now = time.monotonic_ns()
+            else:  # woke early (signal): sleep the rest
+                time.sleep((deadline_ns - now) / 1e9)
+                now = time.monotonic_ns()
+        return now
+
+
+class LatenessStats:
+    """Lateness against deadlines with bounded memory: a histogram of 1 us bins up to 65.5 ms
+    (quantiles beyond that read as the bound) plus the exact maximum and a count of misses."""
+
+    BINS = 65536
+
+    def __init__(self, period_ns: float):
+        self.period_ns = period_ns
+        self.hist = np.zeros(self.BINS, dtype=np.int64)
+        self.count = 0
+        self.max_ns = 0
+        self.missed = 0       # later than one period
+        self._pending: list[int] = []
+
+    def add(self, lateness_ns: int) -> None:
+        self._pending.append(lateness_ns)
+        if len(self._pending) >= 1024:
+            self.fold()
+
+    def fold(self) -> None:
+        """Move pending values into the histogram (per block, never per sample)."""
+        if not self._pending:
+            return
+        values = np.asarray(self._pending, dtype=np.int64)
+        self._pending.clear()
+        self.count += values.size
+        self.max_ns = max(self.max_ns, int(values.max()))
+        self.missed += int(np.count_nonzero(values > self.period_ns))
+        self.hist += np.bincount(np.clip(values // 1000, 0, self.BINS - 1), minlength=self.BINS)
+
+    def quantile_us(self, q: float) -> float:
+        self.fold()
+        if not self.count:
+            return 0.0
+        rank = int(np.ceil(q * self.count))
+        return float(np.searchsorted(np.cumsum(self.hist), max(rank, 1)))
+
+    def summary(self) -> dict:
+        self.fold()
+        return {"p50_us": self.quantile_us(0.5), "p99_us": self.quantile_us(0.99),
+                "p999_us": self.quantile_us(0.999), "max_us": self.max_ns / 1000,
+                "missed": self.missed, "missed_ratio": self.missed / self.count if self.count else 0.0}

@@ -1,0 +1,113 @@
+"""Subcommands `stream`, `formats` and `targets`; cli.py calls register(subparsers)."""
+from __future__ import annotations
+
+
+from imu_emulator.streaming import StreamError
+from imu_emulator.transport import TARGET_KINDS, TargetOptions
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "stream", help="stream a scene live to a pty, serial port, CAN bus, UDP or a capture file",
+        description="Stream IMU samples at wall-clock rate. Without --format/--to, the scene's [[stream]] "
+                    "tables say what goes where (several IMUs to several targets at once).")
+    p.add_argument("scene", help="scene file (TOML)")
+    p.add_argument("--format", help="wire format (see `imu-emulator formats`)")
+    p.add_argument("--to", dest="target", help="target spec (see `imu-emulator targets`)")
+    p.add_argument("--imu", help="IMU name (default: the scene's first)")
+    p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                   help="encoder option, repeatable (e.g. sysid=1)")
+    p.add_argument("--link", help="pty: make a stable symlink at this path to the slave")
+    p.add_argument("--pace-baud", type=int, metavar="BAUD", help="pty: deliver no faster than a UART at BAUD")
+    p.add_argument("--bitrate", type=int, help="CAN nominal bit rate, bit/s (default 1000000)")
+    p.add_argument("--data-bitrate", type=int, help="CAN FD data phase bit rate, bit/s")
+    p.add_argument("--fd", action="store_true", help="open the CAN bus in FD mode")
+    p.add_argument("--speed", type=float, default=1.0, help="time factor; 0 = as fast as the link takes")
+    p.add_argument("--loop", action="store_true", help="repeat the scene; time keeps increasing")
+    p.add_argument("--epoch-time", action="store_true", help="time fields on the Unix epoch (default: since start)")
+    p.add_argument("--duration", type=float, metavar="SECONDS", help="stop after this much scene time")
+    p.add_argument("--count", type=int, help="stop after this many samples")
+    p.add_argument("--allow-overload", action="store_true", help="stream even when the link budget does not fit")
+    p.add_argument("--no-realtime", action="store_true", help="do not ask for SCHED_FIFO")
+    p.add_argument("--quiet", action="store_true", help="no status line or summary")
+    p.add_argument("--stats-json", metavar="PATH", help="write the final statistics as JSON")
+    p.set_defaults(func=cmd_stream)
+
+    p = subparsers.add_parser("formats", help="list wire formats")
+    p.set_defaults(func=cmd_formats)
+    p = subparsers.add_parser("targets", help="list stream target kinds")
+    p.set_defaults(func=cmd_targets)
+
+
+def _option_value(text: str):
+    lowered = text.lower()
+    if lowered in ("true", "false"):
+        return lowered == "true"
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
+def _parse_options(pairs) -> dict:
+    options = {}
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep or not key:
+            raise StreamError(f"--option: expected KEY=VALUE, got {pair!r}")
+        options[key] = _option_value(value)
+    return options
+
+
+def cmd_stream(args) -> int:
+    from imu_emulator.scene import load_scene
+    from imu_emulator.simulate import Simulation
+    from imu_emulator.streaming import RunOptions, StreamConfig, run_streams, streams_from_tables
+
+    for name in ("duration", "count", "pace_baud", "bitrate", "data_bitrate"):
+        value = getattr(args, name)
+        if value is not None and value <= 0:
+            raise StreamError(f"--{name.replace('_', '-')}: must be positive, got {value}")
+    scene = load_scene(args.scene)
+    target_options = TargetOptions(link=args.link, pace_baud=args.pace_baud, bitrate=args.bitrate,
+                                   data_bitrate=args.data_bitrate, fd=args.fd, blocking=args.speed == 0)
+    imu_names = tuple(imu.name for imu in scene.imus)
+    if args.format or args.target:
+        if not (args.format and args.target):
+            raise StreamError("stream: --format and --to go together")
+        configs = [StreamConfig(args.imu or imu_names[0], args.format, args.target,
+                                _parse_options(args.option), target_options)]
+    else:
+        if not scene.streams:
+            raise StreamError(f"{args.scene}: no [[stream]] tables; give --format and --to")
+        configs = streams_from_tables(scene.streams, imu_names, target_options)
+        if args.imu:
+            configs = [c for c in configs if c.imu == args.imu]
+            if not configs:
+                raise StreamError(f"--imu: no [[stream]] for IMU {args.imu!r}")
+    options = RunOptions(speed=args.speed, loop=args.loop, epoch_time=args.epoch_time, duration_s=args.duration,
+                         count=args.count, quiet=args.quiet, allow_overload=args.allow_overload,
+                         realtime=not args.no_realtime, stats_json=args.stats_json)
+    run_streams(scene, Simulation(scene), configs, options)
+    return 0
+
+
+def cmd_formats(args) -> int:
+    import firmware_protocols
+    from firmware_protocols.base import can_bits_worst_case
+    for name, info in firmware_protocols.formats().items():
+        if info.kind == "serial":
+            size = f"{info.bytes_per_sample} B/sample"
+        else:
+            bits = sum(can_bits_worst_case(*frame) for frame in info.frames_per_sample)
+            size = f"{len(info.frames_per_sample)} frames/sample, {bits} bits worst case"
+        print(f"{name:24} {info.kind:6} {size:40} {info.description}")
+    return 0
+
+
+def cmd_targets(args) -> int:
+    for syntax, text, carries in TARGET_KINDS.values():
+        print(f"{syntax:34} {carries + ' formats':15} {text}")
+    return 0

@@ -1,0 +1,462 @@
+"""Live streaming: scene blocks -> Samples -> wire format encoder -> transport, at wall-clock rate.
+
+A producer process computes and encodes blocks ahead of time into a pipe (bounded by its buffer); the
+send loop only waits for each sample's deadline and hands prepared packets to the transports. Several streams (one
+IMU, one format, one target each) share one clock and one simulation.
+"""
+from __future__ import annotations
+
+import json
+import math
+import multiprocessing
+import os
+import signal
+import sys
+import threading
+import time
+import traceback
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+import firmware_protocols
+from firmware_protocols.base import EncodeError, SaturationStats, can_bits_worst_case
+from imu_emulator.errors import ImuEmulatorError, SceneError, TargetError
+from imu_emulator.realtime import LatenessStats, Pacer, drop_realtime, enable_realtime
+from imu_emulator.transport import TargetOptions, check_carries, link_capacity, open_target, parse_target
+
+# Blocks hold about this much time: few pipe messages per second, and the sender's per-block work
+# (one unpickle) stays far below a sample period.
+_BLOCK_SECONDS = 0.02
+_MAX_BLOCK = 500
+# The first deadline lies this far after the producer starts, so the first block is ready in time.
+_LEAD_NS = 30_000_000
+_STATUS_INTERVAL_NS = 500_000_000
+
+STREAM_TABLE_KEYS = {"imu", "format", "to", "options", "link", "pace_baud", "bitrate", "data_bitrate", "fd"}
+
+
+class StreamError(ImuEmulatorError):
+    """A stream's format, IMU or encoder options are unusable."""
+
+
+@dataclass(frozen=True)
+class StreamConfig:
+    imu: str
+    format: str
+    target: str
+    options: dict = field(default_factory=dict)             # encoder options
+    target_options: TargetOptions = TargetOptions()
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    speed: float = 1.0               # 0 = as fast as the link takes
+    loop: bool = False
+    epoch_time: bool = False
+    duration_s: float | None = None
+    count: int | None = None
+    quiet: bool = False
+    allow_overload: bool = False
+    realtime: bool = True
+    stats_json: str | None = None
+
+
+def streams_from_tables(tables, imu_names, defaults: TargetOptions = TargetOptions()) -> list[StreamConfig]:
+    """Validate the scene's raw [[stream]] tables; errors name the table and key."""
+    configs = []
+    for i, table in enumerate(tables):
+        where = f"stream[{i}]"
+        unknown = sorted(set(table) - STREAM_TABLE_KEYS)
+        if unknown:
+            raise SceneError(f"{where}.{unknown[0]}: unknown key (allowed: {', '.join(sorted(STREAM_TABLE_KEYS))})")
+        for key in ("format", "to"):
+            if not isinstance(table.get(key), str) or not table[key]:
+                raise SceneError(f"{where}.{key}: missing (a string is required)")
+        imu = table.get("imu", imu_names[0])
+        if imu not in imu_names:
+            raise SceneError(f"{where}.imu: no IMU named {imu!r} (scene has: {', '.join(imu_names)})")
+        options = table.get("options", {})
+        if not isinstance(options, dict):
+            raise SceneError(f"{where}.options: expected a table")
+        overrides = {}
+        for key, kind in (("link", str), ("pace_baud", int), ("bitrate", int), ("data_bitrate", int), ("fd", bool)):
+            if key in table:
+                value = table[key]
+                if not isinstance(value, kind) or (kind is int and (isinstance(value, bool) or value <= 0)):
+                    raise SceneError(f"{where}.{key}: expected {'a positive integer' if kind is int else kind.__name__}, "
+                                     f"got {value!r}")
+                overrides[key] = value
+        configs.append(StreamConfig(imu, table["format"], table["to"], dict(options), replace(defaults, **overrides)))
+    return configs
+
+
+# --- link budget --------------------------------------------------------------------------------
+
+def link_budget_problem(stream: "Stream", rate_hz: float) -> str | None:
+    """None when the stream fits its link at rate_hz, else a one-line message naming the numbers."""
+    capacity, encoder = stream.capacity, stream.encoder
+    label = f"{stream.config.imu} {stream.config.format} at {rate_hz:g} Hz"
+    if stream.info.kind == "serial":
+        if capacity.bytes_per_s is None:
+            return None
+        per_sample = getattr(encoder, "bytes_per_sample", stream.info.bytes_per_sample)
+        need = per_sample * rate_hz
+        if need <= capacity.bytes_per_s:
+            return None
+        return (f"{label} needs {need:,.0f} B/s ({per_sample} B/sample) but {stream.config.target} carries "
+                f"{capacity.bytes_per_s:,.0f} B/s (baud/10); lower the rate, raise the baud or pass --allow-overload")
+    if capacity.bits_per_s is None:
+        return None
+    frames = getattr(encoder, "frames_per_sample", stream.info.frames_per_sample)
+    seconds = 0.0
+    bits = 0
+    for length, extended, fd in frames:
+        total = can_bits_worst_case(length, extended, fd)
+        bits += total
+        if fd and capacity.data_bits_per_s:
+            # Approximation: payload and CRC ride the data phase, the rest the nominal phase.
+            data_bits = total - can_bits_worst_case(0, extended, fd)
+            seconds += (total - data_bits) / capacity.bits_per_s + data_bits / capacity.data_bits_per_s
+        else:
+            seconds += total / capacity.bits_per_s
+    load = seconds * rate_hz
+    if load <= 1.0:
+        return None
+    return (f"{label} needs {bits} bits/sample ({len(frames)} frames, worst-case stuffing) = "
+            f"{bits * rate_hz / 1e6:.3f} Mbit/s, {load:.0%} of the {capacity.bits_per_s / 1e6:g} Mbit/s bus "
+            f"of {stream.config.target}; lower the rate, raise --bitrate or pass --allow-overload")
+
+
+# --- one stream: encoder + transport + counters --------------------------------------------------
+
+class Stream:
+    def __init__(self, config: StreamConfig, imu_index: int, info):
+        self.config = config
+        self.imu_index = imu_index
+        self.info = info
+        self.spec = parse_target(config.target)   # malformed specs fail before anything is opened
+        check_carries(self.spec, info.kind)
+        self.capacity = link_capacity(self.spec, info.kind, config.target_options)
+        try:
+            self.encoder = firmware_protocols.create_encoder(config.format, **config.options)
+        except TypeError as exc:
+            raise StreamError(f"{config.format}: bad option ({exc}); known options: "
+                              f"{', '.join(self.info.options) or 'none'}") from None
+        except ValueError as exc:
+            raise StreamError(f"{config.format}: {exc}") from None
+        self.transport = None
+        self.sent = 0
+        self.dropped = 0
+        self.saturated = 0
+
+    def open(self) -> None:
+        self.transport = open_target(self.spec, self.info.kind, self.config.target_options)
+
+    def encode(self, block, time_ns: np.ndarray) -> tuple[list, int]:
+        """Per-sample prepared payloads for one block, and the saturation count after it."""
+        from firmware_protocols import Samples
+        i = self.imu_index
+        encoded = self.encoder.encode(Samples(time_ns, block.accel[i], block.gyro[i], quat=block.quat[i]))
+        if self.info.kind == "serial":
+            items = _Packets(bytes(encoded.data), encoded.offsets.tolist())
+        else:
+            prepare = self.transport.prepare
+            bounds = np.searchsorted(encoded["sample"], np.arange(len(time_ns) + 1)).tolist()
+            items = [prepare(encoded[bounds[j]:bounds[j + 1]], time_ns[j]) for j in range(len(time_ns))]
+        return items, _saturation_total(self.encoder)
+
+    def close(self) -> None:
+        if self.transport is not None:
+            self.transport.close()
+            self.transport = None
+
+    def summary(self) -> dict:
+        return {"imu": self.config.imu, "format": self.config.format, "target": self.config.target,
+                "sent": self.sent, "dropped": self.dropped, "saturated": self.saturated}
+
+
+def _saturation_total(encoder) -> int:
+    # The contract names `.saturated`; dronecan.py (as of this writing) calls it `.stats`.
+    stats = getattr(encoder, "saturated", None) or getattr(encoder, "stats", None)
+    return stats.total if isinstance(stats, SaturationStats) else 0
+
+
+def build_streams(configs: list[StreamConfig], imu_names) -> list[Stream]:
+    streams = []
+    for config in configs:
+        if config.imu not in imu_names:
+            raise StreamError(f"--imu: no IMU named {config.imu!r} (scene has: {', '.join(imu_names)})")
+        try:
+            info = firmware_protocols.get(config.format)
+        except KeyError as exc:
+            raise StreamError(exc.args[0]) from None
+        streams.append(Stream(config, list(imu_names).index(config.imu), info))
+    return streams
+
+
+# --- the run ------------------------------------------------------------------------------------
+
+class _Packets:
+    """One block's serial packets as one buffer: crossing the pipe as a single bytes object costs the
+    sender a fraction of what a list of small ones would, and slicing happens only when sending."""
+
+    __slots__ = ("data", "offsets")
+
+    def __init__(self, data: bytes, offsets: list):
+        self.data, self.offsets = data, offsets
+
+    def __len__(self) -> int:
+        return len(self.offsets) - 1
+
+    def __getitem__(self, j: int) -> bytes:
+        return self.data[self.offsets[j]:self.offsets[j + 1]]
+
+    def __getstate__(self):
+        return self.data, self.offsets
+
+    def __setstate__(self, state):
+        self.data, self.offsets = state
+
+
+@dataclass
+class _ProducerFailure:
+    """An exception raised in the producer process, carried to the sender to be raised there."""
+    user_error: bool
+    message: str
+
+    @classmethod
+    def from_exception(cls, exc: BaseException) -> "_ProducerFailure":
+        if isinstance(exc, (ImuEmulatorError, EncodeError)):
+            return cls(True, str(exc))
+        return cls(False, "".join(traceback.format_exception(exc)))
+
+    def raise_(self):
+        if self.user_error:
+            raise StreamError(self.message)
+        raise RuntimeError("producer process failed:\n" + self.message)
+
+
+@dataclass
+class _Block:
+    j0: int                  # run index of the first sample (0 = first sample streamed)
+    items: list              # per stream: list of prepared payloads, one per sample
+    saturated: list          # per stream: encoder saturation total after this block
+
+
+class _Stop(Exception):
+    pass
+
+
+class Streamer:
+    def __init__(self, sim, rate_hz: float, t0_s: float, streams: list[Stream], options: RunOptions):
+        self.sim = sim
+        self.rate_hz = rate_hz
+        self.t0_s = t0_s
+        self.streams = streams
+        self.options = options
+        self.scene_samples = int(sim.n_samples)
+        limits = [n for n in (options.count,
+                              None if options.duration_s is None else int(round(options.duration_s * rate_hz)),
+                              None if options.loop else self.scene_samples) if n is not None]
+        self.total = min(limits) if limits else None
+        self.stats = LatenessStats(1e9 / rate_hz)
+        self.samples_done = 0
+        self._time_offset_ns = 0
+        self._first_ns = 0
+        self._last_ns = 0
+
+    # - producer -
+    def _loop_period_ns(self) -> int:
+        return int(round(self.scene_samples * 1e9 / self.rate_hz))
+
+    def _blocks(self):
+        """Encoded blocks from the first sample to the limit (forever when looping without a limit)."""
+        block_len = max(1, min(_MAX_BLOCK, int(self.rate_hz * _BLOCK_SECONDS)))
+        j = 0
+        while self.total is None or j < self.total:
+            k = j % self.scene_samples if self.options.loop else j
+            n = min(block_len, self.scene_samples - k) if self.options.loop else block_len
+            if self.total is not None:
+                n = min(n, self.total - j)
+            block = self.sim.block(k, n)
+            offset = self._time_offset_ns
+            if self.options.loop:   # each pass is stamped one scene length later: time keeps increasing
+                offset += (j // self.scene_samples) * self._loop_period_ns()
+            time_ns = block.time_ns(offset)
+            encoded = [stream.encode(block, time_ns) for stream in self.streams]
+            yield _Block(j, [e[0] for e in encoded], [e[1] for e in encoded])
+            j += n
+
+    def _start_producer(self):
+        """Fork a process that computes and encodes ahead into a pipe. A process, not a thread: a
+        thread holding the GIL while descheduled by other load would stall the real-time sender for
+        tens of milliseconds. The pipe's buffer bounds how far ahead it runs."""
+        receiver, sender = multiprocessing.Pipe(duplex=False)
+        pid = os.fork()
+        if pid == 0:   # child: never returns
+            code = 0
+            try:
+                receiver.close()
+                signal.signal(signal.SIGINT, signal.SIG_IGN)   # the parent decides when to stop
+                signal.signal(signal.SIGTERM, signal.SIG_DFL)
+                drop_realtime()
+                for item in self._blocks():
+                    sender.send(item)
+                sender.send(None)
+            except (BrokenPipeError, ConnectionResetError):
+                pass
+            except BaseException as exc:
+                try:
+                    sender.send(_ProducerFailure.from_exception(exc))
+                except Exception:
+                    code = 1
+            finally:
+                os._exit(code)
+        sender.close()
+        return pid, receiver
+
+    # - sender -
+    def run(self) -> dict:
+        """Stream until the limit, the scene's end or SIGINT/SIGTERM; returns the summary dict."""
+        old_term = signal.signal(signal.SIGTERM, _raise_stop) if threading.current_thread() is threading.main_thread() else None
+        try:
+            self._check_budgets()
+            for stream in self.streams:
+                stream.open()
+            for stream in self.streams:
+                print(f"{stream.config.imu} {stream.config.format} -> {stream.transport.describe()}", flush=True)
+            self._warm_up()
+            paced = self.options.speed > 0
+            start = time.monotonic_ns() + _LEAD_NS
+            if self.options.epoch_time:
+                # Sample k's time = the wall clock at its ideal deadline.
+                self._time_offset_ns = time.time_ns() + (start - time.monotonic_ns()) - int(round(self.t0_s * 1e9))
+            producer, blocks = self._start_producer()
+            # RT only for paced runs: speed 0 never sleeps, and a busy SCHED_FIFO loop starves the machine.
+            rt = enable_realtime(want_fifo=paced and self.options.realtime)
+            self._note(f"scheduling: {rt.describe()}")
+            try:
+                self._send_loop(blocks, Pacer(rt.fifo) if paced else None, start)
+            except (KeyboardInterrupt, _Stop):
+                pass
+            finally:
+                drop_realtime()
+                blocks.close()
+                _reap(producer)
+        finally:
+            if old_term is not None:
+                signal.signal(signal.SIGTERM, old_term)
+            for stream in self.streams:
+                stream.close()
+        summary = self.summary()
+        if not self.options.quiet:
+            print(self._status_text("done"), file=sys.stderr, flush=True)
+            for s in summary["streams"]:
+                print(f"  {s['imu']} {s['format']} -> {s['target']}: sent {s['sent']}, dropped {s['dropped']}, "
+                      f"saturated {s['saturated']}", file=sys.stderr, flush=True)
+        if self.options.stats_json:
+            with open(self.options.stats_json, "w") as f:
+                json.dump(summary, f, indent=1)
+        return summary
+
+    def _check_budgets(self) -> None:
+        if self.options.speed == 0:
+            return
+        for stream in self.streams:
+            problem = link_budget_problem(stream, self.rate_hz * self.options.speed)
+            if problem and not self.options.allow_overload:
+                raise TargetError(problem)
+            if problem:
+                self._note("overload: " + problem.split(";")[0])
+
+    def _warm_up(self) -> None:
+        """Compile kernels and encoders now rather than inside the first deadlines (throwaway encoders
+        keep the real ones' sequence numbers at zero)."""
+        block = self.sim.block(0, 1)
+        from firmware_protocols import Samples
+        for stream in self.streams:
+            i = stream.imu_index
+            throwaway = firmware_protocols.create_encoder(stream.config.format, **stream.config.options)
+            throwaway.encode(Samples(block.time_ns(), block.accel[i], block.gyro[i], quat=block.quat[i]))
+
+    def _send_loop(self, blocks, pacer: Pacer | None, start: int) -> None:
+        period = 1e9 / (self.rate_hz * self.options.speed) if pacer else 0.0
+        streams = self.streams
+        transports = [s.transport for s in streams]
+        stats = self.stats
+        next_status = start + _STATUS_INTERVAL_NS
+        show_status = not self.options.quiet
+        done = 0
+        while True:
+            block = blocks.recv()
+            if block is None:
+                break
+            if isinstance(block, _ProducerFailure):
+                block.raise_()
+            items = block.items
+            for i in range(len(items[0])):
+                j = block.j0 + i
+                if pacer:
+                    deadline = start + int(j * period)
+                    now = pacer.wait_until(deadline)
+                    stats.add(now - deadline)
+                for stream, transport, payloads in zip(streams, transports, items):
+                    if transport.send(payloads[i]):
+                        stream.sent += 1
+                    else:
+                        stream.dropped += 1
+                done += 1
+                self.samples_done = done
+                if done == 1:
+                    self._first_ns = time.monotonic_ns()
+                if show_status and (not pacer or j % 64 == 0):
+                    now = time.monotonic_ns()
+                    if now >= next_status:
+                        next_status = now + _STATUS_INTERVAL_NS
+                        print(self._status_text("streaming"), end="\r" if sys.stderr.isatty() else "\n",
+                              file=sys.stderr, flush=True)
+            for stream, saturated in zip(streams, block.saturated):
+                stream.saturated = saturated
+            self._last_ns = time.monotonic_ns()
+
+    # - reporting -
+    def _note(self, text: str) -> None:
+        if not self.options.quiet:
+            print(text, file=sys.stderr, flush=True)
+
+    def summary(self) -> dict:
+        elapsed = ((self._last_ns or time.monotonic_ns()) - self._first_ns) / 1e9
+        return {"samples": self.samples_done, "rate_hz": self.rate_hz, "speed": self.options.speed,
+                "achieved_hz": (self.samples_done - 1) / elapsed if self.samples_done > 1 and elapsed > 0 else 0.0,
+                "lateness": self.stats.summary(),
+                "dropped": sum(s.dropped for s in self.streams),
+                "saturated": sum(s.saturated for s in self.streams),
+                "streams": [s.summary() for s in self.streams]}
+
+    def _status_text(self, state: str) -> str:
+        s = self.summary()
+        late = s["lateness"]
+        return (f"{state}: {s['samples']} samples, {s['achieved_hz']:.1f} Hz, late p50 {late['p50_us']:.0f} us "
+                f"p99 {late['p99_us']:.0f} us max {late['max_us']:.0f} us, dropped {s['dropped']}, "
+                f"saturated {s['saturated']}")
+
+
+def _reap(pid: int) -> None:
+    """End the producer (it may be blocked writing to the pipe we just closed) and collect it."""
+    try:
+        os.kill(pid, signal.SIGTERM)
+    except ProcessLookupError:
+        pass
+    os.waitpid(pid, 0)
+
+
+def _raise_stop(signum, frame):
+    raise _Stop()
+
+
+def run_streams(scene, sim, configs: list[StreamConfig], options: RunOptions) -> dict:
+    streams = build_streams(configs, tuple(sim.imu_names))
+    if not math.isfinite(options.speed) or options.speed < 0:
+        raise StreamError(f"--speed: expected a number >= 0, got {options.speed}")
+    return Streamer(sim, float(scene.rate_hz), float(scene.t0_s), streams, options).run()

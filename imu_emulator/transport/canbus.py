@@ -1,0 +1,67 @@
+"""Any python-can interface by name: socketcan, virtual, slcan, udp_multicast, pcan, kvaser, ..."""
+from __future__ import annotations
+
+import errno
+
+import can
+
+from imu_emulator.errors import TargetError
+from imu_emulator.transport.base import TargetOptions, Transport
+from imu_emulator.transport.frames import to_messages
+
+# How long a blocking send (--speed 0) waits for room on the bus before calling the frame dropped.
+_BLOCKING_TIMEOUT_S = 1.0
+
+
+class CanBusTransport(Transport):
+
+    def __init__(self, interface: str, channel: str, options: TargetOptions):
+        if interface not in can.interfaces.VALID_INTERFACES:
+            raise TargetError(f"can:{interface}: unknown python-can interface "
+                              f"(known: {', '.join(sorted(can.interfaces.VALID_INTERFACES))})")
+        kwargs = {"fd": options.fd}
+        # socketcan's bit rate is set with `ip link`; passing it would only be ignored, so we do not pretend.
+        if options.bitrate and interface not in ("socketcan", "virtual", "udp_multicast"):
+            kwargs["bitrate"] = options.bitrate
+        if options.data_bitrate and interface not in ("socketcan", "virtual", "udp_multicast"):
+            kwargs["data_bitrate"] = options.data_bitrate
+        if interface == "slcan":
+            kwargs["sleep_after_open"] = 0.1   # python-can waits 2 s for Arduino-style resets by default
+        try:
+            self.bus = can.Bus(interface=interface, channel=channel, **kwargs)
+        except OSError as exc:
+            raise TargetError(f"can:{interface}:{channel}: {_os_reason(exc)}") from None
+        except (can.CanError, ValueError, ImportError, TypeError) as exc:
+            cause = exc.__cause__ if isinstance(exc.__cause__, OSError) else None
+            reason = _os_reason(cause) if cause else (str(exc).splitlines() or [type(exc).__name__])[0]
+            raise TargetError(f"can:{interface}:{channel}: {reason}") from None
+        self.interface, self.channel = interface, channel
+        self._brs = bool(options.data_bitrate)
+        self._timeout = _BLOCKING_TIMEOUT_S if options.blocking else 0.0
+
+    def prepare(self, payload, time_ns: int):
+        return to_messages(payload, bitrate_switch=self._brs)
+
+    def send(self, messages) -> bool:
+        for message in messages:
+            try:
+                self.bus.send(message, timeout=self._timeout)
+            except can.CanError:
+                # The rest of this sample's frames go too: a receiver gets an incomplete transfer at
+                # worst, which it discards, never frames from two different samples interleaved.
+                return False
+        return True
+
+    def describe(self) -> str:
+        return f"can:{self.interface}:{self.channel}"
+
+    def close(self) -> None:
+        self.bus.shutdown()
+
+
+def _os_reason(exc: OSError) -> str:
+    if exc.errno == errno.EAFNOSUPPORT:
+        return "this kernel has no SocketCAN support (AF_CAN unavailable)"
+    if exc.errno in (errno.ENODEV, errno.ENXIO):
+        return "no such CAN device"
+    return exc.strerror or str(exc)

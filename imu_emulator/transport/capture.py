@@ -1,0 +1,65 @@
+"""Capture files: raw bytes for serial formats; for CAN formats a log in the format python-can's writers
+pick by suffix (.log candump, .asc Vector ASC, .blf Vector BLF, .csv, .trc, ...)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import can
+
+from imu_emulator.errors import TargetError
+from imu_emulator.transport.base import Transport
+from imu_emulator.transport.frames import to_messages
+
+
+def _open_error(path: str, exc: Exception) -> TargetError:
+    return TargetError(f"file:{path}: cannot open: {getattr(exc, 'strerror', None) or exc}")
+
+
+class RawFileTransport(Transport):
+
+    def __init__(self, path: str):
+        try:
+            self.file = open(path, "wb")
+        except OSError as exc:
+            raise _open_error(path, exc) from None
+        self.path = path
+
+    def send(self, payload: bytes) -> bool:
+        self.file.write(payload)
+        return True
+
+    def describe(self) -> str:
+        return f"file {self.path}"
+
+    def close(self) -> None:
+        self.file.close()
+
+
+class CanLogTransport(Transport):
+
+    def __init__(self, path: str):
+        suffix = Path(path).suffix.lower()
+        known = sorted(can.io.MESSAGE_WRITERS)
+        if suffix not in known:
+            raise TargetError(f"file:{path}: no CAN log writer for suffix {suffix or '(none)'!r} "
+                              f"(known: {', '.join(known)})")
+        try:
+            self.writer = can.Logger(path)
+        except (OSError, ValueError, ImportError) as exc:
+            raise _open_error(path, exc) from None
+        self.path = path
+
+    def prepare(self, payload, time_ns: int):
+        # The log's time stamps are the samples' times on the declared time base, not wall clock.
+        return to_messages(payload, timestamp=time_ns / 1e9)
+
+    def send(self, messages) -> bool:
+        for message in messages:
+            self.writer.on_message_received(message)
+        return True
+
+    def describe(self) -> str:
+        return f"file {self.path}"
+
+    def close(self) -> None:
+        self.writer.stop()

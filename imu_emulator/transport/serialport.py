@@ -1,0 +1,33 @@
+"""A real serial port through pyserial (USB adapters, UARTs, or any tty path)."""
+from __future__ import annotations
+
+import os
+
+import serial
+
+from imu_emulator.errors import TargetError
+from imu_emulator.transport.base import TargetOptions, Transport
+from imu_emulator.transport.fdwriter import FdPacketWriter
+
+
+class SerialTransport(Transport):
+
+    def __init__(self, device: str, baud: int, options: TargetOptions):
+        try:
+            # pyserial's POSIX backend opens with O_NONBLOCK and leaves it so: our writer needs exactly that.
+            self.port = serial.Serial(device, baudrate=baud, timeout=0, write_timeout=0)
+        except (serial.SerialException, ValueError, OSError) as exc:
+            code = getattr(exc, "errno", None)
+            reason = os.strerror(code) if isinstance(code, int) else str(exc).splitlines()[0]
+            raise TargetError(f"serial:{device}: cannot open: {reason}") from None
+        self.device, self.baud = device, baud
+        self.writer = FdPacketWriter(self.port.fileno(), pace_baud=options.pace_baud, blocking=options.blocking)
+
+    def send(self, payload: bytes) -> bool:
+        return self.writer.send(payload)
+
+    def describe(self) -> str:
+        return f"{self.device} @ {self.baud} baud"
+
+    def close(self) -> None:
+        self.port.close()

@@ -1,0 +1,34 @@
+"""Serial-format packets as UDP datagrams, one datagram per sample (e.g. MAVLink to a ground station)."""
+from __future__ import annotations
+
+import socket
+
+from imu_emulator.errors import TargetError
+from imu_emulator.transport.base import TargetOptions, Transport
+
+
+class UdpTransport(Transport):
+
+    def __init__(self, host: str, port: int, options: TargetOptions):
+        try:
+            family, kind, proto, _, address = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)[0]
+            self.sock = socket.socket(family, kind, proto)
+            self.sock.connect(address)
+        except OSError as exc:
+            raise TargetError(f"udp:{host}:{port}: {exc.strerror or exc}") from None
+        self.sock.setblocking(options.blocking)
+        self.host, self.port = host, port
+
+    def send(self, payload: bytes) -> bool:
+        try:
+            self.sock.send(payload)
+        except (BlockingIOError, ConnectionRefusedError):
+            # Refused = an earlier datagram met a closed port; UDP senders keep going regardless.
+            return False
+        return True
+
+    def describe(self) -> str:
+        return f"udp {self.host}:{self.port}"
+
+    def close(self) -> None:
+        self.sock.close()

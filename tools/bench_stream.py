@@ -1,0 +1,134 @@
+"""Figures for live streaming (not a test): HIGHRES_IMU to a pty read by this process.
+
+- lateness against deadlines (the emulator's own statistics) at each rate: p50, p99, p99.9, max and
+  the share of deadlines missed by more than one period;
+- drift between sample time and the reader's wall clock over a long run at 1 kHz;
+- time from launching the command to the first packet received (warm cache).
+
+    python tools/bench_stream.py [--seconds 30] [--rates 1000 10000] [--drift-seconds 600]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import select
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+SCENE = """
+[scene]
+rate_hz = {rate}
+duration_s = 1.0
+[trajectory]
+shape = "circle"
+radius_m = 5.0
+frequency_hz = 1.0
+height_m = 0.0
+[attitude]
+mode = "tangent"
+[[imu]]
+name = "imu0"
+[effects]
+gravity = true
+"""
+
+
+def launch(directory: Path, rate: float, seconds: float, stats: Path):
+    scene = directory / f"bench_{int(rate)}.toml"
+    scene.write_text(SCENE.format(rate=rate))
+    started = time.monotonic()
+    proc = subprocess.Popen([sys.executable, "-m", "imu_emulator", "stream", str(scene), "--format",
+                             "mavlink-highres", "--to", "pty", "--loop", "--duration", str(seconds), "--quiet",
+                             "--stats-json", str(stats)], stdout=subprocess.PIPE, cwd=REPO, text=True)
+    path = proc.stdout.readline().split("-> ")[1].split()[0]
+    fd = os.open(path, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
+    return proc, fd, started
+
+
+def read_until_exit(proc, fd, on_data=None):
+    """Read everything until the emulator exits; returns the monotonic time of the first byte."""
+    first = None
+    while True:
+        ready, _, _ = select.select([fd], [], [], 0.2)
+        if ready:
+            try:
+                data = os.read(fd, 1 << 16)
+            except OSError:
+                break
+            if not data:   # end of file: the emulator closed its side
+                break
+            if first is None:
+                first = time.monotonic()
+            if on_data:
+                on_data(time.monotonic(), data)
+        elif proc.poll() is not None:
+            break
+    os.close(fd)
+    proc.wait()
+    return first
+
+
+def lateness(directory: Path, rate: float, seconds: float) -> dict:
+    stats = directory / "stats.json"
+    proc, fd, _ = launch(directory, rate, seconds, stats)
+    read_until_exit(proc, fd)
+    return json.loads(stats.read_text())
+
+
+def drift(directory: Path, seconds: float) -> tuple[float, float]:
+    """(drift over the run, spread) in ms: reader's clock minus packet time, last second vs first second."""
+    from pymavlink.dialects.v20 import common as mavlink2
+    mav = mavlink2.MAVLink(None)
+    points = []
+
+    def on_data(now, data):
+        for message in mav.parse_buffer(data) or []:
+            if message.get_type() == "HIGHRES_IMU":
+                points.append((now, message.time_usec * 1e-6))
+
+    proc, fd, _ = launch(directory, 1000, seconds, directory / "drift.json")
+    read_until_exit(proc, fd, on_data)
+    arrival, sample = np.array(points).T
+    offset = (arrival - arrival[0]) - (sample - sample[0])
+    head, tail = offset[sample - sample[0] < 1.0], offset[sample - sample[-1] > -1.0]
+    return (np.median(tail) - np.median(head)) * 1e3, (np.percentile(tail, 99) - np.median(tail)) * 1e3
+
+
+def first_packet(directory: Path) -> float:
+    proc, fd, started = launch(directory, 1000, 1.0, directory / "first.json")
+    first = read_until_exit(proc, fd)
+    return first - started
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--seconds", type=float, default=30.0, help="duration of each lateness run")
+    parser.add_argument("--rates", type=float, nargs="+", default=[1000.0, 10000.0])
+    parser.add_argument("--drift-seconds", type=float, default=600.0, help="duration of the drift run (0 = skip)")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        directory = Path(tmp)
+        first_packet(directory)   # warm the numba caches
+        print(f"first packet after launch (warm cache): {first_packet(directory) * 1e3:.0f} ms")
+        for rate in args.rates:
+            s = lateness(directory, rate, args.seconds)
+            late = s["lateness"]
+            print(f"{rate:>7.0f} Hz, {args.seconds:g} s: lateness p50 {late['p50_us']:.0f} us, p99 {late['p99_us']:.0f} us, "
+                  f"p99.9 {late['p999_us']:.0f} us, max {late['max_us']:.0f} us; missed > 1 period "
+                  f"{late['missed_ratio']:.4%}; achieved {s['achieved_hz']:.1f} Hz; dropped {s['dropped']}")
+        if args.drift_seconds > 0:
+            total, spread = drift(directory, args.drift_seconds)
+            print(f"drift over {args.drift_seconds:g} s at 1 kHz (reader clock - sample time, last s vs first s): "
+                  f"{total:+.3f} ms (p99 - p50 of arrival offset in the last s: {spread:.3f} ms)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
