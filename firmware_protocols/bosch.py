@@ -78,7 +78,7 @@ class BoschMM7Encoder:
         self.rate_axes = axis_map(rate_axes)
         self.accel_axes = axis_map(accel_axes)
         self.counter = int(counter) & 0xF
-        self.stats = SaturationStats()
+        self.saturated = SaturationStats()
 
     frames_per_sample = ((8, False, False),) * 3
 
@@ -88,15 +88,15 @@ class BoschMM7Encoder:
         rates_deg = np.degrees(self.rate_axes.to_wire(samples.gyro))
         accels_g = self.accel_axes.to_wire(samples.accel) / STANDARD_GRAVITY
         temperature = to_int_field(samples.field_or("temperature_c", 25.0), 1.0, TEMP_OFFSET_C, 0, TEMP_RAW_MAX,
-                                   "temperature", self.stats, np.int64)
+                                   "temperature", self.saturated, np.int64)
         counters = (self.counter + np.arange(n, dtype=np.int64)) & 0xF
         payloads = np.zeros((n, 3, 8), dtype=np.uint8)
         for i, (rate, accel) in enumerate((("yaw_rate", "ay"), ("roll_rate", "ax"), ("pitch_rate", "az"))):
             frame = payloads[:, i, :]
             put_u16(frame, 0, to_int_field(rates_deg[:, i], RATE_SCALE_DEG, RATE_OFFSET_DEG, 0, RAW_MAX,
-                                           rate, self.stats, np.int64))
+                                           rate, self.saturated, np.int64))
             put_u16(frame, 4, to_int_field(accels_g[:, i], ACCEL_SCALE_G, ACCEL_OFFSET_G, 0, RAW_MAX,
-                                           accel, self.stats, np.int64))
+                                           accel, self.saturated, np.int64))
             frame[:, 6] = counters          # status nibble (bits 52-55) stays 0
         payloads[:, 0, 3] = temperature
         payloads[:, :, 7] = crc8_sae_j1850(payloads[:, :, :7].reshape(n * 3, 7)).reshape(n, 3)

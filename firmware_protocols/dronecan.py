@@ -314,7 +314,7 @@ class _DroneCanEncoder:
         self.priority = int(priority)
         self.fd = bool(fd)
         self.transfer_id = int(transfer_id) & 0x1F
-        self.stats = SaturationStats()
+        self.saturated = SaturationStats()
         self.can_id = can_id_for(self.message.dtid, self.node_id, self.priority)
         self._lengths = self.message.frame_lengths(self.fd)
         self._params = np.array([self.message.payload_len[self.fd], self.message.signature_crc, self.can_id,
@@ -356,7 +356,7 @@ class _DroneCanEncoder:
             raise EncodeError(f"non-finite value in field '{field}' at {where} ({message.name})")
         if saturated:
             for index, name in enumerate(message.counters):
-                self.stats.add(name, int(counts[index]))
+                self.saturated.add(name, int(counts[index]))
         self.transfer_id = (self.transfer_id + n) & 0x1F
         self._after_block(samples)
         return int(written)

@@ -85,11 +85,11 @@ class J1939Encoder:
         self.accel_axes = axis_map(accel_axes)
         self.ids = (j1939_id(int(ari_priority), PGN_ARI, self.source_address),
                     j1939_id(int(accs_priority), PGN_ACCS, self.source_address))
-        self.stats = SaturationStats()
+        self.saturated = SaturationStats()
         self._ari_fom = _fom_byte(rate_fom, 0b11)
         self._accs_fom = _fom_byte(accel_fom, 0b00)
         self._latency = int(to_int_field(np.array([latency_s]), LATENCY_SCALE_S, 0.0, 0, U8_VALID_MAX,
-                                          "latency", self.stats, np.int64)[0])
+                                          "latency", self.saturated, np.int64)[0])
 
     frames_per_sample = ((8, True, False), (8, True, False))
 
@@ -102,10 +102,10 @@ class J1939Encoder:
         ari, accs = payloads[:, 0, :], payloads[:, 1, :]
         for i, name in enumerate(("pitch_rate", "roll_rate", "yaw_rate")):
             put_u16(ari, 2 * i, to_int_field(rates_deg[:, i], RATE_SCALE_DEG, RATE_OFFSET_DEG, 0, U16_VALID_MAX,
-                                             name, self.stats, np.int64))
+                                             name, self.saturated, np.int64))
         for i, name in enumerate(("lateral_acceleration", "longitudinal_acceleration", "vertical_acceleration")):
             put_u16(accs, 2 * i, to_int_field(accels[:, i], ACCEL_SCALE, ACCEL_OFFSET, 0, U16_VALID_MAX,
-                                              name, self.stats, np.int64))
+                                              name, self.saturated, np.int64))
         ari[:, 6] = self._ari_fom
         ari[:, 7] = self._latency
         accs[:, 6] = self._accs_fom

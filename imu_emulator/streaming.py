@@ -20,7 +20,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 import firmware_protocols
-from firmware_protocols.base import EncodeError, SaturationStats, can_bits_worst_case
+from firmware_protocols.base import EncodeError, can_bits_worst_case
 from imu_emulator.errors import ImuEmulatorError, SceneError, TargetError
 from imu_emulator.realtime import LatenessStats, Pacer, drop_realtime, enable_realtime
 from imu_emulator.transport import TargetOptions, check_carries, link_capacity, open_target, parse_target
@@ -177,9 +177,7 @@ class Stream:
 
 
 def _saturation_total(encoder) -> int:
-    # The contract names `.saturated`; dronecan.py (as of this writing) calls it `.stats`.
-    stats = getattr(encoder, "saturated", None) or getattr(encoder, "stats", None)
-    return stats.total if isinstance(stats, SaturationStats) else 0
+    return encoder.saturated.total
 
 
 def build_streams(configs: list[StreamConfig], imu_names) -> list[Stream]:

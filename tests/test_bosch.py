@@ -100,7 +100,7 @@ def test_round_trip_with_saturation(gyro, accel, temp):
     expected = (sum(not rate_lo - 1e-7 <= r <= rate_hi + 1e-7 for r in wire_rates)
                 + sum(not acc_lo - 1e-5 <= a <= acc_hi + 1e-5 for a in wire_accels)
                 + (not -50.5 <= temp <= 150.5))
-    assert encoder.stats.total == expected
+    assert encoder.saturated.total == expected
     packet, = BoschMM7Decoder().feed_frames(frames)
     np.testing.assert_allclose(packet.fields["gyro"], [tx2["rate"] * -1, tx3["rate"], tx1["rate"]])
 
@@ -112,7 +112,7 @@ def test_saturation_edges_never_reach_ffff():
            for f in frames]
     assert raw == [(65534, 0), (0, 65534), (0, 32768)]   # yaw +z, roll -x, pitch +y; AY, AX, AZ
     assert frame_bytes(frames[0])[3] == 200
-    assert encoder.stats.counts == {"yaw_rate": 1, "roll_rate": 1, "pitch_rate": 1, "ax": 1, "ay": 1,
+    assert encoder.saturated.counts == {"yaw_rate": 1, "roll_rate": 1, "pitch_rate": 1, "ax": 1, "ay": 1,
                                     "temperature": 1}
 
 

@@ -225,7 +225,7 @@ def test_saturation_never_inf_and_counted(accel, gyro):
         decoded = packet.fields[name]
         assert np.isfinite(decoded).all()
         over = int(np.sum(np.abs(sent) > 65504.0))
-        assert encoder.stats.counts.get(field, 0) == over
+        assert encoder.saturated.counts.get(field, 0) == over
         big = np.abs(sent) > 65504.0
         np.testing.assert_array_equal(decoded[big], np.sign(np.array(sent))[big] * 65504.0)
     assert np.isfinite(packet.fields["delta_velocity"]).all()
@@ -239,7 +239,7 @@ def test_saturation_edges_and_timestamp_clamp():
     assert packets[0].fields["time_ns"] == 0 and packets[1].fields["time_ns"] == (2**63 - 1) // 1000 * 1000
     np.testing.assert_array_equal(packets[0].fields["accel"], [65504.0, -65504.0, 65504.0])
     assert packets[1].fields["delta_velocity"][0] == np.finfo(np.float32).max
-    assert encoder.stats.counts == {"timestamp": 1, "accelerometer_latest": 3, "accelerometer_integral": 2}
+    assert encoder.saturated.counts == {"timestamp": 1, "accelerometer_latest": 3, "accelerometer_integral": 2}
 
 
 @pytest.mark.parametrize("field, index, name", [("accel", (0, 1), "accel"), ("gyro", (1, 2), "gyro"),
@@ -252,7 +252,7 @@ def test_nan_raises_naming_field(field, index, name):
     encoder = RawImuEncoder(sample_period_s=0.01, transfer_id=4)
     with pytest.raises(EncodeError, match=rf"'{name}' at sample {index[0]}, component {index[1]}"):
         encoder.encode(samples)
-    assert encoder.transfer_id == 4 and encoder.stats.total == 0
+    assert encoder.transfer_id == 4 and encoder.saturated.total == 0
 
 
 def test_nan_in_quat_and_mag():

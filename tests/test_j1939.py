@@ -88,8 +88,8 @@ def test_saturation_counts_and_never_reaches_reserved_codes(gyro, accel):
             assert data[byte] | data[byte + 1] << 8 <= 0xFAFF
     over_rate = sum(not -250.0 - 1 / 256 <= math.degrees(g) <= 0xFAFF / 128 - 250 + 1 / 256 for g in gyro)
     over_accel = sum(not -320.005 <= a <= 322.555 for a in (accel[0], accel[1], -accel[2]))
-    rate_counts = sum(encoder.stats.counts.get(n, 0) for n in ("pitch_rate", "roll_rate", "yaw_rate"))
-    accel_counts = sum(encoder.stats.counts.get(n, 0) for n in
+    rate_counts = sum(encoder.saturated.counts.get(n, 0) for n in ("pitch_rate", "roll_rate", "yaw_rate"))
+    accel_counts = sum(encoder.saturated.counts.get(n, 0) for n in
                        ("lateral_acceleration", "longitudinal_acceleration", "vertical_acceleration"))
     assert (rate_counts, accel_counts) == (over_rate, over_accel)
 
@@ -106,7 +106,7 @@ def test_saturation_edges():
     assert [raw(frames[i], 2) for i in (1, 3, 5)] == [0xFAFF] * 3      # longitudinal = +accel x
     assert [raw(frames[i], 0) for i in (1, 3, 5)] == [0] * 3           # lateral = +accel y
     assert frame_bytes(frames[0])[7] == 0xFA                            # 1 s latency -> 125 ms
-    assert encoder.stats.counts == {"latency": 1, "roll_rate": 2, "pitch_rate": 2,
+    assert encoder.saturated.counts == {"latency": 1, "roll_rate": 2, "pitch_rate": 2,
                                     "longitudinal_acceleration": 2, "lateral_acceleration": 2}
 
 
