@@ -17,7 +17,7 @@ Variables the generated code defines, per sample:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from imu_emulator import expressions
 from imu_emulator.scene import Expressions, SampledData, Scene
@@ -28,9 +28,11 @@ ANGLES = ("r", "p", "y")       # roll, pitch, yaw suffixes
 
 @dataclass
 class MotionCode:
-    lines: list[str]           # straight-line code inside the per-sample loop (4-space relative indent)
+    lines: list[str]             # straight-line code inside the per-sample loop
     constants: dict[str, float]  # module-level constants the lines use
     needs_jerk: bool
+    phase_lines: list[str] = field(default_factory=list)  # computes sph_i, cph_i from k; run as a stage
+    phase_vars: list[str] = field(default_factory=list)   # of its own so samples overlap in the CPU
 
 
 def _phase_constants(coef, offset, scene: Scene, index: int) -> dict[str, float]:
@@ -107,18 +109,20 @@ def _symbolic(parts: list[tuple[str, object]], scene: Scene) -> MotionCode:
     exprs = [sympy.N(e, 30) for e in exprs]
     replacements, reduced = sympy.cse(exprs, symbols=sympy.numbered_symbols("_x"), optimizations="basic")
     printer = PythonCodePrinter({"fully_qualified_modules": True, "standard": "python3"})
-    lines = []
+    phase_lines = []
     if n_phases:
         # Split k once for Dekker's product; every phase slot shares it.
-        lines += ["kf = float(k)", "_s = 134217729.0 * kf", "kh = _s - (_s - kf)", "kl = kf - kh"]
+        phase_lines += ["kf = float(k)", "_s = 134217729.0 * kf", "kh = _s - (_s - kf)", "kl = kf - kh"]
         for i in range(n_phases):
-            lines += _phase_lines(i)
+            phase_lines += _phase_lines(i)
+    lines = []
     for sym, value in replacements:
         lines.append(f"{sym} = {printer.doprint(value)}")
     for name, value in zip(names, reduced):
         code = printer.doprint(value)
         lines.append(f"{name} = float({code})")
-    return MotionCode(lines=lines, constants=constants, needs_jerk=False)
+    return MotionCode(lines=lines, constants=constants, needs_jerk=False, phase_lines=phase_lines,
+                      phase_vars=[f"{sc}ph{i}" for i in range(n_phases) for sc in "sc"])
 
 
 def translational_parts(exprs: Expressions, scene: Scene, order: int):
@@ -245,9 +249,8 @@ def motion_code(scene: Scene, angles: bool) -> MotionCode:
     else:
         assert isinstance(scene.attitude, SampledData)
         attitude_lines = sampled_attitude_lines(angles)
-    constants: dict[str, float] = {}
-    if symbolic_parts:
-        sym = _symbolic(symbolic_parts, scene)
-        lines = sym.lines + lines
-        constants.update(sym.constants)
-    return MotionCode(lines=lines + attitude_lines, constants=constants, needs_jerk=tangent)
+    if not symbolic_parts:
+        return MotionCode(lines=lines + attitude_lines, constants={}, needs_jerk=tangent)
+    sym = _symbolic(symbolic_parts, scene)
+    return MotionCode(lines=sym.lines + lines + attitude_lines, constants=sym.constants, needs_jerk=tangent,
+                      phase_lines=sym.phase_lines, phase_vars=sym.phase_vars)
