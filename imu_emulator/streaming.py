@@ -6,6 +6,7 @@ IMU, one format, one target each) share one clock and one simulation.
 """
 from __future__ import annotations
 
+import gc
 import json
 import math
 import multiprocessing
@@ -296,6 +297,8 @@ class Streamer:
             code = 0
             try:
                 receiver.close()
+                # A collection walking the whole inherited heap would also copy every page on write.
+                gc.freeze()
                 signal.signal(signal.SIGINT, signal.SIG_IGN)   # the parent decides when to stop
                 signal.signal(signal.SIGTERM, signal.SIG_DFL)
                 drop_realtime()
@@ -335,10 +338,17 @@ class Streamer:
             rt = enable_realtime(want_fifo=paced and self.options.realtime)
             self._note(f"scheduling: {rt.describe()}")
             try:
-                self._send_loop(blocks, Pacer(rt.fifo) if paced else None, start)
+                period_ns = 1e9 / (self.rate_hz * self.options.speed) if paced else 0.0
+                # The cyclic collector walking the heap (numba, sympy) stalls for milliseconds about once a
+                # second; the send loop makes no reference cycles, so refcounting alone frees its garbage.
+                gc.freeze()
+                gc.disable()
+                self._send_loop(blocks, Pacer(rt.fifo, period_ns) if paced else None, start)
             except (KeyboardInterrupt, _Stop):
                 pass
             finally:
+                gc.enable()
+                gc.unfreeze()
                 drop_realtime()
                 blocks.close()
                 _reap(producer)

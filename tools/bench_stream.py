@@ -3,7 +3,10 @@
 - lateness against deadlines (the emulator's own statistics) at each rate: p50, p99, p99.9, max and
   the share of deadlines missed by more than one period;
 - drift between sample time and the reader's wall clock over a long run at 1 kHz;
-- time from launching the command to the first packet received (warm cache).
+- time from launching the command to the first packet received (warm cache);
+- the machine's floor at each rate: the same pacer with nothing to send, no producer and no reader. On
+  shared virtual machines the host takes the vCPU away now and then (seen here: every 100 ms, for
+  0.2-5 ms, even from a loop that never sleeps); no pacing inside the guest can beat that floor.
 
     python tools/bench_stream.py [--seconds 30] [--rates 1000 10000] [--drift-seconds 600]
 """
@@ -101,6 +104,29 @@ def drift(directory: Path, seconds: float) -> tuple[float, float]:
     return (np.median(tail) - np.median(head)) * 1e3, (np.percentile(tail, 99) - np.median(tail)) * 1e3
 
 
+BASELINE = """
+import gc, json, sys, time
+from imu_emulator.realtime import LatenessStats, Pacer, enable_realtime
+rate, seconds = float(sys.argv[1]), float(sys.argv[2])
+rt = enable_realtime()
+gc.freeze(); gc.disable()
+period = 1e9 / rate
+pacer, stats = Pacer(rt.fifo, period), LatenessStats(period)
+start = time.monotonic_ns() + 10_000_000
+for k in range(int(rate * seconds)):
+    deadline = start + int(k * period)
+    stats.add(pacer.wait_until(deadline) - deadline)
+print(json.dumps(stats.summary()))
+"""
+
+
+def baseline(rate: float, seconds: float) -> dict:
+    """The machine's floor: the same pacer with nothing to send, no producer, no reader."""
+    out = subprocess.run([sys.executable, "-c", BASELINE, str(rate), str(seconds)], capture_output=True,
+                         text=True, check=True, cwd=REPO)
+    return json.loads(out.stdout)
+
+
 def first_packet(directory: Path) -> float:
     proc, fd, started = launch(directory, 1000, 1.0, directory / "first.json")
     first = read_until_exit(proc, fd)
@@ -123,6 +149,9 @@ def main() -> int:
             print(f"{rate:>7.0f} Hz, {args.seconds:g} s: lateness p50 {late['p50_us']:.0f} us, p99 {late['p99_us']:.0f} us, "
                   f"p99.9 {late['p999_us']:.0f} us, max {late['max_us']:.0f} us; missed > 1 period "
                   f"{late['missed_ratio']:.4%}; achieved {s['achieved_hz']:.1f} Hz; dropped {s['dropped']}")
+            base = baseline(rate, args.seconds)
+            print(f"{'':>7s}    machine floor (same pacer, nothing sent): p99 {base['p99_us']:.0f} us, "
+                  f"p99.9 {base['p999_us']:.0f} us, max {base['max_us']:.0f} us; missed {base['missed_ratio']:.4%}")
         if args.drift_seconds > 0:
             total, spread = drift(directory, args.drift_seconds)
             print(f"drift over {args.drift_seconds:g} s at 1 kHz (reader clock - sample time, last s vs first s): "
