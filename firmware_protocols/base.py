@@ -214,6 +214,28 @@ class Packet:
     raw: bytes = b""
 
 
+class CanStreamDecoder:
+    """What every CAN decoder shares: rows of a frame array or single frames in, packets out, and never
+    an exception (a malformed frame counts in stats.ignored_frames). Subclasses set `self.stats` and
+    implement `_feed(can_id, data, extended, fd) -> list[Packet]`."""
+
+    stats: DecoderStats
+
+    def feed_frames(self, frames: np.ndarray) -> list[Packet]:
+        out: list[Packet] = []
+        for row in frames:
+            out.extend(self.feed_frame(int(row["can_id"]), bytes(row["data"][: row["length"]]),
+                                       bool(row["extended"]), bool(row["fd"])))
+        return out
+
+    def feed_frame(self, can_id: int, data: bytes, extended: bool, fd: bool = False) -> list[Packet]:
+        try:
+            return self._feed(int(can_id), bytes(data), bool(extended), bool(fd))
+        except Exception:                   # a malformed frame must never stop the stream
+            self.stats.ignored_frames += 1
+            return []
+
+
 def can_bits_worst_case(length: int, extended: bool, fd: bool = False) -> int:
     """Bits on the bus for one frame with worst-case bit stuffing (classic CAN; CAN FD approximated at
     nominal rate for the whole frame, an upper bound)."""

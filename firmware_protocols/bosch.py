@@ -34,7 +34,7 @@ import math
 
 import numpy as np
 
-from firmware_protocols.base import DecoderStats, Packet, SaturationStats, Samples, to_int_field
+from firmware_protocols.base import CanStreamDecoder, DecoderStats, Packet, SaturationStats, Samples, to_int_field
 from firmware_protocols.can_signals import AxisMap, axis_map, fixed_frames, put_u16
 from firmware_protocols.registry import FormatInfo, register
 
@@ -104,7 +104,7 @@ class BoschMM7Encoder:
         return fixed_frames(payloads, IDS, extended=False)
 
 
-class BoschMM7Decoder:
+class BoschMM7Decoder(CanStreamDecoder):
     """Collects TX1, TX2, TX3 with equal counters (in that order, as the sensor sends them) into one
     packet per sample. A frame with a wrong CRC counts in bad_checksum and breaks the set in progress;
     a set broken by a missing or reordered frame is dropped (its frames count in ignored_frames)."""
@@ -114,20 +114,6 @@ class BoschMM7Decoder:
         self.accel_axes = axis_map(accel_axes)
         self.stats = DecoderStats()
         self._set: list[bytes] = []
-
-    def feed_frames(self, frames: np.ndarray) -> list[Packet]:
-        out: list[Packet] = []
-        for row in frames:
-            out.extend(self.feed_frame(int(row["can_id"]), bytes(row["data"][: row["length"]]),
-                                       bool(row["extended"]), bool(row["fd"])))
-        return out
-
-    def feed_frame(self, can_id: int, data: bytes, extended: bool, fd: bool = False) -> list[Packet]:
-        try:
-            return self._feed(int(can_id), bytes(data), bool(extended), bool(fd))
-        except Exception:                   # a malformed frame must never stop the stream
-            self.stats.ignored_frames += 1
-            return []
 
     def _drop_set(self) -> None:
         self.stats.ignored_frames += len(self._set)

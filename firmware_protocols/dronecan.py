@@ -46,8 +46,8 @@ import math
 import numba
 import numpy as np
 
-from firmware_protocols.base import (CLASSIC_FRAME_DTYPE, FD_FRAME_DTYPE, DecoderStats, EncodeError, Packet, SaturationStats,
-                                     Samples, empty_frames)
+from firmware_protocols.base import (CLASSIC_FRAME_DTYPE, FD_FRAME_DTYPE, CanStreamDecoder, DecoderStats, EncodeError,
+                                     Packet, SaturationStats, Samples, empty_frames)
 from firmware_protocols.crc import crc16_ccitt, crc16_ccitt_bytes
 from firmware_protocols.registry import FormatInfo, register
 
@@ -464,7 +464,7 @@ class _Transfer:
         self.fd = fd
 
 
-class DroneCanDecoder:
+class DroneCanDecoder(CanStreamDecoder):
     """Reassembles ahrs.RawIMU / Solution / MagneticFieldStrength2 transfers from any source node.
 
     One transfer in progress per CAN id (a node sends one transfer of a subject at a time). A frame that
@@ -476,20 +476,6 @@ class DroneCanDecoder:
         self.data_type_ids = frozenset(int(d) for d in data_type_ids)
         self.stats = DecoderStats()
         self._pending: dict[int, _Transfer] = {}
-
-    def feed_frames(self, frames: np.ndarray) -> list[Packet]:
-        out: list[Packet] = []
-        for row in frames:
-            out.extend(self.feed_frame(int(row["can_id"]), bytes(row["data"][: row["length"]]),
-                                       bool(row["extended"]), bool(row["fd"])))
-        return out
-
-    def feed_frame(self, can_id: int, data: bytes, extended: bool, fd: bool = False) -> list[Packet]:
-        try:
-            return self._feed(int(can_id), bytes(data), bool(extended), bool(fd))
-        except Exception:                   # a malformed frame must never stop the stream
-            self.stats.ignored_frames += 1
-            return []
 
     def _feed(self, can_id, data, extended, fd):
         dtid = (can_id >> 8) & 0xFFFF

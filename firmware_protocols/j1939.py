@@ -31,7 +31,7 @@ import math
 
 import numpy as np
 
-from firmware_protocols.base import DecoderStats, Packet, SaturationStats, Samples, to_int_field
+from firmware_protocols.base import CanStreamDecoder, DecoderStats, Packet, SaturationStats, Samples, to_int_field
 from firmware_protocols.can_signals import AxisMap, axis_map, fixed_frames, put_u16
 from firmware_protocols.registry import FormatInfo, register
 
@@ -118,7 +118,7 @@ def _u16_si(data: bytes, byte: int, scale: float, offset: float) -> float:
     return raw * scale + offset if raw <= U16_VALID_MAX else math.nan
 
 
-class J1939Decoder:
+class J1939Decoder(CanStreamDecoder):
     """ARI / ACCS frames from any source address -> packets in SI (rad/s, m/s², s).
 
     Raw values in J1939's error / not-available ranges decode to NaN. `gyro` / `accel` give the same
@@ -131,21 +131,7 @@ class J1939Decoder:
         self.source_address = source_address
         self.stats = DecoderStats()
 
-    def feed_frames(self, frames: np.ndarray) -> list[Packet]:
-        out: list[Packet] = []
-        for row in frames:
-            out.extend(self.feed_frame(int(row["can_id"]), bytes(row["data"][: row["length"]]),
-                                       bool(row["extended"]), bool(row["fd"])))
-        return out
-
-    def feed_frame(self, can_id: int, data: bytes, extended: bool, fd: bool = False) -> list[Packet]:
-        try:
-            return self._feed(int(can_id), bytes(data), bool(extended))
-        except Exception:                   # a malformed frame must never stop the stream
-            self.stats.ignored_frames += 1
-            return []
-
-    def _feed(self, can_id, data, extended):
+    def _feed(self, can_id, data, extended, fd):
         pgn = (can_id >> 8) & 0x3FFFF
         source = can_id & 0xFF
         if (not extended or can_id > 0x1FFFFFFF or len(data) != 8 or pgn not in (PGN_ARI, PGN_ACCS)
