@@ -70,7 +70,6 @@ class Scene:
     imus: tuple[ImuSpec, ...]
     effects: frozenset[str]
     streams: tuple[dict, ...] = ()
-    seed: int | None = None
     path: str | None = None
     warnings: tuple[str, ...] = ()
 
@@ -222,13 +221,10 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
     warnings: list[str] = []
 
     head = _table(raw, "scene")
-    _no_unknown(head, {"rate_hz", "duration_s", "frame", "gravity_mps2", "t0_s", "seed", "name"}, "scene")
+    _no_unknown(head, {"rate_hz", "duration_s", "frame", "gravity_mps2", "t0_s", "name"}, "scene")
     rate = _number(head, "rate_hz", "scene", required=True, positive=True)
     frame = _choice(head, "frame", "scene", FRAMES, "ENU")
     gravity = _number(head, "gravity_mps2", "scene", default=9.80665)
-    seed = head.get("seed")
-    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int)):
-        raise SceneError(f"scene.seed: expected an integer, got {seed!r}")
 
     params = _params(raw)
 
@@ -314,7 +310,7 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
     return Scene(rate_hz=rate, duration_s=duration, frame=frame, gravity_mps2=gravity, t0_s=t0,
                  params=params, trajectory=trajectory, attitude_mode=mode, attitude=attitude,
                  initial_heading_rad=heading, imus=tuple(imus), effects=effects,
-                 streams=tuple(dict(s) for s in streams), seed=seed, path=path, warnings=tuple(warnings))
+                 streams=tuple(dict(s) for s in streams), path=path, warnings=tuple(warnings))
 
 
 def load_scene(path: str | Path) -> Scene:

@@ -136,7 +136,7 @@ def first_packet(directory: Path) -> float:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=float, default=30.0, help="duration of each lateness run")
-    parser.add_argument("--rates", type=float, nargs="+", default=[1000.0, 10000.0])
+    parser.add_argument("--rates", type=float, nargs="*", default=[1000.0, 10000.0], help="rates of the lateness runs (none: skip)")
     parser.add_argument("--drift-seconds", type=float, default=600.0, help="duration of the drift run (0 = skip)")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
