@@ -34,8 +34,8 @@ import math
 
 import numpy as np
 
-from firmware_protocols.base import CanStreamDecoder, DecoderStats, Packet, SaturationStats, Samples, to_int_field
-from firmware_protocols.can_signals import AxisMap, axis_map, fixed_frames, put_u16
+from firmware_protocols.base import CanStreamDecoder, DecoderStats, Packet, SaturationStats, Samples
+from firmware_protocols.can_signals import CRC8_J1850_TABLE, AxisMap, Signal, SignalLayout, axis_map
 from firmware_protocols.registry import FormatInfo, register
 
 IDS = (0x174, 0x178, 0x17C)
@@ -52,25 +52,11 @@ DEFAULT_RATE_MAP = AxisMap((2, 0, 1), (1, -1, 1))     # TX1 yaw, TX2 roll, TX3 p
 DEFAULT_ACCEL_MAP = AxisMap((1, 0, 2), (1, 1, 1))     # TX1 AY, TX2 AX, TX3 AZ
 
 
-def _crc8_table() -> np.ndarray:
-    table = np.zeros(256, dtype=np.uint8)
-    for byte in range(256):
-        crc = byte
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-        table[byte] = crc
-    return table
-
-
-CRC8_J1850_TABLE = _crc8_table()
-
-
-def crc8_sae_j1850(data: np.ndarray) -> np.ndarray:
-    """CRC-8/SAE-J1850 of each row of an (n, k) uint8 array (check value of b"123456789": 0x4B)."""
-    crc = np.full(data.shape[0], 0xFF, dtype=np.uint8)
-    for column in range(data.shape[1]):
-        crc = CRC8_J1850_TABLE[crc ^ data[:, column]]
-    return crc ^ np.uint8(0xFF)
+def crc8_sae_j1850(data: bytes) -> int:
+    crc = 0xFF
+    for byte in data:
+        crc = int(CRC8_J1850_TABLE[crc ^ byte])
+    return crc ^ 0xFF
 
 
 class BoschMM7Encoder:
@@ -79,29 +65,27 @@ class BoschMM7Encoder:
         self.accel_axes = axis_map(accel_axes)
         self.counter = int(counter) & 0xF
         self.saturated = SaturationStats()
+        # sources: gyro x y z (0-2), accel x y z (3-5), temperature (6)
+        signals = [Signal("temperature", 0, 3, 1, 6, 1.0, 1.0, TEMP_OFFSET_C, 0, TEMP_RAW_MAX)]
+        for message, (rate, accel) in enumerate((("yaw_rate", "ay"), ("roll_rate", "ax"), ("pitch_rate", "az"))):
+            signals.append(Signal(rate, message, 0, 2, self.rate_axes.axes[message],
+                                  math.degrees(1.0) * self.rate_axes.signs[message],
+                                  RATE_SCALE_DEG, RATE_OFFSET_DEG, 0, RAW_MAX))
+            signals.append(Signal(accel, message, 4, 2, 3 + self.accel_axes.axes[message],
+                                  self.accel_axes.signs[message] / STANDARD_GRAVITY,
+                                  ACCEL_SCALE_G, ACCEL_OFFSET_G, 0, RAW_MAX))
+        # status nibbles (bits 20-23, 52-55) and CLU/HW fields stay 0: all OK
+        self.layout = SignalLayout(IDS, False, np.zeros((3, 8)), signals, counter_byte=6, crc8=True)
 
     frames_per_sample = ((8, False, False),) * 3
 
     def encode(self, samples: Samples) -> np.ndarray:
         samples.require_finite(("gyro", "accel", "temperature_c"))
-        n = len(samples)
-        rates_deg = np.degrees(self.rate_axes.to_wire(samples.gyro))
-        accels_g = self.accel_axes.to_wire(samples.accel) / STANDARD_GRAVITY
-        temperature = to_int_field(samples.field_or("temperature_c", 25.0), 1.0, TEMP_OFFSET_C, 0, TEMP_RAW_MAX,
-                                   "temperature", self.saturated, np.int64)
-        counters = (self.counter + np.arange(n, dtype=np.int64)) & 0xF
-        payloads = np.zeros((n, 3, 8), dtype=np.uint8)
-        for i, (rate, accel) in enumerate((("yaw_rate", "ay"), ("roll_rate", "ax"), ("pitch_rate", "az"))):
-            frame = payloads[:, i, :]
-            put_u16(frame, 0, to_int_field(rates_deg[:, i], RATE_SCALE_DEG, RATE_OFFSET_DEG, 0, RAW_MAX,
-                                           rate, self.saturated, np.int64))
-            put_u16(frame, 4, to_int_field(accels_g[:, i], ACCEL_SCALE_G, ACCEL_OFFSET_G, 0, RAW_MAX,
-                                           accel, self.saturated, np.int64))
-            frame[:, 6] = counters          # status nibble (bits 52-55) stays 0
-        payloads[:, 0, 3] = temperature
-        payloads[:, :, 7] = crc8_sae_j1850(payloads[:, :, :7].reshape(n * 3, 7)).reshape(n, 3)
-        self.counter = (self.counter + n) & 0xF
-        return fixed_frames(payloads, IDS, extended=False)
+        temperature = samples.field_or("temperature_c", 25.0)
+        frames = self.layout.pack(np.column_stack((samples.gyro, samples.accel, temperature)), self.counter,
+                                  self.saturated)
+        self.counter = (self.counter + len(samples)) & 0xF
+        return frames
 
 
 class BoschMM7Decoder(CanStreamDecoder):
@@ -123,7 +107,7 @@ class BoschMM7Decoder(CanStreamDecoder):
         if extended or fd or can_id not in IDS or len(data) != 8:
             self.stats.ignored_frames += 1
             return []
-        if int(crc8_sae_j1850(np.frombuffer(data[:7], dtype=np.uint8)[None, :])[0]) != data[7]:
+        if crc8_sae_j1850(data[:7]) != data[7]:
             self.stats.bad_checksum += 1
             self._drop_set()
             return []

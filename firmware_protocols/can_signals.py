@@ -1,12 +1,14 @@
 """Pieces shared by the fixed-layout CAN signal formats (J1939, Bosch MM7): an explicit, configurable
-mapping from sensor axes to wire quantities, and packing of 8-byte payloads into CAN frame rows."""
+mapping from sensor axes to wire quantities, and a table-driven packer that turns sample arrays into
+8-byte CAN frames in one compiled call (scaling, rounding, saturation counting, counter, CRC-8)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
-from firmware_protocols.base import empty_frames
+from firmware_protocols.base import SaturationStats, empty_frames
 
 @dataclass(frozen=True)
 class AxisMap:
@@ -44,18 +46,116 @@ def axis_map(value) -> AxisMap:
     return AxisMap(tuple(axes), tuple(signs))
 
 
-def fixed_frames(payloads: np.ndarray, can_ids, extended: bool) -> np.ndarray:
-    """(n, m, 8) payloads of m messages per sample -> CAN frames, sample-major, message order kept."""
-    n, m, _ = payloads.shape
-    frames = empty_frames(n * m)
-    frames["sample"] = np.repeat(np.arange(n, dtype=np.int64), m)
-    frames["can_id"] = np.tile(np.asarray(can_ids, dtype=np.uint32), n)
-    frames["extended"] = extended
-    frames["length"] = 8
-    frames["data"][:, :8] = payloads.reshape(n * m, 8)
-    return frames
+@dataclass(frozen=True)
+class Signal:
+    """One unsigned little-endian signal: raw = round((sources[:, source] * factor - offset) / scale),
+    saturated to [lo, hi] (and counted under `name`), written at `byte` of message `message`."""
+
+    name: str
+    message: int
+    byte: int
+    width: int          # bytes: 1 or 2
+    source: int         # column of the sources matrix the encoder passes
+    factor: float       # SI -> the signal's unit, times the axis sign
+    scale: float        # signal unit per bit
+    offset: float
+    lo: int
+    hi: int
 
 
-def put_u16(payload: np.ndarray, byte: int, raw: np.ndarray) -> None:
-    payload[:, byte] = raw & 0xFF
-    payload[:, byte + 1] = raw >> 8
+def crc8_sae_j1850_table() -> np.ndarray:
+    """Table of CRC-8/SAE-J1850 (poly 0x1D, init 0xFF, xorout 0xFF; check b"123456789" -> 0x4B)."""
+    table = np.zeros(256, dtype=np.int64)
+    for byte in range(256):
+        crc = byte
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+        table[byte] = crc
+    return table
+
+
+CRC8_J1850_TABLE = crc8_sae_j1850_table()
+
+
+class SignalLayout:
+    """Messages of one sample (ids, constant bytes) and the signals in them.
+
+    counter_byte: byte whose low nibble carries a 4-bit counter, equal in all messages of a sample and
+    stepping by one per sample (-1: none). crc8: last byte = CRC-8/SAE-J1850 over bytes 0-6.
+    """
+
+    def __init__(self, can_ids, extended: bool, template, signals: list[Signal], counter_byte: int = -1,
+                 crc8: bool = False):
+        self.can_ids = np.asarray(can_ids, dtype=np.int64)
+        self.extended = bool(extended)
+        self.template = np.asarray(template, dtype=np.int64).reshape(len(self.can_ids), 8)
+        self.names = [sig.name for sig in signals]
+        self.spec = np.array([[sig.message, sig.byte, sig.width, sig.source] for sig in signals], dtype=np.int64)
+        self.values = np.array([[sig.factor, sig.scale, sig.offset, sig.lo, sig.hi] for sig in signals])
+        self.counter_byte = int(counter_byte)
+        self.crc8 = bool(crc8)
+        self._counts = np.zeros(len(signals), dtype=np.int64)
+
+    @property
+    def frames_per_sample(self) -> tuple:
+        return ((8, self.extended, False),) * len(self.can_ids)
+
+    def pack(self, sources: np.ndarray, counter: int, saturated: SaturationStats) -> np.ndarray:
+        """sources: (n, k) float64, finite. Returns n * messages frames, sample-major."""
+        frames = empty_frames(sources.shape[0] * len(self.can_ids))
+        total = _pack(np.ascontiguousarray(sources, dtype=np.float64), self.spec, self.values, self.template,
+                      self.can_ids, self.extended, counter, self.counter_byte, self.crc8, CRC8_J1850_TABLE,
+                      frames, self._counts)
+        if total:
+            for name, count in zip(self.names, self._counts):
+                saturated.add(name, int(count))
+        return frames
+
+
+@numba.njit(cache=True, nogil=True)
+def _pack(sources, spec, values, template, can_ids, extended, counter, counter_byte, crc8, crc_table,
+          frames, counts):
+    f_sample = frames.sample
+    f_id = frames.can_id
+    f_ext = frames.extended
+    f_len = frames.length
+    f_data = frames.data
+    counts[:] = 0
+    n = sources.shape[0]
+    m = can_ids.shape[0]
+    total = 0
+    for i in range(n):
+        base = i * m
+        for k in range(m):
+            f = base + k
+            f_sample[f] = i
+            f_id[f] = can_ids[k]
+            f_ext[f] = extended
+            f_len[f] = 8
+            for b in range(8):
+                f_data[f, b] = template[k, b]
+            if counter_byte >= 0:
+                f_data[f, counter_byte] = (template[k, counter_byte] & 0xF0) | ((counter + i) & 0xF)
+        for r in range(spec.shape[0]):
+            raw = np.rint((sources[i, spec[r, 3]] * values[r, 0] - values[r, 2]) / values[r, 1])
+            if raw < values[r, 3]:
+                raw = values[r, 3]
+                counts[r] += 1
+                total += 1
+            elif raw > values[r, 4]:
+                raw = values[r, 4]
+                counts[r] += 1
+                total += 1
+            word = np.int64(raw)
+            f = base + spec[r, 0]
+            f_data[f, spec[r, 1]] = word & 0xFF
+            if spec[r, 2] == 2:
+                f_data[f, spec[r, 1] + 1] = (word >> 8) & 0xFF
+        if crc8:
+            for k in range(m):
+                f = base + k
+                crc = 0xFF
+                for b in range(7):
+                    crc = crc_table[crc ^ f_data[f, b]]
+                f_data[f, 7] = crc ^ 0xFF
+    return total

@@ -32,7 +32,7 @@ import math
 import numpy as np
 
 from firmware_protocols.base import CanStreamDecoder, DecoderStats, Packet, SaturationStats, Samples, to_int_field
-from firmware_protocols.can_signals import AxisMap, axis_map, fixed_frames, put_u16
+from firmware_protocols.can_signals import AxisMap, Signal, SignalLayout, axis_map
 from firmware_protocols.registry import FormatInfo, register
 
 PGN_ARI = 0xF02A
@@ -86,31 +86,26 @@ class J1939Encoder:
         self.ids = (j1939_id(int(ari_priority), PGN_ARI, self.source_address),
                     j1939_id(int(accs_priority), PGN_ACCS, self.source_address))
         self.saturated = SaturationStats()
-        self._ari_fom = _fom_byte(rate_fom, 0b11)
-        self._accs_fom = _fom_byte(accel_fom, 0b00)
-        self._latency = int(to_int_field(np.array([latency_s]), LATENCY_SCALE_S, 0.0, 0, U8_VALID_MAX,
-                                          "latency", self.saturated, np.int64)[0])
+        latency = int(to_int_field(np.array([latency_s]), LATENCY_SCALE_S, 0.0, 0, U8_VALID_MAX,
+                                   "latency", self.saturated, np.int64)[0])
+        template = np.zeros((2, 8))
+        template[0, 6:] = _fom_byte(rate_fom, 0b11), latency
+        template[1, 6:] = _fom_byte(accel_fom, 0b00), 0xFF
+        # sources: gyro x y z (0-2), accel x y z (3-5)
+        signals = []
+        for i, name in enumerate(("pitch_rate", "roll_rate", "yaw_rate")):
+            signals.append(Signal(name, 0, 2 * i, 2, self.rate_axes.axes[i], math.degrees(1.0) * self.rate_axes.signs[i],
+                                  RATE_SCALE_DEG, RATE_OFFSET_DEG, 0, U16_VALID_MAX))
+        for i, name in enumerate(("lateral_acceleration", "longitudinal_acceleration", "vertical_acceleration")):
+            signals.append(Signal(name, 1, 2 * i, 2, 3 + self.accel_axes.axes[i], self.accel_axes.signs[i],
+                                  ACCEL_SCALE, ACCEL_OFFSET, 0, U16_VALID_MAX))
+        self.layout = SignalLayout(self.ids, True, template, signals)
 
     frames_per_sample = ((8, True, False), (8, True, False))
 
     def encode(self, samples: Samples) -> np.ndarray:
         samples.require_finite(("gyro", "accel"))
-        n = len(samples)
-        rates_deg = np.degrees(self.rate_axes.to_wire(samples.gyro))
-        accels = self.accel_axes.to_wire(samples.accel)
-        payloads = np.empty((n, 2, 8), dtype=np.uint8)
-        ari, accs = payloads[:, 0, :], payloads[:, 1, :]
-        for i, name in enumerate(("pitch_rate", "roll_rate", "yaw_rate")):
-            put_u16(ari, 2 * i, to_int_field(rates_deg[:, i], RATE_SCALE_DEG, RATE_OFFSET_DEG, 0, U16_VALID_MAX,
-                                             name, self.saturated, np.int64))
-        for i, name in enumerate(("lateral_acceleration", "longitudinal_acceleration", "vertical_acceleration")):
-            put_u16(accs, 2 * i, to_int_field(accels[:, i], ACCEL_SCALE, ACCEL_OFFSET, 0, U16_VALID_MAX,
-                                              name, self.saturated, np.int64))
-        ari[:, 6] = self._ari_fom
-        ari[:, 7] = self._latency
-        accs[:, 6] = self._accs_fom
-        accs[:, 7] = 0xFF
-        return fixed_frames(payloads, self.ids, extended=True)
+        return self.layout.pack(np.column_stack((samples.gyro, samples.accel)), 0, self.saturated)
 
 
 def _u16_si(data: bytes, byte: int, scale: float, offset: float) -> float:
