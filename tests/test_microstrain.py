@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from firmware_protocols import registry
 from firmware_protocols.base import EncodeError, Samples
 from firmware_protocols.microstrain import FIELDS, MipDecoder, MipEncoder
+from stream_fuzz import damaged_stream, feed_in_chunks
 
 SETTINGS = settings(derandomize=True, deadline=None, max_examples=60,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
@@ -211,21 +212,9 @@ def test_garbage_between_packets_is_skipped(garbage, cut):
 @given(st.lists(st.one_of(st.binary(max_size=60), st.just(b"\x75\x65\x80"), st.integers(0, 14)), max_size=40),
        st.integers(0, 2 ** 32 - 1))
 def test_fuzz_never_raises_never_yields_bad_checksum(parts, seed):
-    batch = stream_of()
-    rng = np.random.default_rng(seed)
-    stream = bytearray()
-    for part in parts:
-        if isinstance(part, int):
-            packet = bytearray(batch.packet(part))
-            if rng.random() < 0.3:
-                packet[rng.integers(len(packet))] ^= 1 << int(rng.integers(8))
-            if rng.random() < 0.2:
-                packet = packet[:rng.integers(len(packet))]
-            stream += packet
-        else:
-            stream += part
+    stream = damaged_stream(stream_of(), parts, seed)
     decoder = MipDecoder()
-    packets = [p for k in range(0, len(stream), 29) for p in decoder.feed(bytes(stream[k:k + 29]))]
+    packets = feed_in_chunks(decoder, stream, 29)
     for p in packets:
         assert p.raw[:2] == b"\x75\x65" and spec_fletcher(p.raw[:-2]) == (p.raw[-2], p.raw[-1])
     assert decoder.stats.packets == len(packets)

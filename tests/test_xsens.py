@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 from firmware_protocols import registry
 from firmware_protocols.base import EncodeError, Samples
 from firmware_protocols.xsens import ITEMS, XsensDecoder, XsensEncoder
+from stream_fuzz import damaged_stream, feed_in_chunks
 
 SETTINGS = settings(derandomize=True, deadline=None, max_examples=60,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
@@ -350,23 +351,9 @@ def test_garbage_between_packets_is_skipped(garbage, cuts):
                           st.integers(0, 19)), max_size=40),
        st.integers(0, 2 ** 32 - 1))
 def test_fuzz_never_raises_never_yields_bad_checksum(parts, flip_seed):
-    batch = stream_of()
-    rng = np.random.default_rng(flip_seed)
-    stream = bytearray()
-    for part in parts:
-        if isinstance(part, int):
-            packet = bytearray(batch.packet(part))
-            if rng.random() < 0.3:
-                packet[rng.integers(len(packet))] ^= 1 << int(rng.integers(8))
-            if rng.random() < 0.2:
-                packet = packet[:rng.integers(len(packet))]      # truncated
-            stream += packet
-        else:
-            stream += part
+    stream = damaged_stream(stream_of(), parts, flip_seed)
     decoder = XsensDecoder()
-    packets = []
-    for k in range(0, len(stream), 37):
-        packets += decoder.feed(bytes(stream[k:k + 37]))
+    packets = feed_in_chunks(decoder, stream, 37)
     for p in packets:
         assert p.raw[0] == 0xFA and sum(p.raw[1:]) % 256 == 0
     assert decoder.stats.packets == len(packets)
