@@ -84,30 +84,37 @@ def uses_time(tree: ast.Expression) -> bool:
     return any(isinstance(n, ast.Name) and n.id == TIME for n in ast.walk(tree))
 
 
-def evaluate_constant(tree: ast.Expression, values: Mapping[str, float], where: str) -> float:
-    """Evaluate a time-free expression numerically (for params defined from other params)."""
-    def ev(node):
+def _fold(tree: ast.Expression, constant, name, call):
+    """Evaluate a checked tree; the caller supplies what numbers, names and function calls become, and
+    + - * / ** work on whatever those are (floats, or sympy objects)."""
+    def walk(node):
         if isinstance(node, ast.Expression):
-            return ev(node.body)
+            return walk(node.body)
         if isinstance(node, ast.Constant):
-            return float(node.value)
+            return constant(node.value)
         if isinstance(node, ast.Name):
-            if node.id in values:
-                return values[node.id]
-            return CONSTANTS[node.id]
+            return name(node.id)
         if isinstance(node, ast.UnaryOp):
-            return -ev(node.operand) if isinstance(node.op, ast.USub) else ev(node.operand)
+            operand = walk(node.operand)
+            return -operand if isinstance(node.op, ast.USub) else operand
         if isinstance(node, ast.BinOp):
-            a, b = ev(node.left), ev(node.right)
+            a, b = walk(node.left), walk(node.right)
             op = type(node.op)
             return a + b if op is ast.Add else a - b if op is ast.Sub else a * b if op is ast.Mult \
                 else a / b if op is ast.Div else a ** b
         if isinstance(node, ast.Call):
-            fn = {"abs": abs}.get(node.func.id) or getattr(math, node.func.id)
-            return fn(*[ev(a) for a in node.args])
-        raise SceneError(f"{where}: cannot evaluate {_describe(node)!r}")
+            return call(node.func.id, [walk(a) for a in node.args])
+        raise AssertionError(f"unchecked node {node!r}")  # check() guarantees we never get here
+
+    return walk(tree)
+
+
+def evaluate_constant(tree: ast.Expression, values: Mapping[str, float], where: str) -> float:
+    """Evaluate a time-free expression numerically (for params defined from other params)."""
+    def call(fn, args):
+        return ({"abs": abs}.get(fn) or getattr(math, fn))(*args)
     try:
-        value = float(ev(tree))
+        value = float(_fold(tree, float, lambda n: values[n] if n in values else CONSTANTS[n], call))
     except (ArithmeticError, ValueError) as exc:
         raise SceneError(f"{where}: {exc}") from None
     if not math.isfinite(value):
@@ -119,28 +126,14 @@ def to_sympy(tree: ast.Expression, params: Mapping[str, float], t_symbol):
     """Translate a checked tree into a sympy expression; params become exact binary floats."""
     import sympy
 
-    def conv(node):
-        if isinstance(node, ast.Expression):
-            return conv(node.body)
-        if isinstance(node, ast.Constant):
-            value = node.value
-            return sympy.Integer(value) if isinstance(value, int) else sympy.Float(value, 17)
-        if isinstance(node, ast.Name):
-            if node.id == TIME:
-                return t_symbol
-            if node.id in params:
-                return sympy.Float(params[node.id], 17)
-            return sympy.pi if node.id == "pi" else sympy.E
-        if isinstance(node, ast.UnaryOp):
-            operand = conv(node.operand)
-            return -operand if isinstance(node.op, ast.USub) else operand
-        if isinstance(node, ast.BinOp):
-            a, b = conv(node.left), conv(node.right)
-            op = type(node.op)
-            return a + b if op is ast.Add else a - b if op is ast.Sub else a * b if op is ast.Mult \
-                else a / b if op is ast.Div else a ** b
-        if isinstance(node, ast.Call):
-            return getattr(sympy, FUNCTIONS[node.func.id][0])(*[conv(a) for a in node.args])
-        raise AssertionError(f"unchecked node {node!r}")  # check() guarantees we never get here
+    def constant(value):
+        return sympy.Integer(value) if isinstance(value, int) else sympy.Float(value, 17)
 
-    return conv(tree)
+    def name(n):
+        if n == TIME:
+            return t_symbol
+        if n in params:
+            return sympy.Float(params[n], 17)
+        return sympy.pi if n == "pi" else sympy.E
+
+    return _fold(tree, constant, name, lambda fn, args: getattr(sympy, FUNCTIONS[fn][0])(*args))
