@@ -14,8 +14,8 @@ from imu_emulator.scene import from_dict as scene_from_dict
 def __getattr__(name):
     # Simulation pulls in numba; importing the package for scene validation alone should not.
     if name in ("Simulation", "simulate"):
-        from imu_emulator import simulate as module
-        return getattr(module, name)
+        import importlib
+        return getattr(importlib.import_module("imu_emulator.simulation"), name)
     raise AttributeError(name)
 
 

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from imu_emulator.errors import ImuEmulatorError
-from imu_emulator.samples import SampleBlock
+from imu_emulator.samples import SampleBlock, concatenate
 
 CSV_COLUMNS = ("t", "imu", "ax", "ay", "az", "gx", "gy", "gz")
 TRUTH_COLUMNS = ("px", "py", "pz", "vx", "vy", "vz", "roll", "pitch", "yaw", "wbx", "wby", "wbz")
@@ -58,7 +58,6 @@ class Writer:
             return
         if not self.blocks:  # the run failed before its first block: leave no half-written file
             return
-        from imu_emulator.simulate import concatenate
         data = concatenate(self.blocks)
         arrays = {"t": data.t_s, "imu_names": np.array(self.imu_names), "accel": data.accel, "gyro": data.gyro}
         if data.quat is not None:

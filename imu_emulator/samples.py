@@ -38,3 +38,15 @@ class SampleBlock:
     def time_ns(self, offset_ns: int = 0) -> np.ndarray:
         """Sample times as integer nanoseconds (exact to the ns for any sane t0), plus an offset."""
         return np.rint(self.t_s * 1e9).astype(np.int64) + np.int64(offset_ns)
+
+
+def concatenate(blocks: list[SampleBlock]) -> SampleBlock:
+    first = blocks[0]
+    truth = None
+    if first.truth is not None:
+        truth = {k: np.concatenate([b.truth[k] for b in blocks]) for k in first.truth}
+    return SampleBlock(k0=first.k0, t_s=np.concatenate([b.t_s for b in blocks]),
+                       accel=np.concatenate([b.accel for b in blocks], axis=1),
+                       gyro=np.concatenate([b.gyro for b in blocks], axis=1),
+                       quat=None if first.quat is None else np.concatenate([b.quat for b in blocks], axis=1),
+                       truth=truth)

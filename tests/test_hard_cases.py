@@ -13,7 +13,7 @@ from imu_emulator.derivatives import wrap_angles
 from imu_emulator.rotations import (euler_to_matrix, euler_to_quat, matrix_to_euler, matrix_to_quat,
                                     quat_to_euler, quat_to_matrix)
 from imu_emulator.scene import DEFAULT_DERIVATIVE
-from imu_emulator.simulate import Simulation
+from imu_emulator.simulation import Simulation
 from reference import imu_functions, t as T
 
 G0 = 9.80665

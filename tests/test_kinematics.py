@@ -7,7 +7,7 @@ import sympy as sp
 from scipy.spatial.transform import Rotation
 
 from imu_emulator import load_scene, scene_from_dict
-from imu_emulator.simulate import Simulation
+from imu_emulator.simulation import Simulation
 from reference import imu_functions, t
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"

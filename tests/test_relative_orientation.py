@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from imu_emulator import scene_from_dict
-from imu_emulator.simulate import Simulation
+from imu_emulator.simulation import Simulation
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
 from relative_orientation import estimate, main  # noqa: E402

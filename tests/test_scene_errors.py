@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from imu_emulator import DataError, SceneError, load_scene, scene_from_dict
-from imu_emulator.simulate import Simulation
+from imu_emulator.simulation import Simulation
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -186,7 +186,7 @@ def test_cli_generate_npz_with_truth(tmp_path):
 
 def test_second_run_uses_the_cached_kernel_without_sympy(tmp_path):
     path = _write(tmp_path, GOOD)
-    code = ("import sys; from imu_emulator import load_scene; from imu_emulator.simulate import Simulation; "
+    code = ("import sys; from imu_emulator import load_scene; from imu_emulator.simulation import Simulation; "
             f"Simulation(load_scene({str(path)!r})).run(); print('sympy' in sys.modules)")
     env = {"IMU_EMULATOR_CACHE": str(tmp_path / "cache"), "PATH": "/usr/bin:/bin"}
     first = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)

@@ -42,7 +42,7 @@ from imu_emulator import scene_from_dict  # noqa: E402
 from imu_emulator.attitude_rates import dcm_rate, euler_rate, increment_rate  # noqa: E402
 from imu_emulator.derivatives import wrap_angles  # noqa: E402
 from imu_emulator.scene import DEFAULT_DERIVATIVE  # noqa: E402
-from imu_emulator.simulate import Simulation  # noqa: E402
+from imu_emulator.simulation import Simulation  # noqa: E402
 from reference import imu_functions, t as T  # noqa: E402
 
 G0 = 9.80665

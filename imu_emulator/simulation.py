@@ -101,18 +101,6 @@ class Simulation:
         return whole
 
 
-def concatenate(blocks: list[SampleBlock]) -> SampleBlock:
-    first = blocks[0]
-    truth = None
-    if first.truth is not None:
-        truth = {k: np.concatenate([b.truth[k] for b in blocks]) for k in first.truth}
-    return SampleBlock(k0=first.k0, t_s=np.concatenate([b.t_s for b in blocks]),
-                       accel=np.concatenate([b.accel for b in blocks], axis=1),
-                       gyro=np.concatenate([b.gyro for b in blocks], axis=1),
-                       quat=None if first.quat is None else np.concatenate([b.quat for b in blocks], axis=1),
-                       truth=truth)
-
-
 def simulate(scene: Scene, truth: bool = False) -> SampleBlock:
     """Python API: all samples of a scene."""
     return Simulation(scene, attitude=True, truth=truth).run()

@@ -1,9 +1,9 @@
-"""Subcommands `stream`, `formats` and `targets`; cli.py calls register(subparsers)."""
+"""`imu-emulator stream`: a scene live to ports, buses, UDP or capture files at wall-clock rate."""
 from __future__ import annotations
 
 
 from imu_emulator.streaming import StreamError
-from imu_emulator.transport import TARGET_KINDS, TargetOptions
+from imu_emulator.transport import TargetOptions
 
 
 def register(subparsers) -> None:
@@ -33,12 +33,6 @@ def register(subparsers) -> None:
     p.add_argument("--stats-json", metavar="PATH", help="write the final statistics as JSON")
     p.set_defaults(func=cmd_stream)
 
-    p = subparsers.add_parser("formats", help="list wire formats")
-    p.set_defaults(func=cmd_formats)
-    p = subparsers.add_parser("targets", help="list stream target kinds")
-    p.set_defaults(func=cmd_targets)
-
-
 def _option_value(text: str):
     lowered = text.lower()
     if lowered in ("true", "false"):
@@ -63,7 +57,7 @@ def _parse_options(pairs) -> dict:
 
 def cmd_stream(args) -> int:
     from imu_emulator.scene import load_scene
-    from imu_emulator.simulate import Simulation
+    from imu_emulator.simulation import Simulation
     from imu_emulator.streaming import RunOptions, StreamConfig, run_streams, streams_from_tables
 
     for name in ("duration", "count", "pace_baud", "bitrate", "data_bitrate"):
@@ -91,23 +85,4 @@ def cmd_stream(args) -> int:
                          count=args.count, quiet=args.quiet, allow_overload=args.allow_overload,
                          realtime=not args.no_realtime, stats_json=args.stats_json)
     run_streams(scene, Simulation(scene), configs, options)
-    return 0
-
-
-def cmd_formats(args) -> int:
-    import firmware_protocols
-    from firmware_protocols.base import can_bits_worst_case
-    for name, info in firmware_protocols.formats().items():
-        if info.kind == "serial":
-            size = f"{info.bytes_per_sample} B/sample"
-        else:
-            bits = sum(can_bits_worst_case(*frame) for frame in info.frames_per_sample)
-            size = f"{len(info.frames_per_sample)} frames/sample, {bits} bits worst case"
-        print(f"{name:24} {info.kind:6} {size:40} {info.description}")
-    return 0
-
-
-def cmd_targets(args) -> int:
-    for syntax, text, carries in TARGET_KINDS.values():
-        print(f"{syntax:34} {carries + ' formats':15} {text}")
     return 0

@@ -1,0 +1,15 @@
+"""`imu-emulator targets`: the kinds of stream target."""
+from __future__ import annotations
+
+from imu_emulator.transport import TARGET_KINDS
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("targets", help="list stream target kinds")
+    p.set_defaults(func=cmd_targets)
+
+
+def cmd_targets(args) -> int:
+    for syntax, text, carries in TARGET_KINDS.values():
+        print(f"{syntax:34} {carries + ' formats':15} {text}")
+    return 0
