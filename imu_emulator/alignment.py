@@ -123,13 +123,16 @@ def _uniform(t: np.ndarray, x: np.ndarray, h: float) -> tuple[float, np.ndarray]
     return float(t[0]), np.interp(grid, t, x)
 
 
-def coarse_time_offset(ta, wa, tb, wb, lo: float, hi: float, min_overlap_s: float, where: str) -> float:
+def coarse_time_offset(ta, wa, tb, wb, lo: float, hi: float, min_overlap_s: float, where: str) -> float | None:
     """Δ = t_B − t_A maximising the normalised cross-correlation of the rate magnitudes wa(ta), wb(tb),
-    searched in [lo, hi] among shifts that overlap by at least min_overlap_s; sub-sample by a parabola."""
+    searched in [lo, hi] among shifts that overlap by at least min_overlap_s; sub-sample by a parabola.
+    None when either rate magnitude never changes (nothing to correlate)."""
     h = min(np.median(np.diff(ta)), np.median(np.diff(tb)))
     a0, xa = _uniform(ta, wa, h)
     b0, xb = _uniform(tb, wb, h)
     xa, xb = xa - xa.mean(), xb - xb.mean()
+    if not (np.any(xa) and np.any(xb)):
+        return None
     corr = correlate(xb, xa, mode="full", method="fft")
     lags = correlation_lags(len(xb), len(xa), mode="full")     # xb[n + lag] pairs with xa[n]
     # Energies of the overlapping parts, for a normalisation that does not favour long overlaps.
@@ -148,11 +151,15 @@ def coarse_time_offset(ta, wa, tb, wb, lo: float, hi: float, min_overlap_s: floa
     score = np.full(len(corr), -np.inf)
     score[ok] = corr[ok] / np.sqrt(ea[ok] * eb[ok])
     i = int(np.argmax(score))
+    if not (0 < i < len(score) - 1 and ok[i - 1] and ok[i + 1]):
+        raise DataError(f"{where}: the best match of the angular rates lies at the edge of the offsets searched "
+                        f"({delta[i]:.6g} s in [{lo:.6g}, {hi:.6g}] s with at least {min_overlap_s:.6g} s of overlap):"
+                        " the true offset may lie beyond; widen the search with --max-offset-s if the records "
+                        "overlap enough")
     shift = 0.0
-    if 0 < i < len(score) - 1 and np.isfinite(score[i - 1]) and np.isfinite(score[i + 1]):
-        den = score[i - 1] - 2 * score[i] + score[i + 1]
-        if den < 0:
-            shift = 0.5 * (score[i - 1] - score[i + 1]) / den
+    den = score[i - 1] - 2 * score[i] + score[i + 1]
+    if den < 0:
+        shift = 0.5 * (score[i - 1] - score[i + 1]) / den
     return float(delta[i] + shift * h)
 
 
@@ -297,7 +304,11 @@ def align(a: ImuLog, b: ImuLog, options: AlignOptions = AlignOptions()) -> Align
                         f"{b.t[0]:.6g}..{b.t[-1]:.6g} s, and time offsets are searched within ±{max_offset:.6g} s "
                         "(--max-offset-s)")
     wa, wb = np.linalg.norm(a.gyro, axis=1), np.linalg.norm(b.gyro, axis=1)
+    notes = []
     delta0 = coarse_time_offset(a.t, wa, b.t, wb, -max_offset, max_offset, MIN_OVERLAP_FRACTION * span, where)
+    if delta0 is None:
+        delta0 = float(np.clip(0.0, max(lo_a, -max_offset), min(hi_a, max_offset)))
+        notes.append(f"the angular rate magnitude never changes: the time offset starts at {delta0:g} s")
     coarse = delta0
     lo, hi = max(a.t[0], b.t[0] - delta0), min(a.t[-1], b.t[-1] - delta0)    # overlap on A's clock
     t_ref = 0.5 * (lo + hi)
@@ -309,8 +320,9 @@ def align(a: ImuLog, b: ImuLog, options: AlignOptions = AlignOptions()) -> Align
         offsets = []
         for half in halves:
             sel = (a.t >= half[0]) & (a.t <= half[-1])
-            offsets.append(coarse_time_offset(a.t[sel], wa[sel], b.t, wb, delta0 - window, delta0 + window,
-                                              0.9 * (half[-1] - half[0]), where))
+            found = coarse_time_offset(a.t[sel], wa[sel], b.t, wb, delta0 - window, delta0 + window,
+                                       0.9 * (half[-1] - half[0]), where)
+            offsets.append(delta0 if found is None else found)
         centres = [0.5 * (h[0] + h[-1]) for h in halves]
         drift0 = (offsets[1] - offsets[0]) / (centres[1] - centres[0]) * 1e6
         delta0 = float(np.mean(offsets) + drift0 * 1e-6 * (t_ref - np.mean(centres)))
@@ -339,8 +351,8 @@ def align(a: ImuLog, b: ImuLog, options: AlignOptions = AlignOptions()) -> Align
         # Each residual group weighted by 1/its RMS: after the start, then once more after the first fit if
         # the ratio of the two moved by more than 10 % (the gyro-only fit needs no second pass).
         rg, rf, _, _ = problem.groups(C0, p)
-        scale = np.array([1.0 / max(_rms(rg), 1e-15 * max(_rms(wa0), 1e-300)),
-                          1.0 / max(_rms(rf), 1e-15 * max(_rms(fa0), 1e-300)) if rf is not None else 1.0])
+        scale = np.array([1.0 / max(_rms(rg), 1e-6 * GYRO_FLOOR),
+                          1.0 / max(_rms(rf), 1e-6 * ACCEL_FLOOR) if rf is not None else 1.0])
         if weighting and abs(math.log((scale[1] / scale[0]) / (problem.scale[1] / problem.scale[0]))) < 0.1:
             break
         problem.scale = scale
@@ -349,7 +361,7 @@ def align(a: ImuLog, b: ImuLog, options: AlignOptions = AlignOptions()) -> Align
                                     + ((1e-14 * _rms(fa0) * scale[1]) ** 2 if rf is not None else 0.0))
         p, C0, n = levenberg_marquardt(problem, p, C0, floor)
         evaluations += n
-    return _result(problem, p, C0, options, coarse, hi - lo, evaluations)
+    return _result(problem, p, C0, options, coarse, hi - lo, evaluations, notes)
 
 
 def levenberg_marquardt(problem: _Problem, p: np.ndarray, C0: np.ndarray, floor: float,
@@ -428,7 +440,7 @@ def _covariance(J: np.ndarray) -> np.ndarray:
     return np.linalg.inv(normalised) / np.outer(d, d)
 
 
-def _result(problem: _Problem, p, C, options: AlignOptions, coarse, overlap_s, evaluations) -> Alignment:
+def _result(problem: _Problem, p, C, options: AlignOptions, coarse, overlap_s, evaluations, notes) -> Alignment:
     ix = problem.index
     rg, rf, _, _ = problem.groups(C, p)
     P = len(p)
@@ -441,9 +453,11 @@ def _result(problem: _Problem, p, C, options: AlignOptions, coarse, overlap_s, e
     sig_g = _rms(rg) * math.sqrt(m / dof)
     sig_f = _rms(rf) * math.sqrt(m / dof) if rf is not None else 1.0
     cov = {}
-    for name, sg, sf in (("fit", sig_g, sig_f), ("floor", max(sig_g, GYRO_FLOOR), max(sig_f, ACCEL_FLOOR))):
-        problem.scale = np.array([1.0 / max(sg, 1e-300), 1.0 / max(sf, 1e-300)])
-        cov[name] = _covariance(problem.jacobian(p, C))
+    # (never below a millionth of the floors: exactly zero residuals would make the scale infinite)
+    problem.scale = np.array([1.0 / max(sig_g, 1e-6 * GYRO_FLOOR), 1.0 / max(sig_f, 1e-6 * ACCEL_FLOOR)])
+    cov["fit"] = _covariance(problem.jacobian(p, C))
+    problem.scale = np.array([1.0 / max(sig_g, GYRO_FLOOR), 1.0 / max(sig_f, ACCEL_FLOOR)])
+    J_floor = problem.jacobian(p, C)
     _, delta, drift, bg, bf, lever = problem.unpack(p)
     G = _euler_jacobian(C)
     euler = _euler_deg(C)
@@ -463,8 +477,7 @@ def _result(problem: _Problem, p, C, options: AlignOptions, coarse, overlap_s, e
     if problem.with_accel:
         sigma["accel_bias_diff_mps2"] = sd(c, ix["bf"])
         sigma["lever_arm_m"] = sd(c, ix["lever"])
-    observable, reasons = _verdicts(problem, cov["floor"], G, options)
-    notes = []
+    observable, reasons = _verdicts(problem, J_floor.T @ J_floor, G, options)
     cos_pitch = math.cos(math.radians(euler[1]))
     if abs(cos_pitch) < 1e-2:
         notes.append(f"pitch {euler[1]:.4f}° is near ±90° (gimbal lock of the z-y-x angles): roll and yaw "
@@ -476,36 +489,62 @@ def _result(problem: _Problem, p, C, options: AlignOptions, coarse, overlap_s, e
         drift_ppm=float(drift) if problem.with_drift else None, gyro_bias_diff=bg,
         accel_bias_diff=bf, lever_arm_m=lever, sigma=sigma, observable=observable, reasons=reasons, notes=notes,
         residual_rms=rms, n_rows=len(problem), overlap_s=float(overlap_s), coarse_offset_s=float(coarse),
-        base="A" if problem.base_is_a else "B")
+        base="A" if problem.base_is_a else "B", extra={"rotation_covariance_rad2": c[rot, rot]})
 
 
-def _verdicts(problem: _Problem, cov: np.ndarray, G: np.ndarray, options: AlignOptions):
+def _marginal_information(info: np.ndarray, block: slice) -> np.ndarray:
+    """Information about one block with all other parameters free (the Schur complement): what the data say
+    about it once everything it trades off against has been fitted. Computed in information form, so a
+    direction with no information shows as an eigenvalue near 0 while the others keep their digits (an
+    eigen-decomposition of a covariance holding both 1e12 and 1e-12 would not)."""
+    idx = np.arange(info.shape[0])
+    keep = (idx >= block.start) & (idx < block.stop)
+    H_bb, H_bo, H_oo = info[np.ix_(keep, keep)], info[np.ix_(keep, ~keep)], info[np.ix_(~keep, ~keep)]
+    d = np.sqrt(np.maximum(np.diag(H_oo), 1e-200))
+    inner = np.linalg.inv(H_oo / np.outer(d, d) + 1e-12 * np.eye(len(d))) / np.outer(d, d)
+    M = H_bb - H_bo @ inner @ H_bo.T
+    return 0.5 * (M + M.T)
+
+
+def _directions(info: np.ndarray, block: slice):
+    """Eigen-directions of a block's marginal information, with their 1σ and excitation relative to the
+    best-determined direction of the block (sqrt of the eigenvalue ratio)."""
+    values, vectors = np.linalg.eigh(_marginal_information(info, block))
+    # One sign per axis (largest component positive), rounded so that messages do not print "-0.000".
+    vectors = vectors * np.sign(vectors[np.argmax(np.abs(vectors), axis=0), np.arange(vectors.shape[1])])
+    vectors = np.round(vectors, 3) + 0.0
+    top = max(values[-1], 1e-300)
+    values = np.maximum(values, 0.0)
+    with np.errstate(divide="ignore"):
+        sigma = np.where(values > 0, 1.0 / np.sqrt(values), np.inf)
+    return vectors, sigma, np.sqrt(values / top)
+
+
+def _verdicts(problem: _Problem, info: np.ndarray, G: np.ndarray, options: AlignOptions):
     """Which reported quantities the data determine, and why not where they don't.
 
-    Works on the covariance with the residual noise floored (GYRO_FLOOR, ACCEL_FLOOR), block by block
-    (each block's marginal covariance, so a parameter that trades off against another shows as uncertain):
+    Works on the information matrix JᵀJ with the residual noise floored (GYRO_FLOOR, ACCEL_FLOOR), block by
+    block (each block's marginal information, so a parameter that trades off against another shows as
+    uncertain):
     - a direction whose 1σ exceeds the option's maximum is unobservable (too little motion, or none about it);
-    - a direction of a 3-vector block excited less than min_excitation times its best-excited direction (the
-      ratio of the 1σ) is unobservable too: its estimate rests on the small part of the motion, where the
-      sensors' relative errors (scale factor, axis misalignment ~1e-3) weigh 1/ratio times more; e.g. a car
-      that mostly yaws tells the gyros almost nothing about a rotation about the yaw axis.
+    - a direction of a 3-vector block excited less than min_excitation times its best-excited direction is
+      unobservable too: its estimate rests on the small part of the motion, where the sensors' relative
+      errors (scale factor, axis misalignment ~1e-3) weigh 1/ratio times more; e.g. a car that mostly yaws
+      tells the gyros almost nothing about a rotation about the yaw axis.
     """
     ix = problem.index
     observable, reasons = {}, []
     names = ("roll", "pitch", "yaw")
-    rot = ix["rot"]
-    values, vectors = np.linalg.eigh(cov[rot, rot])
-    sig = np.sqrt(np.maximum(values, 0.0))
+    vectors, sig, excitation = _directions(info, ix["rot"])
     bad_angles = set()
     for k in range(3):
         u = vectors[:, k]
         sigma_deg = math.degrees(sig[k])
-        ratio = sig[0] / sig[k] if sig[k] > 0 else 1.0
         why = None
         if sigma_deg > options.max_sigma_deg:
             why = f"1σ {sigma_deg:.3g}° exceeds {options.max_sigma_deg:g}°"
-        elif ratio < options.min_excitation:
-            why = (f"excited {ratio:.3g} times as much as the best-determined axis (threshold "
+        elif excitation[k] < options.min_excitation:
+            why = (f"excited {excitation[k]:.3g} times as much as the best-determined axis (threshold "
                    f"{options.min_excitation:g})")
         if why is None:
             continue
@@ -518,9 +557,9 @@ def _verdicts(problem: _Problem, cov: np.ndarray, G: np.ndarray, options: AlignO
     for name in names:
         observable[name] = name not in bad_angles
 
-    def scalar(key, label, unit, limit, scale=1.0):
-        j = ix[key].start
-        s = math.sqrt(max(cov[j, j], 0.0)) * scale
+    def scalar(key, label, unit, limit):
+        block = ix[key]
+        s = 1.0 / math.sqrt(max(_marginal_information(info, block)[0, 0], 1e-300))
         ok = s <= limit
         if not ok:
             reasons.append(f"{label} is not determined (1σ {s:.3g} {unit} exceeds {limit:g} {unit}): the "
@@ -530,18 +569,14 @@ def _verdicts(problem: _Problem, cov: np.ndarray, G: np.ndarray, options: AlignO
     if problem.with_drift:
         observable["clock_drift_ppm"] = scalar("drift", "clock drift", "ppm", options.max_sigma_drift_ppm)
     if problem.with_accel:
-        lev = ix["lever"]
-        values, vectors = np.linalg.eigh(cov[lev, lev])
-        sig = np.sqrt(np.maximum(values, 0.0))
+        vectors, sig, excitation = _directions(info, ix["lever"])
         bad = np.zeros(3, bool)
         for k in range(3):
             u = vectors[:, k]
-            ratio = sig[0] / sig[k] if sig[k] > 0 else 1.0
-            if sig[k] > options.max_sigma_lever_m or ratio < options.min_excitation:
-                axes = np.abs(u) >= 0.5 * np.max(np.abs(u))
-                bad |= axes
+            if sig[k] > options.max_sigma_lever_m or excitation[k] < options.min_excitation:
+                bad |= np.abs(u) >= 0.5 * np.max(np.abs(u))
                 reasons.append(f"lever arm along A's axis ({u[0]:+.3f}, {u[1]:+.3f}, {u[2]:+.3f}) is not "
-                               f"determined (1σ {sig[k]:.3g} m, {ratio:.3g} times as excited as the best axis): "
-                               "the centripetal and angular-acceleration terms hardly act along it")
+                               f"determined (1σ {sig[k]:.3g} m, {excitation[k]:.3g} times as excited as the "
+                               "best axis): the centripetal and angular-acceleration terms hardly act along it")
         observable["lever_arm_m"] = [bool(not x) for x in bad]
     return observable, reasons

@@ -101,20 +101,25 @@ def merge(scene: dict, fragment: dict) -> dict:
     return out
 
 
-def two_logs(scene_dict: dict, offset_s: float = TIME_OFFSET_S, rate_b_hz: float | None = None):
-    """ImuLogs of IMUs a and b. B's stamps are its true instants plus offset_s (t_B − t_A = offset_s); with
-    rate_b_hz, B comes from a second run of the same scene at that rate (same motion, other sample instants)."""
+def two_logs(scene_dict: dict, offset_s: float = TIME_OFFSET_S, rate_b_hz: float | None = None,
+             t0_b_s: float = 0.0, drift_ppm: float = 0.0, t_ref_s: float = 0.0):
+    """ImuLogs of IMUs a and b (A's clock is the scene's time). B's stamp of the instant τ is
+    τ + offset_s + drift_ppm·1e-6·(τ − t_ref_s), i.e. t_B − t_A as alignment.py defines it. With rate_b_hz or
+    t0_b_s, B comes from a second run of the same scene at that rate, starting at that time: same motion,
+    other sample instants. (Until [[imu]] has its own time_offset_s, this relabelling is how a test gets one.)"""
     from imu_emulator.simulation import Simulation
     out = Simulation(scene_from_dict(scene_dict), attitude=False).run()
     a = ImuLog("A", out.t_s, out.accel[0], out.gyro[0])
-    if rate_b_hz is None:
+    if rate_b_hz is None and t0_b_s == 0.0:
         b_t, b_acc, b_gyr = out.t_s, out.accel[1], out.gyro[1]
     else:
         other = copy.deepcopy(scene_dict)
-        other["scene"]["rate_hz"] = rate_b_hz
+        other["scene"]["rate_hz"] = rate_b_hz or other["scene"]["rate_hz"]
+        other["scene"]["t0_s"] = t0_b_s
         ob = Simulation(scene_from_dict(other), attitude=False).run()
         b_t, b_acc, b_gyr = ob.t_s, ob.accel[1], ob.gyro[1]
-    return a, ImuLog("B", b_t + offset_s, b_acc, b_gyr)
+    stamps = b_t + offset_s + drift_ppm * 1e-6 * (b_t - t_ref_s)
+    return a, ImuLog("B", stamps, b_acc, b_gyr)
 
 
 def rotation_error_deg(C: np.ndarray, truth: np.ndarray) -> float:
