@@ -39,6 +39,9 @@ from imu_emulator.imulog import ImuLog
 
 MIN_SAMPLES = 32            # per record and in the overlap: a quintic spline and a dozen parameters need room
 MIN_OVERLAP_FRACTION = 0.5  # a candidate offset must leave half of the shorter record overlapping
+MIN_RATE_CHANGE = 0.01      # rad/s RMS of |ω| about its mean: less is too little motion to find a time offset
+MIN_CORRELATION = 0.8       # of |ω_A| and |ω_B| at the coarse offset; one body's motion gives ~1 unless noise
+                            # dominates the rate changes, where the offset could not be trusted anyway
 # Noise floors for the observability verdict only: perfect (simulated) data would otherwise make a weakly
 # excited direction look certain. Both sit below the white noise of any MEMS part per sample at 100 Hz
 # (BMI088 gyro: 0.014 °/s/√Hz -> 2.4e-3 rad/s; accel 160 µg/√Hz -> 1.6e-2 m/s²).
@@ -78,7 +81,7 @@ class Alignment:
     residual_rms: dict                  # gyro rad/s, accel m/s²
     n_rows: int                         # samples in the common base
     overlap_s: float
-    coarse_offset_s: float
+    coarse_offset_s: float | None       # from the cross-correlation; None: too little motion to search
     base: str                           # which sensor's stamps are the common base: "A" or "B"
     extra: dict = field(default_factory=dict)
 
@@ -126,12 +129,12 @@ def _uniform(t: np.ndarray, x: np.ndarray, h: float) -> tuple[float, np.ndarray]
 def coarse_time_offset(ta, wa, tb, wb, lo: float, hi: float, min_overlap_s: float, where: str) -> float | None:
     """Δ = t_B − t_A maximising the normalised cross-correlation of the rate magnitudes wa(ta), wb(tb),
     searched in [lo, hi] among shifts that overlap by at least min_overlap_s; sub-sample by a parabola.
-    None when either rate magnitude never changes (nothing to correlate)."""
+    None when either rate magnitude changes by less than MIN_RATE_CHANGE RMS (nothing to correlate)."""
     h = min(np.median(np.diff(ta)), np.median(np.diff(tb)))
     a0, xa = _uniform(ta, wa, h)
     b0, xb = _uniform(tb, wb, h)
     xa, xb = xa - xa.mean(), xb - xb.mean()
-    if not (np.any(xa) and np.any(xb)):
+    if min(_rms(xa), _rms(xb)) < MIN_RATE_CHANGE:
         return None
     corr = correlate(xb, xa, mode="full", method="fft")
     lags = correlation_lags(len(xb), len(xa), mode="full")     # xb[n + lag] pairs with xa[n]
@@ -151,6 +154,10 @@ def coarse_time_offset(ta, wa, tb, wb, lo: float, hi: float, min_overlap_s: floa
     score = np.full(len(corr), -np.inf)
     score[ok] = corr[ok] / np.sqrt(ea[ok] * eb[ok])
     i = int(np.argmax(score))
+    if score[i] < MIN_CORRELATION:
+        raise DataError(f"{where}: the angular rate magnitudes correlate at most {score[i]:.2f} at the time "
+                        f"offsets searched ([{lo:.6g}, {hi:.6g}] s): the records do not show the same motion there;"
+                        " if the offset lies beyond, widen the search with --max-offset-s")
     if not (0 < i < len(score) - 1 and ok[i - 1] and ok[i + 1]):
         raise DataError(f"{where}: the best match of the angular rates lies at the edge of the offsets searched "
                         f"({delta[i]:.6g} s in [{lo:.6g}, {hi:.6g}] s with at least {min_overlap_s:.6g} s of overlap):"
@@ -305,11 +312,12 @@ def align(a: ImuLog, b: ImuLog, options: AlignOptions = AlignOptions()) -> Align
                         "(--max-offset-s)")
     wa, wb = np.linalg.norm(a.gyro, axis=1), np.linalg.norm(b.gyro, axis=1)
     notes = []
-    delta0 = coarse_time_offset(a.t, wa, b.t, wb, -max_offset, max_offset, MIN_OVERLAP_FRACTION * span, where)
+    coarse = coarse_time_offset(a.t, wa, b.t, wb, -max_offset, max_offset, MIN_OVERLAP_FRACTION * span, where)
+    delta0 = coarse
     if delta0 is None:
         delta0 = float(np.clip(0.0, max(lo_a, -max_offset), min(hi_a, max_offset)))
-        notes.append(f"the angular rate magnitude never changes: the time offset starts at {delta0:g} s")
-    coarse = delta0
+        notes.append(f"the angular rate magnitude changes by less than {MIN_RATE_CHANGE:g} rad/s RMS: too little "
+                     f"motion to search a time offset; the fit starts at {delta0:g} s")
     lo, hi = max(a.t[0], b.t[0] - delta0), min(a.t[-1], b.t[-1] - delta0)    # overlap on A's clock
     t_ref = 0.5 * (lo + hi)
     drift0 = 0.0
@@ -477,7 +485,7 @@ def _result(problem: _Problem, p, C, options: AlignOptions, coarse, overlap_s, e
     if problem.with_accel:
         sigma["accel_bias_diff_mps2"] = sd(c, ix["bf"])
         sigma["lever_arm_m"] = sd(c, ix["lever"])
-    observable, reasons = _verdicts(problem, J_floor.T @ J_floor, G, options)
+    observable, reasons = _verdicts(problem, J_floor.T @ J_floor, G, options, searched=coarse is not None)
     cos_pitch = math.cos(math.radians(euler[1]))
     if abs(cos_pitch) < 1e-2:
         notes.append(f"pitch {euler[1]:.4f}° is near ±90° (gimbal lock of the z-y-x angles): roll and yaw "
@@ -488,7 +496,7 @@ def _result(problem: _Problem, p, C, options: AlignOptions, coarse, overlap_s, e
         C=C, quaternion_wxyz=quat, euler_deg=euler, time_offset_s=float(delta), time_reference_s=problem.t_ref,
         drift_ppm=float(drift) if problem.with_drift else None, gyro_bias_diff=bg,
         accel_bias_diff=bf, lever_arm_m=lever, sigma=sigma, observable=observable, reasons=reasons, notes=notes,
-        residual_rms=rms, n_rows=len(problem), overlap_s=float(overlap_s), coarse_offset_s=float(coarse),
+        residual_rms=rms, n_rows=len(problem), overlap_s=float(overlap_s), coarse_offset_s=None if coarse is None else float(coarse),
         base="A" if problem.base_is_a else "B", extra={"rotation_covariance_rad2": c[rot, rot]})
 
 
@@ -520,7 +528,7 @@ def _directions(info: np.ndarray, block: slice):
     return vectors, sigma, np.sqrt(values / top)
 
 
-def _verdicts(problem: _Problem, info: np.ndarray, G: np.ndarray, options: AlignOptions):
+def _verdicts(problem: _Problem, info: np.ndarray, G: np.ndarray, options: AlignOptions, searched: bool):
     """Which reported quantities the data determine, and why not where they don't.
 
     Works on the information matrix JᵀJ with the residual noise floored (GYRO_FLOOR, ACCEL_FLOOR), block by
@@ -566,6 +574,10 @@ def _verdicts(problem: _Problem, info: np.ndarray, G: np.ndarray, options: Align
                            "angular rate hardly changed, or changed like another estimate does")
         return ok
     observable["time_offset_s"] = scalar("dt", "time offset", "s", options.max_sigma_time_s)
+    if not searched and observable["time_offset_s"]:
+        observable["time_offset_s"] = False
+        reasons.append(f"time offset is not determined: the angular rate magnitude changed by less than "
+                       f"{MIN_RATE_CHANGE:g} rad/s RMS, too little to match the two records")
     if problem.with_drift:
         observable["clock_drift_ppm"] = scalar("drift", "clock drift", "ppm", options.max_sigma_drift_ppm)
     if problem.with_accel:

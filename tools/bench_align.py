@@ -133,31 +133,41 @@ def scene_for(case: str, seed: int) -> dict:
     return merge(scene, SENSOR_FRAGMENTS[case]) if case in SENSOR_FRAGMENTS else scene
 
 
-def run_case(case: str, seeds: int, lever_arm: bool):
+def run_case(case: str, seeds: int):
+    """Per model ("gyro only", "gyro + accel, lever arm"), one row of errors per seed; or None and the reason
+    when the scene cannot be built (cases b–d before the sensor-error model)."""
     truth = true_rotation()
-    rows = []
+    rows = {False: [], True: []}
     for seed in range(seeds):
         try:
             a, b = two_logs(scene_for(case, seed))
         except ImuEmulatorError as exc:
             return None, str(exc)
-        options = AlignOptions(lever_arm=lever_arm, drift=(case == "d"))
-        wall, cpu = time.perf_counter(), time.thread_time_ns()
-        result = align(a, b, options)
-        cpu = (time.thread_time_ns() - cpu) * 1e-9
-        wall = time.perf_counter() - wall
-        rows.append({
-            "rotation_deg": rotation_error_deg(result.C, truth),
-            "time_offset_ms": abs(result.time_offset_s - TIME_OFFSET_S) * 1e3,
-            "lever_arm_mm": (float(np.linalg.norm(result.lever_arm_m - np.array(LEVER_B_M))) * 1e3
-                             if lever_arm else float("nan")),
-            "sigma_rotation_deg": result.sigma["rotation_deg"],
-            "wall_s": wall, "cpu_s": cpu,
-            "unobservable": ", ".join(k if not isinstance(v, list) else
-                                      f"{k}[{','.join('xyz'[i] for i, ok in enumerate(v) if not ok)}]"
-                                      for k, v in result.observable.items()
-                                      if (v is False) or (isinstance(v, list) and not all(v))) or "none"})
+        for lever_arm in (False, True):
+            options = AlignOptions(lever_arm=lever_arm, drift=(case == "d"))
+            wall, cpu = time.perf_counter(), time.thread_time_ns()
+            result = align(a, b, options)
+            cpu = (time.thread_time_ns() - cpu) * 1e-9
+            wall = time.perf_counter() - wall
+            rows[lever_arm].append({
+                "rotation_deg": rotation_error_deg(result.C, truth),
+                "time_offset_ms": abs(result.time_offset_s - TIME_OFFSET_S) * 1e3,
+                "lever_arm_mm": (float(np.linalg.norm(result.lever_arm_m - np.array(LEVER_B_M))) * 1e3
+                                 if lever_arm else float("nan")),
+                "sigma_rotation_deg": result.sigma["rotation_deg"],
+                "wall_s": wall, "cpu_s": cpu,
+                "unobservable": unobservable(result.observable)})
     return rows, None
+
+
+def unobservable(observable: dict) -> str:
+    parts = []
+    for key, value in observable.items():
+        if isinstance(value, list) and not all(value):
+            parts.append(f"{key} {''.join('xyz'[i] for i, ok in enumerate(value) if not ok)}")
+        elif value is False:
+            parts.append(key)
+    return ", ".join(parts) or "none"
 
 
 def main(argv=None) -> int:
@@ -172,23 +182,23 @@ def main(argv=None) -> int:
           "| reported 1σ rotation (°, median) | unobservable (verdicts seen) | align() wall / CPU median (s) |")
     print("|---|---|---|---|---|---|---|---|")
     for case in args.cases.split(","):
-        for lever_arm in (False, True):
-            rows, skipped = run_case(case, args.seeds, lever_arm)
-            model = "gyro + accel, lever arm" if lever_arm else "gyro only"
-            if rows is None:
-                print(f"| {case} | {model} | skipped: {skipped} |||||")
-                break
-            col = {k: np.array([r[k] for r in rows]) for k in rows[0] if k != "unobservable"}
+        rows, skipped = run_case(case, args.seeds)
+        if rows is None:
+            print(f"| {case} | — | skipped: {skipped} ||||||")
+            continue
+        for lever_arm, model in ((False, "gyro only"), (True, "gyro + accel, lever arm")):
+            col = {k: np.array([r[k] for r in rows[lever_arm]]) for k in rows[lever_arm][0] if k != "unobservable"}
 
             def stat(k, fmt):
                 x = col[k]
                 if np.all(np.isnan(x)):
                     return "—"
                 return f"{fmt.format(np.max(x))} / {fmt.format(np.sqrt(np.mean(x ** 2)))}"
-            verdicts = sorted({r["unobservable"] for r in rows})
-            print(f"| {case} | {model} | {stat('rotation_deg', '{:.2e}')} | {stat('time_offset_ms', '{:.2e}')} | "
-                  f"{stat('lever_arm_mm', '{:.2e}')} | {np.median(col['sigma_rotation_deg']):.2e} | "
-                  f"{'; '.join(verdicts)} | {np.median(col['wall_s']):.3f} / {np.median(col['cpu_s']):.3f} |")
+            verdicts = sorted({r["unobservable"] for r in rows[lever_arm]})
+            print(f"| {case} | {model} | {stat('rotation_deg', '{:.1e}')} | {stat('time_offset_ms', '{:.1e}')} | "
+                  f"{stat('lever_arm_mm', '{:.1e}')} | {np.median(col['sigma_rotation_deg']):.1e} | "
+                  f"{'; '.join(verdicts)} | {np.median(col['wall_s']):.2f} / {np.median(col['cpu_s']):.2f} |",
+                  flush=True)
     return 0
 
 

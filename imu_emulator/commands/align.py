@@ -70,7 +70,8 @@ def report(result, label_a: str, label_b: str) -> str:
     lines.append("DCM: " + "; ".join(" ".join(f"{v:+.9f}" for v in row) for row in result.C))
     offset = (f"{result.time_offset_s * 1e3:.6f} ± {sig['time_offset_s'] * 1e3:.2g} ms" if obs["time_offset_s"]
               else "unobservable")
-    lines.append(f"time offset t_B - t_A: {offset} (coarse {result.coarse_offset_s * 1e3:.3f} ms)"
+    coarse = "not searched" if result.coarse_offset_s is None else f"coarse {result.coarse_offset_s * 1e3:.3f} ms"
+    lines.append(f"time offset t_B - t_A: {offset} ({coarse})"
                  + (f" at t_A = {result.time_reference_s:.6f} s" if result.drift_ppm is not None else ""))
     if result.drift_ppm is not None:
         drift = (f"{result.drift_ppm:.3f} ± {sig['clock_drift_ppm']:.2g} ppm" if obs["clock_drift_ppm"]
