@@ -6,8 +6,9 @@ clock: for one physical instant, B's stamp minus A's stamp is
 
     t_B − t_A = Δ + d·(t_A − t_ref)          (Δ = time_offset_s at t_ref, d = drift, reported in ppm)
 
-with t_ref the middle of the overlap on A's clock. A sensor whose oscillator runs 50 ppm slow against A's
-gives d = +50 ppm... in the sense that its stamps fall behind: d is the rate of change of t_B − t_A.
+with t_ref the middle of the overlap on A's clock; d is the rate of change of t_B − t_A. If B samples at
+t_k = k·Δt·(1 + 50e-6) while its stamps say k·Δt (the clock of specs/sensor-errors.md at +50 ppm) and A's
+clock is true, B's stamps fall behind: d = −50 ppm.
 
 Pipeline:
 1. coarse Δ from the cross-correlation of the rotation-invariant |ω| of both sensors (both resampled to the

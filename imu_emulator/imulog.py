@@ -13,7 +13,6 @@ that name the file, the row (CSV line as an editor shows it, or 0-based NPZ inde
 """
 from __future__ import annotations
 
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,7 +21,7 @@ import numpy as np
 from imu_emulator.derivatives import validate_samples
 from imu_emulator.errors import DataError
 from imu_emulator.output import TRUTH_COLUMNS
-from imu_emulator.trackfile import _parse_table
+from imu_emulator.trackfile import _parse_table, read_csv_rows, read_npz_arrays
 
 SAMPLE_COLUMNS = ("t", "ax", "ay", "az", "gx", "gy", "gz")
 VALUE_COLUMNS = SAMPLE_COLUMNS[1:]
@@ -74,13 +73,7 @@ def _checked(label: str, t, accel, gyro, row_label) -> ImuLog:
 
 def _read_csv(path: Path) -> dict[str | None, ImuLog]:
     where = path.name
-    text = path.read_text(encoding="utf-8-sig")
-    rows = [(number, line) for number, line in enumerate(text.splitlines(), start=1)
-            if line.strip() and not line.lstrip().startswith("#")]
-    if not rows:
-        raise DataError(f"{where}: empty file (expected a header row {','.join(SAMPLE_COLUMNS)})")
-    header_line, header = rows[0]
-    names = [c.strip().lower() for c in header.split(",")]
+    header_line, _, names, data = read_csv_rows(path, ",".join(SAMPLE_COLUMNS))
     missing = [c for c in SAMPLE_COLUMNS if c not in names]
     if missing:
         raise DataError(f"{where}: row {header_line}: missing column{'s' if len(missing) > 1 else ''} "
@@ -93,7 +86,6 @@ def _read_csv(path: Path) -> dict[str | None, ImuLog]:
                             f"{', '.join(SAMPLE_COLUMNS)}, and imu for several IMUs)")
         if names.count(name) > 1:
             raise DataError(f"{where}: row {header_line}: column '{name}' appears twice")
-    data = rows[1:]
     if not data:
         raise DataError(f"{where}: no data rows after the header")
     if "imu" not in names:
@@ -124,11 +116,7 @@ def _from_table(label: str, names: list[str], table: np.ndarray, lines: np.ndarr
 
 def _read_npz(path: Path) -> dict[str | None, ImuLog]:
     where = path.name
-    try:
-        with np.load(path, allow_pickle=False) as archive:
-            arrays = {name: archive[name] for name in archive.files}
-    except (ValueError, EOFError, zipfile.BadZipFile, AttributeError) as exc:
-        raise DataError(f"{where}: not a readable NPZ archive ({exc})") from None
+    arrays = read_npz_arrays(path)
     missing = [name for name in ("t", "accel", "gyro") if name not in arrays]
     if missing:
         raise DataError(f"{where}: missing array{'s' if len(missing) > 1 else ''} {', '.join(missing)} "

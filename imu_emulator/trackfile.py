@@ -116,22 +116,37 @@ def _check_names(where: str, names: list[str], kind: str) -> bool:
     return bool(angles)
 
 
-def _load_csv(path: Path) -> Track:
-    where = path.name
+def read_csv_rows(path: Path, expected_header: str) -> tuple[int, str, list[str], list[tuple[int, str]]]:
+    """The header's line number and text, its column names (stripped, lower case) and the data rows as
+    (line number, text), blank lines and '#' comments skipped; DataError for an empty file. Shared with
+    imulog, so that every CSV we read follows the same rules."""
     text = path.read_text(encoding="utf-8-sig")
     rows = [(number, line) for number, line in enumerate(text.splitlines(), start=1)
             if line.strip() and not line.lstrip().startswith("#")]
     if not rows:
-        raise DataError(f"{where}: empty file (expected a header row t,x,y,z[,roll,pitch,yaw])")
+        raise DataError(f"{path.name}: empty file (expected a header row {expected_header})")
     header_line, header = rows[0]
-    names = [c.strip().lower() for c in header.split(",")]
+    return header_line, header, [c.strip().lower() for c in header.split(",")], rows[1:]
+
+
+def read_npz_arrays(path: Path) -> dict[str, np.ndarray]:
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            return {name: archive[name] for name in archive.files}
+    except (ValueError, EOFError, zipfile.BadZipFile, AttributeError) as exc:
+        # AttributeError: np.load of a bare .npy returns an array, which is no context manager
+        raise DataError(f"{path.name}: not a readable NPZ archive ({exc})") from None
+
+
+def _load_csv(path: Path) -> Track:
+    where = path.name
+    header_line, header, names, data = read_csv_rows(path, "t,x,y,z[,roll,pitch,yaw]")
     if len(names) == 1 and names[0] != "t":
         raise DataError(f"{where}: row {header_line}: header '{header.strip()}' has a single column; "
                         "columns are separated by commas")
     if any(not c for c in names):
         raise DataError(f"{where}: row {header_line}: empty column name in the header")
     has_euler = _check_names(where, names, "column")
-    data = rows[1:]
     if not data:
         raise DataError(f"{where}: no data rows after the header")
     lines = np.array([number for number, _ in data])
@@ -183,12 +198,7 @@ def _parse_table(where: str, names: list[str], data: list[tuple[int, str]]) -> n
 
 def _load_npz(path: Path) -> Track:
     where = path.name
-    try:
-        with np.load(path, allow_pickle=False) as archive:
-            arrays = {name: archive[name] for name in archive.files}
-    except (ValueError, EOFError, zipfile.BadZipFile, AttributeError) as exc:
-        # AttributeError: np.load of a bare .npy returns an array, which is no context manager
-        raise DataError(f"{where}: not a readable NPZ archive ({exc})") from None
+    arrays = read_npz_arrays(path)
     if "position" in arrays:
         unknown = sorted(set(arrays) - {"t", "position", "euler"})
         if unknown:
