@@ -368,8 +368,11 @@ def align(a: ImuLog, b: ImuLog, options: AlignOptions = AlignOptions()) -> Align
         # Rounding floor of the weighted cost: 1e-14 of each group's signal RMS per residual.
         floor = 3 * len(problem) * ((1e-14 * _rms(wa0) * scale[0]) ** 2
                                     + ((1e-14 * _rms(fa0) * scale[1]) ** 2 if rf is not None else 0.0))
-        p, C0, n = levenberg_marquardt(problem, p, C0, floor)
+        p, C0, n, converged = levenberg_marquardt(problem, p, C0, floor)
         evaluations += n
+        if not converged:
+            notes.append("Levenberg–Marquardt stopped at its iteration limit before converging: treat the "
+                         "estimates with suspicion")
     return _result(problem, p, C0, options, coarse, hi - lo, evaluations, notes)
 
 
@@ -381,7 +384,7 @@ def levenberg_marquardt(problem: _Problem, p: np.ndarray, C0: np.ndarray, floor:
     `floor` is the cost that rounding errors of the residual elements alone would make; a step gaining less
     than 1e-10 of the cost or less than the rounding noise of the cost itself (about 2·√(cost·floor)) ends
     the iteration: beyond that, accepted steps only shuffle rounding errors.
-    Returns the parameters, C0 and the number of residual evaluations."""
+    Returns the parameters, C0, the number of residual evaluations and whether it converged."""
     rot = problem.index["rot"]
     r = problem.residual(p, C0)
     cost, lam, evaluations = float(r @ r), 1e-3, 1
@@ -407,13 +410,13 @@ def levenberg_marquardt(problem: _Problem, p: np.ndarray, C0: np.ndarray, floor:
             predicted = -(2 * g @ step + step @ H @ step) if step is not None else np.inf
             lam *= 10.0
             if predicted <= 1e-10 * cost + 2 * math.sqrt(cost * floor) + floor or lam > 1e10:   # converged
-                return p, C0, evaluations
+                return p, C0, evaluations, True
         gained = cost - c_trial
         p, C0, r, cost = trial, C_trial, r_trial, c_trial
         lam = max(lam / 10.0, 1e-15)
         if gained <= 1e-10 * (cost + gained) + 2 * math.sqrt(cost * floor) + floor:
-            break
-    return p, C0, evaluations
+            return p, C0, evaluations, True
+    return p, C0, evaluations, False
 
 
 def _rms(x):
