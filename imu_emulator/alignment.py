@@ -55,6 +55,10 @@ class AlignOptions:
     lever_arm: bool = False         # add the accelerometer residual, the lever arm and the accel bias difference
     drift: bool = False             # estimate a linear clock drift
     max_offset_s: float | None = None   # search |Δ| up to this; default half the shorter record
+    # Window of the Savitzky–Golay derivative giving α for the lever-arm term: wider windows let less gyro
+    # noise into α (noise in a regressor shrinks the lever arm: 2.8 mm at 0.05 s, 0.4 mm at 0.1 s with
+    # BMI088-class noise, tools/bench_align.py case w); motion much faster than 1/window would be smoothed.
+    alpha_span_s: float = 0.1
     # Verdict thresholds (see _verdicts): a direction is unobservable when its 1σ (with the noise floors)
     # exceeds the maximum, or when it is excited less than min_excitation times the best direction of its kind.
     min_excitation: float = 0.1
@@ -191,7 +195,7 @@ class _Problem:
     [b_f (3), l (3)]."""
 
     def __init__(self, a: ImuLog, b: ImuLog, base_is_a: bool, delta0: float, drift0: float, t_ref: float,
-                 with_accel: bool, with_drift: bool, alpha_span_s: float = 0.05):
+                 with_accel: bool, with_drift: bool, alpha_span_s: float):
         self.base_is_a, self.t_ref, self.with_accel, self.with_drift = base_is_a, t_ref, with_accel, with_drift
         base, other = (a, b) if base_is_a else (b, a)
         self.other_t = other.t
@@ -336,7 +340,8 @@ def align(a: ImuLog, b: ImuLog, options: AlignOptions = AlignOptions()) -> Align
         drift0 = (offsets[1] - offsets[0]) / (centres[1] - centres[0]) * 1e6
         delta0 = float(np.mean(offsets) + drift0 * 1e-6 * (t_ref - np.mean(centres)))
     base_is_a = a.rate_hz <= b.rate_hz
-    problem = _Problem(a, b, base_is_a, delta0, drift0, t_ref, options.lever_arm, options.drift)
+    problem = _Problem(a, b, base_is_a, delta0, drift0, t_ref, options.lever_arm, options.drift,
+                       options.alpha_span_s)
     if len(problem) < MIN_SAMPLES:
         raise DataError(f"{where}: too short: {len(problem)} samples overlap (need at least {MIN_SAMPLES})")
     # Closed-form start: Kabsch on the centred gyro pairs (centring removes the bias difference).

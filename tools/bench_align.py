@@ -10,6 +10,8 @@ Cases (issue 12):
   c  b + 0.1 % scale factor and 0.05° misalignment per sensor            (needs the sensor-error model)
   d  c + 50 ppm clock drift of B                                         (needs the sensor-error model)
   e  a car-like drive (a figure of eight, mostly yaw, small roll and pitch), exact data: what is observable
+  w  a + white noise only, drawn here with numpy (not the sensor model) at BMI088-class densities:
+     gyro 0.014 °/s/√Hz, accel 160 µg/√Hz, i.e. 3.5e-3 rad/s and 0.022 m/s² per sample at 200 Hz
 Cases b–d take their sensor model as a scene fragment (SENSOR_FRAGMENTS): until the scene accepts those keys
 they are reported as skipped with the scene's own error message.
 Prints, per case and per estimated quantity, the max and RMS error over the seeds, the observability verdicts,
@@ -134,6 +136,15 @@ def scene_for(case: str, seed: int) -> dict:
     return merge(scene, SENSOR_FRAGMENTS[case]) if case in SENSOR_FRAGMENTS else scene
 
 
+# Per-sample σ = density·√f_s (specs/sensor-errors.md, "Exact discretization").
+WHITE_NOISE = {"gyro": math.radians(0.014) * math.sqrt(RATE_HZ), "accel": 160e-6 * 9.80665 * math.sqrt(RATE_HZ)}
+
+
+def with_white_noise(log: ImuLog, rng) -> ImuLog:
+    return ImuLog(log.label, log.t, log.accel + rng.normal(0, WHITE_NOISE["accel"], log.accel.shape),
+                  log.gyro + rng.normal(0, WHITE_NOISE["gyro"], log.gyro.shape))
+
+
 def run_case(case: str, seeds: int):
     """Per model ("gyro only", "gyro + accel, lever arm"), one row of errors per seed; or None and the reason
     when the scene cannot be built (cases b–d before the sensor-error model)."""
@@ -141,9 +152,12 @@ def run_case(case: str, seeds: int):
     rows = {False: [], True: []}
     for seed in range(seeds):
         try:
-            a, b = two_logs(scene_for(case, seed))
+            a, b = two_logs(scene_for("a" if case == "w" else case, seed))
         except ImuEmulatorError as exc:
             return None, str(exc)
+        if case == "w":
+            rng = np.random.default_rng(1000 + seed)
+            a, b = with_white_noise(a, rng), with_white_noise(b, rng)
         for lever_arm in (False, True):
             options = AlignOptions(lever_arm=lever_arm, drift=(case == "d"))
             wall, cpu, thread = time.perf_counter(), time.process_time(), time.thread_time()
@@ -175,7 +189,7 @@ def unobservable(observable: dict) -> str:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seeds", type=int, default=20)
-    parser.add_argument("--cases", default="a,b,c,d,e")
+    parser.add_argument("--cases", default="a,b,c,d,e,w")
     args = parser.parse_args(argv)
     os.environ.setdefault("IMU_EMULATOR_CACHE", "/tmp/imu-emulator-bench-align")
     print(f"# {args.seeds} seeds, {DURATION_S:g} s at {RATE_HZ:g} Hz; load average {os.getloadavg()[0]:.2f} "
