@@ -1,6 +1,6 @@
 """Accuracy and run time of `imu-emulator align` (imu_emulator.alignment) on data the emulator makes exactly.
 
-    .venv/bin/python tools/bench_align.py [--seeds 20] [--cases a,e] [--plot align.png]
+    .venv/bin/python tools/bench_align.py [--seeds 20] [--cases a,e,w] [--plot docs/alignment/alignment.png]
 
 Two IMUs on one body: B mounted at Euler (10°, −25°, 137°) relative to A, B's lever arm (0.12, −0.05, 0.30) m
 from A, B's clock 3.7 ms ahead of A's (not a multiple of the 5 ms sample period), 200 Hz, 60 s.
@@ -190,6 +190,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--cases", default="a,b,c,d,e,w")
+    parser.add_argument("--plot", help="also draw the errors of every seed to this image (needs matplotlib)")
     args = parser.parse_args(argv)
     os.environ.setdefault("IMU_EMULATOR_CACHE", "/tmp/imu-emulator-bench-align")
     print(f"# {args.seeds} seeds, {DURATION_S:g} s at {RATE_HZ:g} Hz; load average {os.getloadavg()[0]:.2f} "
@@ -198,8 +199,10 @@ def main(argv=None) -> int:
           "| reported 1σ rotation (°, median) | unobservable (verdicts seen) "
           "| align() wall / process CPU / thread CPU, median (s) |")
     print("|---|---|---|---|---|---|---|---|")
+    results = {}
     for case in args.cases.split(","):
         rows, skipped = run_case(case, args.seeds)
+        results[case] = rows
         if rows is None:
             print(f"| {case} | — | skipped: {skipped} ||||||")
             continue
@@ -217,7 +220,42 @@ def main(argv=None) -> int:
                   f"{'; '.join(verdicts)} | {np.median(col['wall_s']):.2f} / {np.median(col['cpu_s']):.2f} / "
                   f"{np.median(col['thread_s']):.2f} |",
                   flush=True)
+    if args.plot:
+        plot(results, args.plot)
     return 0
+
+
+def plot(results: dict, path: str) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.8))
+    panels = (("rotation_deg", "rotation error (°)", 0.02), ("time_offset_ms", "|Δt error| (ms)", 0.1),
+              ("lever_arm_mm", "lever arm error (mm)", 5.0))
+    labels = []
+    for ax, (key, title, goal) in zip(axes, panels):
+        x = 0
+        labels = []
+        for case, rows in results.items():
+            if rows is None:
+                continue
+            for lever_arm, model in ((False, "gyro"), (True, "gyro+acc")):
+                values = np.array([r[key] for r in rows[lever_arm]])
+                if not np.all(np.isnan(values)):
+                    ax.plot(np.full(len(values), x) + np.linspace(-0.15, 0.15, len(values)),
+                            np.maximum(values, 1e-16), "o", ms=3)
+                labels.append(f"{case}\n{model}")
+                x += 1
+        ax.axhline(goal, color="k", lw=0.8, ls="--")
+        ax.set_yscale("log")
+        ax.set_title(title, fontsize=10)
+        ax.set_xticks(range(len(labels)), labels, fontsize=8)
+        ax.grid(True, axis="y", alpha=0.3)
+    fig.suptitle("imu-emulator align: errors per seed (dashed: the issue's goal); tools/bench_align.py", fontsize=10)
+    fig.tight_layout()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    print(f"wrote {path}")
 
 
 if __name__ == "__main__":
