@@ -243,7 +243,7 @@ def plot(results: dict, path: str) -> None:
                 values = np.array([r[key] for r in rows[lever_arm]])
                 if not np.all(np.isnan(values)):
                     ax.plot(np.full(len(values), x) + np.linspace(-0.15, 0.15, len(values)),
-                            np.maximum(values, 1e-16), "o", ms=3)
+                            np.maximum(values, 1e-16), "o", ms=3, color=f"C{x}")
                 labels.append(f"{case}\n{model}")
                 x += 1
         ax.axhline(goal, color="k", lw=0.8, ls="--")
