@@ -138,6 +138,7 @@ def test_too_little_motion_is_unobservable_not_confident():
     assert not any(result.observable[k] for k in ("roll", "pitch", "yaw", "time_offset_s"))
     assert len(result.reasons) == 4
     assert any("too little motion" in note for note in result.notes)
+    json.dumps(result.to_json(), allow_nan=False)       # infinite σ become null, not invalid JSON
 
 
 def test_car_drive_case_e_reports_unobservable_axes():
