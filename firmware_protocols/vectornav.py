@@ -593,16 +593,19 @@ class AsciiDecoder:
                 break
             self.stats.skipped_bytes += start - pos
             pos = start
-            end = buf.find(b"\r\n", pos)
-            restart = buf.find(b"$", pos + 1, end if end >= 0 else len(buf))
+            # Look no further than the longest line: searching to the end of the buffer for every '$'
+            # made a flood of '$' cost quadratic time.
+            window = min(len(buf), pos + self.MAX_LINE + 2)
+            end = buf.find(b"\r\n", pos, window)
+            restart = buf.find(b"$", pos + 1, end if end >= 0 else window)
             if restart >= 0:       # a line cut short by a new '$': drop the fragment
                 self.stats.skipped_bytes += restart - pos
                 pos = restart
                 continue
             if end < 0:
-                if len(buf) - pos > self.MAX_LINE:
-                    self.stats.skipped_bytes += 1
-                    pos += 1
+                if window - pos == self.MAX_LINE + 2:    # no line end within reach: not a line
+                    self.stats.skipped_bytes += window - pos
+                    pos = window
                     continue
                 break
             line = bytes(buf[pos:end])

@@ -235,6 +235,10 @@ def _xbus_length(buf: bytearray, j: int) -> int:
 
 
 def _xbus_checksum_ok(frame: bytes) -> bool:
+    if len(frame) > 512:
+        # An extended header may promise 8 KiB; a flood of such false headers costs one sum per byte of
+        # input, which numpy does 6x faster than sum() (and sum() is faster on the usual short frames).
+        return int(np.frombuffer(frame, np.uint8, offset=1).sum()) & 0xFF == 0
     return sum(frame[1:]) & 0xFF == 0
 
 
