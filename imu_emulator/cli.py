@@ -8,8 +8,15 @@ from imu_emulator.commands import register_all
 from imu_emulator.errors import ImuEmulatorError
 
 
+class _Parser(argparse.ArgumentParser):
+    """Usage mistakes are bad input like any other: one `error:` line naming the option, exit code 2."""
+
+    def error(self, message):
+        self.exit(2, f"error: {message} (see `{self.prog} --help`)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="imu-emulator", description="Turn a described motion into IMU output.")
+    parser = _Parser(prog="imu-emulator", description="Turn a described motion into IMU output.")
     sub = parser.add_subparsers(dest="command", required=True)
     register_all(sub)
     return parser

@@ -1,4 +1,5 @@
-"""Write samples to CSV or NPZ (chosen by the output file's suffix)."""
+"""Write samples to CSV or NPZ (chosen by the output file's suffix). The file appears only complete: it is
+written under a temporary name and renamed when the run succeeds (imu_emulator.outfile)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -6,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from imu_emulator.errors import ImuEmulatorError
+from imu_emulator.outfile import AtomicOutput, output_error
 from imu_emulator.samples import SampleBlock, concatenate
 
 CSV_COLUMNS = ("t", "imu", "ax", "ay", "az", "gx", "gy", "gz")
@@ -23,20 +25,22 @@ def check_path(path: str | Path) -> Path:
 
 
 class Writer:
-    """Receives blocks in order and writes them; CSV streams to disk, NPZ collects then saves."""
+    """Receives blocks in order and writes them; CSV streams to disk, NPZ collects then saves.
+    The output file is created at construction (an unwritable path fails before the run), and appears at
+    its path on close(); discard() (or close() after an exception) leaves nothing behind."""
 
     def __init__(self, path: str | Path, imu_names, truth: bool):
         self.path = check_path(path)
         self.imu_names = list(imu_names)
         self.truth = truth
         self.blocks: list[SampleBlock] = []
-        self._csv = None
-        if self.path.suffix.lower() == ".csv":
-            self._csv = open(self.path, "w", newline="")
-            self._csv.write(",".join(CSV_COLUMNS + (TRUTH_COLUMNS if truth else ())) + "\n")
+        self.csv = self.path.suffix.lower() == ".csv"
+        self._out = AtomicOutput(self.path, "w" if self.csv else "wb")
+        if self.csv:
+            self._out.write(",".join(CSV_COLUMNS + (TRUTH_COLUMNS if truth else ())) + "\n")
 
     def write(self, block: SampleBlock) -> None:
-        if self._csv is None:
+        if not self.csv:
             self.blocks.append(block)
             return
         extra = []
@@ -50,18 +54,39 @@ class Writer:
             text = np.char.mod("%.17g", numeric).tolist()
             per_imu.append([",".join((r[0], name, *r[1:])) for r in text])
         # One row per IMU per sample, sample k of every IMU before sample k+1.
-        self._csv.write("\n".join(row for rows in zip(*per_imu) for row in rows) + "\n")
+        self._out.write("\n".join(row for rows in zip(*per_imu) for row in rows) + "\n")
 
     def close(self) -> None:
-        if self._csv is not None:
-            self._csv.close()
-            return
-        if not self.blocks:  # the run failed before its first block: leave no half-written file
-            return
+        """Finish the file and put it at its path."""
+        try:
+            if not self.csv:
+                self._save_npz()
+        except BaseException:
+            self._out.discard()
+            raise
+        self._out.commit()
+
+    def discard(self) -> None:
+        """The run failed: remove what was written."""
+        self._out.discard()
+
+    def __enter__(self) -> "Writer":
+        return self
+
+    def __exit__(self, kind, exc, tb) -> None:
+        if kind is None:
+            self.close()
+        else:
+            self.discard()
+
+    def _save_npz(self) -> None:
         data = concatenate(self.blocks)
         arrays = {"t": data.t_s, "imu_names": np.array(self.imu_names), "accel": data.accel, "gyro": data.gyro}
         if data.quat is not None:
             arrays["quat"] = data.quat
         if self.truth:
             arrays.update(data.truth)
-        np.savez(self.path, **arrays)
+        try:
+            np.savez(self._out.file, **arrays)
+        except OSError as exc:
+            raise output_error(self.path, exc) from None

@@ -23,6 +23,7 @@ import numpy as np
 import firmware_protocols
 from firmware_protocols.base import EncodeError, can_bits_worst_case
 from imu_emulator.errors import ImuEmulatorError, SceneError, TargetError
+from imu_emulator.outfile import AtomicOutput
 from imu_emulator.realtime import LatenessStats, Pacer, drop_realtime, enable_realtime
 from imu_emulator.transport import TargetOptions, check_carries, link_capacity, open_target, parse_target
 
@@ -60,7 +61,7 @@ class RunOptions:
     quiet: bool = False
     allow_overload: bool = False
     realtime: bool = True
-    stats_json: str | None = None
+    stats_json: "str | AtomicOutput | None" = None   # a path, or an output the caller created early
 
 
 def streams_from_tables(tables, imu_names, defaults: TargetOptions = TargetOptions()) -> list[StreamConfig]:
@@ -300,6 +301,7 @@ class Streamer:
                 # A collection walking the whole inherited heap would also copy every page on write.
                 gc.freeze()
                 signal.signal(signal.SIGINT, signal.SIG_IGN)   # the parent decides when to stop
+                signal.signal(signal.SIGHUP, signal.SIG_IGN)
                 signal.signal(signal.SIGTERM, signal.SIG_DFL)
                 drop_realtime()
                 for item in self._blocks():
@@ -319,8 +321,15 @@ class Streamer:
 
     # - sender -
     def run(self) -> dict:
-        """Stream until the limit, the scene's end or SIGINT/SIGTERM; returns the summary dict."""
-        old_term = signal.signal(signal.SIGTERM, _raise_stop) if threading.current_thread() is threading.main_thread() else None
+        """Stream until the limit, the scene's end or SIGINT/SIGTERM/SIGHUP; returns the summary dict.
+        A link or the producer failing mid-run still reports what was sent before the error is raised."""
+        stats_out = self.options.stats_json
+        if isinstance(stats_out, str):
+            stats_out = AtomicOutput(stats_out)
+        # A closed terminal (SIGHUP) ends the run like SIGTERM: ports closed, links removed, summary shown.
+        old_handlers = {sig: signal.signal(sig, _raise_stop) for sig in (signal.SIGTERM, signal.SIGHUP)} \
+            if threading.current_thread() is threading.main_thread() else {}
+        failure = None
         try:
             self._check_budgets()
             for stream in self.streams:
@@ -346,27 +355,45 @@ class Streamer:
                 self._send_loop(blocks, Pacer(rt.fifo, period_ns) if paced else None, start)
             except (KeyboardInterrupt, _Stop):
                 pass
+            except ImuEmulatorError as exc:
+                failure = exc
             finally:
                 gc.enable()
                 gc.unfreeze()
                 drop_realtime()
                 blocks.close()
                 _reap(producer)
+        except (KeyboardInterrupt, _Stop):
+            pass            # stopped before the first sample: the summary says nothing was sent
+        except BaseException:
+            if stats_out is not None:
+                stats_out.discard()
+            raise
         finally:
-            if old_term is not None:
-                signal.signal(signal.SIGTERM, old_term)
-            for stream in self.streams:
-                stream.close()
+            for sig, handler in old_handlers.items():
+                signal.signal(sig, handler)
+            failure = _close_all(self.streams) or failure
         summary = self.summary()
-        if not self.options.quiet:
-            print(self._status_text("done"), file=sys.stderr, flush=True)
-            for s in summary["streams"]:
-                print(f"  {s['imu']} {s['format']} -> {s['target']}: sent {s['sent']}, dropped {s['dropped']}, "
-                      f"saturated {s['saturated']}", file=sys.stderr, flush=True)
-        if self.options.stats_json:
-            with open(self.options.stats_json, "w") as f:
-                json.dump(summary, f, indent=1)
+        stats_failure = None
+        if stats_out is not None:
+            try:
+                stats_out.write(json.dumps(summary, indent=1))
+                stats_out.commit()
+            except ImuEmulatorError as exc:
+                stats_failure = exc
+        if not self.options.quiet or stats_failure:     # figures a JSON file could not keep are shown
+            self._print_summary(summary)
+        if failure and stats_failure:
+            raise StreamError(f"{failure}; and {stats_failure}")
+        if failure or stats_failure:
+            raise failure or stats_failure
         return summary
+
+    def _print_summary(self, summary: dict) -> None:
+        print(self._status_text("done"), file=sys.stderr, flush=True)
+        for s in summary["streams"]:
+            print(f"  {s['imu']} {s['format']} -> {s['target']}: sent {s['sent']}, dropped {s['dropped']}, "
+                  f"saturated {s['saturated']}", file=sys.stderr, flush=True)
 
     def _check_budgets(self) -> None:
         if self.options.speed == 0:
@@ -461,6 +488,17 @@ def _reap(pid: int) -> None:
 
 def _raise_stop(signum, frame):
     raise _Stop()
+
+
+def _close_all(streams) -> ImuEmulatorError | None:
+    """Close every stream even when one fails to (a pty's link must still go); the first error is returned."""
+    first = None
+    for stream in streams:
+        try:
+            stream.close()
+        except ImuEmulatorError as exc:
+            first = first or exc
+    return first
 
 
 def run_streams(scene, sim, configs: list[StreamConfig], options: RunOptions) -> dict:

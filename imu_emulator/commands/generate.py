@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from imu_emulator.commands.shared import load_scene_with_warnings, number
 from imu_emulator.progress import Progress
 
 
@@ -12,31 +13,29 @@ def register(subparsers) -> None:
     gen.add_argument("scene", help="scene file (TOML)")
     gen.add_argument("-o", "--output", required=True, help="output file, .csv or .npz")
     gen.add_argument("--truth", action="store_true", help="add position, velocity, attitude and body rates")
-    gen.add_argument("--quiet", action="store_true", help="no progress bar or summary")
-    gen.add_argument("--block", type=int, default=65536, help=argparse.SUPPRESS)
+    gen.add_argument("--quiet", action="store_true", help="no progress bar or summary (warnings still show)")
+    gen.add_argument("--block", type=number(1, 10_000_000, integer=True), default=65536, help=argparse.SUPPRESS)
     gen.set_defaults(func=cmd_generate)
 
 
 def cmd_generate(args) -> int:
     from imu_emulator.output import Writer, check_path
-    from imu_emulator.scene import load_scene
     from imu_emulator.simulation import Simulation
 
     check_path(args.output)
-    scene = load_scene(args.scene)
-    for warning in scene.warnings:
-        print(f"warning: {warning}", file=sys.stderr)
-    sim = Simulation(scene, attitude=False, truth=args.truth)
-    writer = Writer(args.output, scene.imu_names, args.truth)
-    progress = Progress(args.quiet)
-    total = sim.n_samples
-    try:
-        for k0 in range(0, total, args.block):
-            writer.write(sim.block(k0, min(args.block, total - k0)))
-            progress(min(k0 + args.block, total), total)
-    finally:
-        progress.close()
-        writer.close()
+    scene = load_scene_with_warnings(args.scene)
+    # The output file is created before the kernel compiles: an unwritable path fails at once. It appears
+    # at its path only when every block is written (a failed run leaves nothing behind).
+    with Writer(args.output, scene.imu_names, args.truth) as writer:
+        sim = Simulation(scene, attitude=False, truth=args.truth)
+        progress = Progress(args.quiet)
+        total = sim.n_samples
+        try:
+            for k0 in range(0, total, args.block):
+                writer.write(sim.block(k0, min(args.block, total - k0)))
+                progress(min(k0 + args.block, total), total)
+        finally:
+            progress.close()
     if not args.quiet:
         print(f"wrote {total} samples x {len(scene.imus)} IMU(s) to {args.output}", file=sys.stderr)
     return 0

@@ -2,8 +2,16 @@
 from __future__ import annotations
 
 
+import math
+
+from imu_emulator.commands.shared import load_scene_with_warnings, number
 from imu_emulator.streaming import StreamError
 from imu_emulator.transport import TargetOptions
+
+# Beyond any UART or CAN bus there is, and far from where the numbers stop being exact.
+_MAX_RATE = 100_000_000
+# Time stamps are int64 nanoseconds (292 years); a stream longer than this is a typo.
+_MAX_DURATION_S = 1e9
 
 
 def register(subparsers) -> None:
@@ -18,31 +26,38 @@ def register(subparsers) -> None:
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="encoder option, repeatable (e.g. sysid=1)")
     p.add_argument("--link", help="pty: make a stable symlink at this path to the slave")
-    p.add_argument("--pace-baud", type=int, metavar="BAUD", help="pty: deliver no faster than a UART at BAUD")
-    p.add_argument("--bitrate", type=int, help="CAN nominal bit rate, bit/s (default 1000000)")
-    p.add_argument("--data-bitrate", type=int, help="CAN FD data phase bit rate, bit/s")
+    p.add_argument("--pace-baud", type=number(1, _MAX_RATE, integer=True), metavar="BAUD", help="pty: deliver no faster than a UART at BAUD")
+    p.add_argument("--bitrate", type=number(1, _MAX_RATE, integer=True), help="CAN nominal bit rate, bit/s (default 1000000)")
+    p.add_argument("--data-bitrate", type=number(1, _MAX_RATE, integer=True), help="CAN FD data phase bit rate, bit/s")
     p.add_argument("--fd", action="store_true", help="open the CAN bus in FD mode")
-    p.add_argument("--speed", type=float, default=1.0, help="time factor; 0 = as fast as the link takes")
+    p.add_argument("--speed", type=number(1e-6, 1e6, zero=True), default=1.0,
+                   help="time factor; 0 = as fast as the link takes")
     p.add_argument("--loop", action="store_true", help="repeat the scene; time keeps increasing")
     p.add_argument("--epoch-time", action="store_true", help="time fields on the Unix epoch (default: since start)")
-    p.add_argument("--duration", type=float, metavar="SECONDS", help="stop after this much scene time")
-    p.add_argument("--count", type=int, help="stop after this many samples")
+    p.add_argument("--duration", type=number(1e-9, _MAX_DURATION_S), metavar="SECONDS",
+                   help="stop after this much scene time")
+    p.add_argument("--count", type=number(1, 10**15, integer=True), help="stop after this many samples")
     p.add_argument("--allow-overload", action="store_true", help="stream even when the link budget does not fit")
     p.add_argument("--no-realtime", action="store_true", help="do not ask for SCHED_FIFO")
-    p.add_argument("--quiet", action="store_true", help="no status line or summary")
+    p.add_argument("--quiet", action="store_true", help="no status line or summary (warnings still show)")
     p.add_argument("--stats-json", metavar="PATH", help="write the final statistics as JSON")
     p.set_defaults(func=cmd_stream)
 
-def _option_value(text: str):
+def _option_value(key: str, text: str):
     lowered = text.lower()
     if lowered in ("true", "false"):
         return lowered == "true"
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    return text
+    try:
+        return int(text)
+    except ValueError:
+        pass
+    try:
+        value = float(text)
+    except ValueError:
+        return text
+    if not math.isfinite(value):
+        raise StreamError(f"--option {key}={text}: expected a finite number")
+    return value
 
 
 def _parse_options(pairs) -> dict:
@@ -51,20 +66,30 @@ def _parse_options(pairs) -> dict:
         key, sep, value = pair.partition("=")
         if not sep or not key:
             raise StreamError(f"--option: expected KEY=VALUE, got {pair!r}")
-        options[key] = _option_value(value)
+        options[key] = _option_value(key, value)
     return options
 
 
 def cmd_stream(args) -> int:
-    from imu_emulator.scene import load_scene
+    from imu_emulator.outfile import AtomicOutput
+
+    # Created now, written when the stream ends: an unwritable path fails before anything streams.
+    stats = AtomicOutput(args.stats_json) if args.stats_json else None
+    try:
+        _stream(args, stats)
+    finally:
+        if stats is not None:
+            stats.discard()     # nothing left behind when the run failed; a no-op after it was written
+    return 0
+
+
+def _stream(args, stats) -> None:
     from imu_emulator.simulation import Simulation
     from imu_emulator.streaming import RunOptions, StreamConfig, run_streams, streams_from_tables
 
-    for name in ("duration", "count", "pace_baud", "bitrate", "data_bitrate"):
-        value = getattr(args, name)
-        if value is not None and value <= 0:
-            raise StreamError(f"--{name.replace('_', '-')}: must be positive, got {value}")
-    scene = load_scene(args.scene)
+    scene = load_scene_with_warnings(args.scene)
+    if args.duration is not None and round(args.duration * scene.rate_hz) < 1:
+        raise StreamError(f"--duration: {args.duration:g} s is less than one sample at {scene.rate_hz:g} Hz")
     target_options = TargetOptions(link=args.link, pace_baud=args.pace_baud, bitrate=args.bitrate,
                                    data_bitrate=args.data_bitrate, fd=args.fd, blocking=args.speed == 0)
     imu_names = tuple(imu.name for imu in scene.imus)
@@ -83,6 +108,5 @@ def cmd_stream(args) -> int:
                 raise StreamError(f"--imu: no [[stream]] for IMU {args.imu!r}")
     options = RunOptions(speed=args.speed, loop=args.loop, epoch_time=args.epoch_time, duration_s=args.duration,
                          count=args.count, quiet=args.quiet, allow_overload=args.allow_overload,
-                         realtime=not args.no_realtime, stats_json=args.stats_json)
+                         realtime=not args.no_realtime, stats_json=stats)
     run_streams(scene, Simulation(scene), configs, options)
-    return 0

@@ -11,8 +11,13 @@ from imu_emulator.transport.base import Transport
 from imu_emulator.transport.frames import to_messages
 
 
-def _open_error(path: str, exc: Exception) -> TargetError:
-    return TargetError(f"file:{path}: cannot open: {getattr(exc, 'strerror', None) or exc}")
+def _open_error(path: str, exc: Exception, doing: str = "cannot open") -> TargetError:
+    return TargetError(f"file:{path}: {doing}: {getattr(exc, 'strerror', None) or exc}")
+
+
+def _write_error(path: str, exc: OSError) -> TargetError:
+    # A full disk or a device that refuses data ends the run with one line; what was sent is still reported.
+    return _open_error(path, exc, "cannot write")
 
 
 class RawFileTransport(Transport):
@@ -25,14 +30,20 @@ class RawFileTransport(Transport):
         self.path = path
 
     def send(self, payload: bytes) -> bool:
-        self.file.write(payload)
+        try:
+            self.file.write(payload)
+        except OSError as exc:
+            raise _write_error(self.path, exc) from None
         return True
 
     def describe(self) -> str:
         return f"file {self.path}"
 
     def close(self) -> None:
-        self.file.close()
+        try:
+            self.file.close()
+        except OSError as exc:
+            raise _write_error(self.path, exc) from None
 
 
 class CanLogTransport(Transport):
@@ -54,12 +65,18 @@ class CanLogTransport(Transport):
         return to_messages(payload, timestamp=time_ns / 1e9)
 
     def send(self, messages) -> bool:
-        for message in messages:
-            self.writer.on_message_received(message)
+        try:
+            for message in messages:
+                self.writer.on_message_received(message)
+        except OSError as exc:
+            raise _write_error(self.path, exc) from None
         return True
 
     def describe(self) -> str:
         return f"file {self.path}"
 
     def close(self) -> None:
-        self.writer.stop()
+        try:
+            self.writer.stop()
+        except OSError as exc:
+            raise _write_error(self.path, exc) from None

@@ -1,0 +1,87 @@
+"""Output files that appear whole or not at all.
+
+The file is created at once under a temporary name in its directory (so a path that cannot be written fails
+before any work is done), written, then renamed over the target on `commit` or removed on `discard`: a run
+that fails half-way leaves neither a half-written file nor a stale temporary one. Every OSError becomes
+one OutputError line naming the path.
+"""
+from __future__ import annotations
+
+import os
+import secrets
+import stat
+from pathlib import Path
+
+from imu_emulator.errors import ImuEmulatorError
+
+
+class OutputError(ImuEmulatorError):
+    """An output file cannot be created or written."""
+
+
+def output_error(path, exc: OSError, doing: str = "cannot write") -> OutputError:
+    return OutputError(f"{path}: {doing}: {exc.strerror or exc}")
+
+
+class AtomicOutput:
+    """`file` is the open temporary file ("w": text, "wb": binary). Use as a context manager (commit on
+    success, discard on an exception) or call commit(); discard() after commit() does nothing."""
+
+    def __init__(self, path, mode: str = "w"):
+        self.path = Path(path)
+        # Write through a symlink to where it points, as a plain open() would.
+        self.target = Path(os.path.realpath(self.path))
+        # A device or FIFO cannot be replaced by a rename: write it directly.
+        self.direct = self.target.exists() and not self.target.is_file()
+        self.temp = None if self.direct else self.target.with_name(
+            f".{self.target.name}.{secrets.token_hex(4)}.part")
+        try:
+            if self.direct:
+                fd = os.open(self.target, os.O_WRONLY | os.O_TRUNC)
+            else:
+                fd = os.open(self.temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+                if self.target.exists():    # replacing a file keeps its permissions
+                    os.fchmod(fd, stat.S_IMODE(self.target.stat().st_mode))
+        except OSError as exc:
+            raise output_error(self.path, exc, "cannot create") from None
+        self.file = open(fd, mode, **({} if "b" in mode else {"newline": "", "encoding": "utf-8"}))
+        self.finished = False
+
+    def write(self, data) -> None:
+        try:
+            self.file.write(data)
+        except OSError as exc:
+            raise output_error(self.path, exc) from None
+
+    def commit(self) -> None:
+        try:
+            self.file.close()
+            if not self.direct:
+                os.replace(self.temp, self.target)
+        except OSError as exc:
+            self.discard()
+            raise output_error(self.path, exc) from None
+        self.finished = True
+
+    def discard(self) -> None:
+        if self.finished:
+            return
+        self.finished = True
+        try:
+            self.file.close()
+        except OSError:
+            pass        # the contents are being thrown away
+        if not self.direct:
+            try:
+                os.unlink(self.temp)
+            except FileNotFoundError:
+                pass
+
+    def __enter__(self) -> "AtomicOutput":
+        return self
+
+    def __exit__(self, kind, exc, tb) -> None:
+        if kind is None:
+            self.commit()
+        else:
+            self.discard()
