@@ -38,6 +38,11 @@ class FdPacketWriter:
         self._write_tail()
         return True
 
+    def discard_pending(self) -> None:
+        """Forget the unfinished packet and the modelled line's backlog (the reader they were for is gone)."""
+        self._tail = b""
+        self._line_free_ns = 0
+
     def _line_takes(self, size: int) -> bool:
         now = time.monotonic_ns()
         start = max(now, self._line_free_ns)

@@ -2,23 +2,33 @@
 from __future__ import annotations
 
 import os
+import select
+import termios
+import time
 import tty
 
 from imu_emulator.errors import TargetError
 from imu_emulator.transport.base import TargetOptions, Transport
 from imu_emulator.transport.fdwriter import FdPacketWriter
 
+_OPEN_FLAGS = os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK
+
 
 class PtyPair:
     """os.openpty with the slave in raw mode (the default line discipline echoes and rewrites binary
-    data). Our own slave fd stays open so a reader may open, close and reopen the path without the
-    master seeing EIO; the master is non-blocking so a reader that stops cannot stop us."""
+    data; the setting stays with the pty when our fd closes). We do not hold the slave open: the master then
+    reports POLLHUP while no reader has it open, so nothing is written for nobody, and a reader that opens
+    the path late gets current samples rather than a buffer of old ones. The master is non-blocking so a
+    reader that stops cannot stop us."""
 
     def __init__(self, link: str | None = None):
-        self.master, self._slave = os.openpty()
-        tty.setraw(self._slave)
+        self.master, slave = os.openpty()
+        tty.setraw(slave)
+        self.path = os.ttyname(slave)
+        os.close(slave)
         os.set_blocking(self.master, False)
-        self.path = os.ttyname(self._slave)
+        self._hangup = select.poll()
+        self._hangup.register(self.master, 0)       # POLLHUP is always reported
         self.link = link
         if link:
             try:
@@ -28,6 +38,25 @@ class PtyPair:
             except OSError as exc:
                 self.close()
                 raise TargetError(f"pty: cannot create link {link}: {exc.strerror}") from None
+
+    def reader_present(self) -> bool:
+        """True while some process has the slave open."""
+        return not self._hangup.poll(0)
+
+    def discard_unread(self) -> None:
+        """Throw away what a reader that went away left unread, and what waits to reach its queue, so the
+        next reader starts with fresh packets."""
+        try:
+            termios.tcflush(self.master, termios.TCOFLUSH)
+            slave = os.open(self.path, _OPEN_FLAGS)
+        except OSError:
+            return
+        try:
+            termios.tcflush(slave, termios.TCIFLUSH)
+        except OSError:
+            pass
+        finally:
+            os.close(slave)
 
     def drain_input(self) -> None:
         """Discard what the reader wrote to us (commands, slcan 'O' lines) so its writes never block."""
@@ -40,22 +69,41 @@ class PtyPair:
     def close(self) -> None:
         if self.link and os.path.islink(self.link) and os.readlink(self.link) == self.path:
             os.unlink(self.link)
-        for fd in (self.master, self._slave):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
+        try:
+            os.close(self.master)
+        except OSError:
+            pass
 
 
 class PtyTransport(Transport):
+    """Packets go out only while a reader has the port open; the others are dropped and counted (with
+    --speed 0, sending waits for a reader instead)."""
+
     _DRAIN_EVERY = 256
+    _READER_WAIT_S = 0.01
 
     def __init__(self, options: TargetOptions):
         self.pty = PtyPair(options.link)
         self.writer = FdPacketWriter(self.pty.master, pace_baud=options.pace_baud, blocking=options.blocking)
         self._writes = 0
+        self._reader = False
+
+    def _reader_present(self) -> bool:
+        present = self.pty.reader_present()
+        while not present and self.writer.blocking:
+            time.sleep(self._READER_WAIT_S)
+            present = self.pty.reader_present()
+        if present != self._reader:
+            self._reader = present
+            # A packet half written when the reader left must not start the next reader's stream.
+            self.writer.discard_pending()
+            if not present:
+                self.pty.discard_unread()
+        return present
 
     def send(self, payload: bytes) -> bool:
+        if not self._reader_present():
+            return False
         self._writes += 1
         if self._writes % self._DRAIN_EVERY == 0:
             self.pty.drain_input()
