@@ -279,3 +279,18 @@ def test_reader_that_opens_late_or_reopens_gets_fresh_packets(tmp_path):
     assert reopened - 10 * period <= again <= time.time()
     summary = json.loads(stats.read_text())
     assert summary["dropped"] >= 2 * 200 * 0.8      # the samples nobody was there to read, counted
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT])
+def test_generate_stopped_by_a_signal_leaves_no_file(tmp_path, sig):
+    out = tmp_path / "long.csv"
+    proc = subprocess.Popen([sys.executable, "-m", "imu_emulator", "generate", "examples/circle.toml", "-o", str(out),
+                             "--block", "1000"], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not any(p.name.endswith(".part") and p.stat().st_size > 0 for p in tmp_path.iterdir()):
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.05)
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode != 0 and "Traceback" not in err, err
+    assert list(tmp_path.iterdir()) == []

@@ -2,7 +2,9 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+import threading
 
 from imu_emulator.commands.shared import load_scene_with_warnings, number
 from imu_emulator.progress import Progress
@@ -24,6 +26,7 @@ def cmd_generate(args) -> int:
 
     check_path(args.output)
     scene = load_scene_with_warnings(args.scene)
+    stopped = _exit_cleanly_on(signal.SIGTERM, signal.SIGHUP, signal.SIGINT)
     # The output file is created before the kernel compiles: an unwritable path fails at once. It appears
     # at its path only when every block is written (a failed run leaves nothing behind).
     with Writer(args.output, scene.imu_names, args.truth) as writer:
@@ -33,9 +36,30 @@ def cmd_generate(args) -> int:
         try:
             for k0 in range(0, total, args.block):
                 writer.write(sim.block(k0, min(args.block, total - k0)))
+                stopped()
                 progress(min(k0 + args.block, total), total)
         finally:
             progress.close()
     if not args.quiet:
         print(f"wrote {total} samples x {len(scene.imus)} IMU(s) to {args.output}", file=sys.stderr)
     return 0
+
+
+def _exit_cleanly_on(*signals):
+    """Interrupt, kill and hang-up signals unwind the run, so the unfinished output file is removed. Returns a
+    check for the block loop: an exception raised in a signal handler can be swallowed by C code that
+    was running (seen while the CSV rows were formatted), so the signal is also remembered and raised there."""
+    received = []
+
+    def leave(signum, frame):
+        received.append(signum)
+        raise SystemExit(128 + signum)
+
+    def check():
+        if received:
+            raise SystemExit(128 + received[0])
+
+    if threading.current_thread() is threading.main_thread():
+        for sig in signals:
+            signal.signal(sig, leave)
+    return check
