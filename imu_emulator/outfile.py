@@ -1,7 +1,7 @@
 """Output files that appear whole or not at all.
 
 The file is created at once under a temporary name in its directory (so a path that cannot be written fails
-before any work is done), written, then renamed over the target on `commit` or removed on `discard`: a run
+before any work is done), written, then renamed over the target on `close` or removed on `discard`: a run
 that fails half-way leaves neither a half-written file nor a stale temporary one. Every OSError becomes
 one OutputError line naming the path.
 """
@@ -23,9 +23,22 @@ def output_error(path, exc: OSError, doing: str = "cannot write") -> OutputError
     return OutputError(f"{path}: {doing}: {exc.strerror or exc}")
 
 
-class AtomicOutput:
-    """`file` is the open temporary file ("w": text, "wb": binary). Use as a context manager (commit on
-    success, discard on an exception) or call commit(); discard() after commit() does nothing."""
+class FinishOnExit:
+    """As a context manager: close() when the block succeeds, discard() when it raises."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, kind, exc, tb) -> None:
+        if kind is None:
+            self.close()
+        else:
+            self.discard()
+
+
+class AtomicOutput(FinishOnExit):
+    """`file` is the open temporary file ("w": text, "wb": binary). close() puts it at its path;
+    discard() removes it, and does nothing after close()."""
 
     def __init__(self, path, mode: str = "w"):
         self.path = Path(path)
@@ -53,7 +66,7 @@ class AtomicOutput:
         except OSError as exc:
             raise output_error(self.path, exc) from None
 
-    def commit(self) -> None:
+    def close(self) -> None:
         try:
             self.file.close()
             if not self.direct:
@@ -76,12 +89,3 @@ class AtomicOutput:
                 os.unlink(self.temp)
             except FileNotFoundError:
                 pass
-
-    def __enter__(self) -> "AtomicOutput":
-        return self
-
-    def __exit__(self, kind, exc, tb) -> None:
-        if kind is None:
-            self.commit()
-        else:
-            self.discard()

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from imu_emulator.errors import ImuEmulatorError
-from imu_emulator.outfile import AtomicOutput, output_error
+from imu_emulator.outfile import AtomicOutput, FinishOnExit, output_error
 from imu_emulator.samples import SampleBlock, concatenate
 
 CSV_COLUMNS = ("t", "imu", "ax", "ay", "az", "gx", "gy", "gz")
@@ -24,7 +24,7 @@ def check_path(path: str | Path) -> Path:
     return path
 
 
-class Writer:
+class Writer(FinishOnExit):
     """Receives blocks in order and writes them; CSV streams to disk, NPZ collects then saves.
     The output file is created at construction (an unwritable path fails before the run), and appears at
     its path on close(); discard() (or close() after an exception) leaves nothing behind."""
@@ -64,20 +64,11 @@ class Writer:
         except BaseException:
             self._out.discard()
             raise
-        self._out.commit()
+        self._out.close()
 
     def discard(self) -> None:
         """The run failed: remove what was written."""
         self._out.discard()
-
-    def __enter__(self) -> "Writer":
-        return self
-
-    def __exit__(self, kind, exc, tb) -> None:
-        if kind is None:
-            self.close()
-        else:
-            self.discard()
 
     def _save_npz(self) -> None:
         data = concatenate(self.blocks)

@@ -378,7 +378,7 @@ class Streamer:
         if stats_out is not None:
             try:
                 stats_out.write(json.dumps(summary, indent=1))
-                stats_out.commit()
+                stats_out.close()
             except ImuEmulatorError as exc:
                 stats_failure = exc
         if not self.options.quiet or stats_failure:     # figures a JSON file could not keep are shown

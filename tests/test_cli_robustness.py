@@ -13,29 +13,14 @@ import pytest
 
 from test_stream_support import REPO, Emulator, mavlink_parse, open_pty_reader, read_for, run_emulator, write_scene
 
-# imu[0] names a mounting, but the effect is off: the output ignores it, and the user must be told.
-IGNORED_MOUNTING = """
-[scene]
-rate_hz = 100
-duration_s = 1.0
+WARNING = "warning: imu[1].mounting_rpy_deg is ignored because effects.mounting is not true"
 
-[trajectory]
-shape = "circle"
-radius_m = 5.0
-frequency_hz = 0.5
-height_m = 0.0
 
-[attitude]
-mode = "tangent"
-
-[[imu]]
-name = "imu0"
-mounting_rpy_deg = [0.0, 0.0, 90.0]
-
-[effects]
-gravity = true
-"""
-WARNING = "warning: imu[0].mounting_rpy_deg is ignored because effects.mounting is not true"
+def _scene_ignoring_a_mounting(directory):
+    """imu1 names a mounting, but the effect is off: the output ignores it, and the user must be told."""
+    path = write_scene(directory, rate=100, duration=1.0)
+    path.write_text(path.read_text().replace("mounting = true\n", ""))
+    return path
 
 
 def _cli(capsys, *args):
@@ -216,8 +201,7 @@ def test_output_replaces_a_file_keeping_its_permissions_and_writes_through_a_sym
 
 @pytest.mark.parametrize("quiet", [[], ["--quiet"]])
 def test_both_commands_show_the_scene_warnings_even_when_quiet(tmp_path, capsys, quiet):
-    scene = tmp_path / "scene.toml"
-    scene.write_text(IGNORED_MOUNTING)
+    scene = _scene_ignoring_a_mounting(tmp_path)
     code, _, err = _cli(capsys, "generate", scene, "-o", tmp_path / "o.csv", *quiet)
     assert code == 0 and WARNING in err.splitlines(), err
     result = run_emulator(scene, "--format", "mavlink-highres", "--to", f"file:{tmp_path / 'o.bin'}", "--speed", "0",
