@@ -42,15 +42,15 @@ class AtomicOutput(FinishOnExit):
 
     def __init__(self, path, mode: str = "w"):
         self.path = Path(path)
+        # A device, FIFO or pipe (/dev/stdout) cannot be replaced by a rename: it is written directly.
+        self.direct = self.path.exists() and not self.path.is_file()
         # Write through a symlink to where it points, as a plain open() would.
-        self.target = Path(os.path.realpath(self.path))
-        # A device or FIFO cannot be replaced by a rename: write it directly.
-        self.direct = self.target.exists() and not self.target.is_file()
+        self.target = self.path if self.direct else Path(os.path.realpath(self.path))
         self.temp = None if self.direct else self.target.with_name(
             f".{self.target.name}.{secrets.token_hex(4)}.part")
         try:
             if self.direct:
-                fd = os.open(self.target, os.O_WRONLY | os.O_TRUNC)
+                fd = os.open(self.path, os.O_WRONLY | os.O_TRUNC)
             else:
                 fd = os.open(self.temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
                 if self.target.exists():    # replacing a file keeps its permissions

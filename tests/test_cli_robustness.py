@@ -278,3 +278,12 @@ def test_generate_stopped_by_a_signal_leaves_no_file(tmp_path, sig):
     _, err = proc.communicate(timeout=60)
     assert proc.returncode != 0 and "Traceback" not in err, err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_stats_json_to_a_pipe_is_written_in_place(tmp_path):
+    # /dev/stdout is a pipe here: it cannot be replaced by a rename, so it is written directly.
+    result = run_emulator(write_scene(tmp_path, rate=100, duration=1.0), "--format", "mavlink-highres",
+                          "--to", f"file:{tmp_path / 'o.bin'}", "--speed", "0", "--quiet", "--stats-json", "/dev/stdout")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout[result.stdout.index("{"):])
+    assert summary["samples"] == 100
