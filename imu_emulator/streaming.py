@@ -491,13 +491,16 @@ def _raise_stop(signum, frame):
 
 
 def _close_all(streams) -> ImuEmulatorError | None:
-    """Close every stream even when one fails to (a pty's link must still go); the first error is returned."""
+    """Close every stream even when one fails to (a pty's link must still go). The first failure is
+    returned when it is the user's (a full disk), raised when it is a bug."""
     first = None
     for stream in streams:
         try:
             stream.close()
-        except ImuEmulatorError as exc:
+        except Exception as exc:
             first = first or exc
+    if first is not None and not isinstance(first, ImuEmulatorError):
+        raise first
     return first
 
 
