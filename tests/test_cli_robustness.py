@@ -262,7 +262,7 @@ def test_reader_that_opens_late_or_reopens_gets_fresh_packets(tmp_path):
     assert opened - 10 * period <= first <= time.time()
     assert reopened - 10 * period <= again <= time.time()
     summary = json.loads(stats.read_text())
-    assert summary["dropped"] >= 2 * 200 * 0.8      # the samples nobody was there to read, counted
+    assert summary["dropped"] >= 200 * 1.0 * 0.8    # at least the second without a reader, counted
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT])
