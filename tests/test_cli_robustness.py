@@ -287,3 +287,12 @@ def test_stats_json_to_a_pipe_is_written_in_place(tmp_path):
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout[result.stdout.index("{"):])
     assert summary["samples"] == 100
+
+
+def test_align_json_that_cannot_be_written_is_one_line_after_the_report(tmp_path, capsys):
+    record = tmp_path / "two.csv"
+    assert _cli(capsys, "generate", REPO / "examples/two_imus.toml", "-o", record, "--quiet")[0] == 0
+    code, out, err = _cli(capsys, "align", record, record, "--imu-a", "imu0", "--imu-b", "imu1",
+                          "--json", "/proc/x.json")
+    _ends_with_one_error_line(code, err, "/proc/x.json", "cannot create")
+    assert out.strip(), "the results are shown before the JSON fails"

@@ -51,8 +51,10 @@ def cmd_align(args) -> int:
         raise ImuEmulatorError(f"A and B are the same record ({a.label}): name two IMUs with --imu-a and --imu-b")
     result = align(a, b, AlignOptions(lever_arm=args.lever_arm, drift=args.drift, max_offset_s=args.max_offset_s))
     print(report(result, a.label, b.label))
-    if args.json is not None:
-        Path(args.json).write_text(json.dumps(result.to_json(), indent=2) + "\n")
+    if args.json is not None:     # after the report: results a bad path cannot keep are shown all the same
+        from imu_emulator.outfile import AtomicOutput
+        with AtomicOutput(args.json) as out:
+            out.write(json.dumps(result.to_json(), indent=2) + "\n")
     return 0
 
 
