@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import select
 import time
 from dataclasses import dataclass
 
@@ -72,13 +73,26 @@ class Pacer:
     def __init__(self, fifo: bool, period_ns: float = 1e6):
         self.spin_ns = int(min(_FIFO_SPIN_NS, _FIFO_SPIN_SHARE * period_ns)) if fifo else _SPIN_NS
 
-    def wait_until(self, deadline_ns: int) -> int:
-        """Returns the time we woke (ns, monotonic), at or after the deadline."""
+    def sleep_until(self, wake_ns: int, fds=(), on_ready=None) -> None:
+        """Sleep until `wake_ns` (monotonic) or a little after, but while any of `fds` is readable call
+        on_ready(readable fds) at once and go back to sleep: replies go out between two deadlines.
+        select() rather than poll/epoll because its timeout has microsecond resolution (theirs is ms)."""
+        while True:
+            early = wake_ns - time.monotonic_ns()
+            if early <= 0:
+                return
+            if not fds:
+                time.sleep(early / 1e9)
+                return
+            ready, _, _ = select.select(fds, (), (), early / 1e9)
+            if ready:
+                on_ready(ready)
+
+    def wait_until(self, deadline_ns: int, fds=(), on_ready=None) -> int:
+        """Returns the time we woke (ns, monotonic), at or after the deadline; input on `fds` is handed to
+        on_ready while sleeping (never while spinning)."""
+        self.sleep_until(deadline_ns - self.spin_ns, fds, on_ready)
         now = time.monotonic_ns()
-        early = deadline_ns - now - self.spin_ns
-        if early > 0:
-            time.sleep(early / 1e9)
-            now = time.monotonic_ns()
         while now < deadline_ns:
             now = time.monotonic_ns()
         return now

@@ -1,6 +1,7 @@
 """`imu-emulator stream`: a scene live to ports, buses, UDP or capture files at wall-clock rate."""
 from __future__ import annotations
 
+from dataclasses import replace
 
 from imu_emulator.streaming import StreamError
 from imu_emulator.transport import TargetOptions
@@ -17,6 +18,9 @@ def register(subparsers) -> None:
     p.add_argument("--imu", help="IMU name (default: the scene's first)")
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="encoder option, repeatable (e.g. sysid=1)")
+    p.add_argument("--device", choices=("on", "off"), default="on",
+                   help="on (default): formats with a device answer the driver's commands, announce themselves "
+                        "and follow the output configuration they are given; off: stream blindly (one-way links)")
     p.add_argument("--link", help="pty: make a stable symlink at this path to the slave")
     p.add_argument("--pace-baud", type=int, metavar="BAUD", help="pty: deliver no faster than a UART at BAUD")
     p.add_argument("--bitrate", type=int, help="CAN nominal bit rate, bit/s (default 1000000)")
@@ -72,11 +76,13 @@ def cmd_stream(args) -> int:
         if not (args.format and args.target):
             raise StreamError("stream: --format and --to go together")
         configs = [StreamConfig(args.imu or imu_names[0], args.format, args.target,
-                                _parse_options(args.option), target_options)]
+                                _parse_options(args.option), target_options, args.device == "on")]
     else:
         if not scene.streams:
             raise StreamError(f"{args.scene}: no [[stream]] tables; give --format and --to")
         configs = streams_from_tables(scene.streams, imu_names, target_options)
+        if args.device == "off":
+            configs = [replace(c, device=False) for c in configs]
         if args.imu:
             configs = [c for c in configs if c.imu == args.imu]
             if not configs:
