@@ -11,7 +11,7 @@ from typing import Callable
 
 _MODULES = ("mavlink", "vectornav", "xsens", "microstrain", "dronecan", "j1939", "bosch")
 # Devices register themselves onto their format's entry (attach_device); imported after the formats.
-_DEVICE_MODULES = ("mavlink",)
+_DEVICE_MODULES = ("mavlink", "vectornav")
 
 
 @dataclass(frozen=True)
@@ -33,6 +33,8 @@ class FormatInfo:
     device_options: dict = field(default_factory=dict)   # options only the device takes -> one-line help
     # Named option sets for drivers that expect one exact packet: preset name -> (options, one-line help).
     presets: dict = field(default_factory=dict)
+    # The device reports navigation (position, velocity, linear acceleration): the streamer then computes truth.
+    device_navigation: bool = False
 
 
 _REGISTRY: dict[str, FormatInfo] = {}
@@ -46,11 +48,12 @@ def register(info: FormatInfo) -> FormatInfo:
     return info
 
 
-def attach_device(name: str, device: Callable, device_options: dict | None = None, presets: dict | None = None) -> None:
+def attach_device(name: str, device: Callable, device_options: dict | None = None, presets: dict | None = None,
+                  navigation: bool = False) -> None:
     """Give the registered format `name` a device (and its device-only options and presets)."""
     info = _REGISTRY[name]
     _REGISTRY[name] = replace(info, device=device, device_options=dict(device_options or {}),
-                              presets=dict(presets or {}))
+                              presets=dict(presets or {}), device_navigation=navigation)
 
 
 def _load_all() -> None:

@@ -517,6 +517,7 @@ class _Sentence:
 
 
 _SENTENCES = {
+    "VNYPR": _Sentence("VNYPR", (("euler", (2, 1, 0), _DEG, "%+08.3f"),)),
     "VNYMR": _Sentence("VNYMR", (("euler", (2, 1, 0), _DEG, "%+08.3f"), ("mag", (0, 1, 2), 1.0, "%+08.4f"),
                                  ("accel", (0, 1, 2), 1.0, "%+07.3f"), ("gyro", (0, 1, 2), 1.0, "%+010.6f"))),
     "VNIMU": _Sentence("VNIMU", (("mag", (0, 1, 2), 1.0, "%+08.4f"), ("accel", (0, 1, 2), 1.0, "%+07.3f"),

@@ -347,14 +347,14 @@ def test_registered_formats(name, option):
 def test_navigation_fields_round_trip_with_their_wire_types_and_documented_defaults():
     """INS group (f64 PosLla, u16 InsStatus) and attitude LinearAccelNed / YprU: the header is the one PX4's
     binary output 2 announces, and the values decode to what went in (float64 exactly, float32 rounded)."""
-    spec = ("common:timestartup;imu:temp,pres,mag;attitude:quaternion,linearaccelned;"
+    spec = ("time:timestartup;imu:temp,pres,mag;attitude:quaternion,linearaccelned;"
             "ins:insstatus,poslla,velned,posu,velu")
     lla = [[47.3977421234567, 8.5455941234567, 488.123456789]]
     samples = Samples([1_000], [[0.1, 0.2, 9.8]], [[0.0, 0.0, 0.1]], position_llh=lla,
                       velocity_ned=[[1.25, -2.5, 0.125]], linear_accel_ned=[[0.5, 0.25, -0.125]])
     data = BinaryEncoder(spec).encode(samples).data
-    # groups 0x35 = common, imu, attitude, ins; masks from vnproglib's COMMONGROUP/IMUGROUP/ATTITUDEGROUP/INSGROUP
-    assert data[:10] == bytes([0xFA, 0x35]) + struct.pack("<4H", 0x0001, 0x0130, 0x0084, 0x0613)
+    # groups 0x36 = time, imu, attitude, ins; masks from vnproglib's TIMEGROUP/IMUGROUP/ATTITUDEGROUP/INSGROUP
+    assert data[:10] == bytes([0xFA, 0x36]) + struct.pack("<4H", 0x0001, 0x0130, 0x0084, 0x0613)
     fields = BinaryDecoder().feed(data)[0].fields
     np.testing.assert_array_equal(fields["ins.poslla"], lla[0])
     assert struct.unpack_from("<H", data, 10 + 8 + 12 + 4 + 4 + 16 + 12)[0] == 0x0006

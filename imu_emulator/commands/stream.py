@@ -62,7 +62,7 @@ def _parse_options(pairs) -> dict:
 def cmd_stream(args) -> int:
     from imu_emulator.scene import load_scene
     from imu_emulator.simulation import Simulation
-    from imu_emulator.streaming import RunOptions, StreamConfig, run_streams, streams_from_tables
+    from imu_emulator.streaming import RunOptions, StreamConfig, needs_truth, run_streams, streams_from_tables
 
     for name in ("duration", "count", "pace_baud", "bitrate", "data_bitrate"):
         value = getattr(args, name)
@@ -90,5 +90,5 @@ def cmd_stream(args) -> int:
     options = RunOptions(speed=args.speed, loop=args.loop, epoch_time=args.epoch_time, duration_s=args.duration,
                          count=args.count, quiet=args.quiet, allow_overload=args.allow_overload,
                          realtime=not args.no_realtime, stats_json=args.stats_json)
-    run_streams(scene, Simulation(scene), configs, options)
+    run_streams(scene, Simulation(scene, truth=needs_truth(configs)), configs, options)
     return 0
