@@ -21,6 +21,9 @@ _SPIN_NS = 200_000
 # throttling (95 % of each second) and stall for tens of milliseconds; this uses at most 40 %.
 _FIFO_SPIN_NS = 100_000
 _FIFO_SPIN_SHARE = 0.4
+# Answering a command costs tens to hundreds of microseconds in Python: none is started this close to a
+# deadline (a command then waits at most one sample period).
+_SERVE_MARGIN_NS = 300_000
 
 
 @dataclass(frozen=True)
@@ -72,19 +75,26 @@ class Pacer:
 
     def __init__(self, fifo: bool, period_ns: float = 1e6):
         self.spin_ns = int(min(_FIFO_SPIN_NS, _FIFO_SPIN_SHARE * period_ns)) if fifo else _SPIN_NS
+        self.serve_margin_ns = _SERVE_MARGIN_NS
+        # When the descriptors were last looked at: at high rates the whole period may be spin and margin,
+        # and the caller then polls them itself after a send (see streaming).
+        self.watched_ns = 0
 
     def sleep_until(self, wake_ns: int, fds=(), on_ready=None) -> None:
         """Sleep until `wake_ns` (monotonic) or a little after, but while any of `fds` is readable call
         on_ready(readable fds) at once and go back to sleep: replies go out between two deadlines.
-        select() rather than poll/epoll because its timeout has microsecond resolution (theirs is ms)."""
+        Input arriving within _SERVE_MARGIN_NS of the wake time waits in the kernel until after the
+        deadline's send, so answering never makes a sample late. select() rather than poll/epoll because its
+        timeout has microsecond resolution (theirs is ms)."""
         while True:
             early = wake_ns - time.monotonic_ns()
             if early <= 0:
                 return
-            if not fds:
+            if not fds or early <= self.serve_margin_ns:
                 time.sleep(early / 1e9)
                 return
-            ready, _, _ = select.select(fds, (), (), early / 1e9)
+            ready, _, _ = select.select(fds, (), (), (early - self.serve_margin_ns) / 1e9)
+            self.watched_ns = time.monotonic_ns()
             if ready:
                 on_ready(ready)
 

@@ -51,6 +51,8 @@ _STATUS_INTERVAL_NS = 500_000_000
 STREAM_TABLE_KEYS = {"imu", "format", "to", "options", "link", "pace_baud", "bitrate", "data_bitrate", "fd", "device"}
 # Targets that cannot talk back: a device there would only change what is streamed, so none is made.
 _ONE_WAY_TARGETS = ("file",)
+# With a pacer, links are looked at after a send when the waits have had no room to (high rates).
+_INPUT_STARVED_NS = 1_000_000
 # Without a pacer (--speed 0) the links are looked at every this many samples.
 _UNPACED_POLL_EVERY = 64
 
@@ -565,6 +567,10 @@ class Streamer:
                         stream.sent += 1
                     else:
                         stream.dropped += 1
+                if pacer and inputs.fds and deadline - pacer.watched_ns > _INPUT_STARVED_NS:
+                    # No slack left to watch the links while waiting (high rates): look right after the send.
+                    inputs.poll_all()
+                    pacer.watched_ns = deadline
                 done += 1
                 self.samples_done = done
                 if done == 1:
