@@ -11,7 +11,7 @@ from typing import Callable
 
 _MODULES = ("mavlink", "vectornav", "xsens", "microstrain", "dronecan", "j1939", "bosch")
 # Devices register themselves onto their format's entry (attach_device); imported after the formats.
-_DEVICE_MODULES = ("mavlink", "vectornav", "xsens", "microstrain", "dronecan")
+_DEVICE_MODULES = ("mavlink", "vectornav", "xsens", "microstrain", "dronecan", "j1939")
 
 
 @dataclass(frozen=True)
