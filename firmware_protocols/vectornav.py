@@ -732,7 +732,7 @@ register(FormatInfo(
     options={"fields": f"groups and fields, e.g. 'common:timestartup,accel;imu:uncompgyro' "
                        f"(default {DEFAULT_FIELDS!r}, PX4's binary output 1)"},
 ))
-for _name in _SENTENCES:
+for _name in ("VNYMR", "VNIMU"):      # VNYPR only for the device's register 6 (ADOR 1), not a format of its own
     register(FormatInfo(
         name=f"vectornav-{_name.lower()}", kind="serial",
         description=f"VectorNav ${_name} ASCII sentence",

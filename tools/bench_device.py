@@ -31,26 +31,8 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-SCENE = """
-[scene]
-rate_hz = {rate}
-duration_s = 600
-
-[trajectory]
-shape = "circle"
-radius_m = 5.0
-frequency_hz = 0.5
-height_m = 0.0
-
-[attitude]
-mode = "tangent"
-
-[[imu]]
-name = "imu0"
-
-[effects]
-gravity = true
-"""
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_stream import SCENE  # noqa: E402  (a 1 s circle, streamed with --loop)
 
 
 # off: --device off, encoded ahead by the producer (the baseline); quiet: the device encodes each sample in
@@ -72,7 +54,7 @@ def one_run(scene: Path, rate: float, seconds: float, kind: str) -> dict:
     with_commands = kind == "commands"
     stats = Path(tempfile.mkstemp(suffix=".json")[1])
     proc = subprocess.Popen([sys.executable, "-m", "imu_emulator", "stream", str(scene), "--format",
-                             "vectornav-binary", "--to", "pty", "--quiet", "--duration", str(seconds + 3),
+                             "vectornav-binary", "--to", "pty", "--quiet", "--loop", "--duration", str(seconds + 3),
                              "--stats-json", str(stats), "--device", "off" if kind == "off" else "on"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, cwd=REPO)
     path = re.search(r"-> (\S+)", proc.stdout.readline()).group(1)

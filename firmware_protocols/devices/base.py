@@ -64,9 +64,14 @@ class Device:
         """Everything sent for sample i of `samples` (b"" / an empty frame array when nothing is due)."""
         raise NotImplementedError
 
+    def encoders(self):
+        """The encoders whose saturation counts this device reports (one `encoder` unless overridden)."""
+        encoder = getattr(self, "encoder", None)
+        return [] if encoder is None else [encoder]
+
     @property
     def saturated(self) -> int:
-        return 0
+        return sum(e.saturated.total for e in self.encoders())
 
     def take_link_requests(self) -> list[LinkRequest]:
         requests, self.link_requests = self.link_requests, []

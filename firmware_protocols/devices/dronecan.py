@@ -83,10 +83,6 @@ class DroneCanNode(Device):
         self.tick = 0
         self.frames_per_sample = self.encoder.frames_per_sample
 
-    @property
-    def saturated(self) -> int:
-        return self.encoder.saturated.total
-
     def node_status(self) -> bytes:
         uptime = int(self.tick / self.rate_hz)
         return struct.pack("<IBH", uptime & 0xFFFFFFFF, HEALTH_OK << 6 | MODE_OPERATIONAL << 3, 0)

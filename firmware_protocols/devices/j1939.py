@@ -65,10 +65,6 @@ class J1939Device(Device):
         self.tick = 0
         self.last = None                   # the latest sample's ARI and ACCS rows
 
-    @property
-    def saturated(self) -> int:
-        return self.encoder.saturated.total
-
     def _row(self, can_id: int, data: bytes) -> np.ndarray:
         row = np.zeros(1, dtype=CLASSIC_FRAME_DTYPE)
         row["can_id"], row["extended"], row["length"] = can_id, True, len(data)

@@ -147,10 +147,6 @@ class MavlinkDevice(Device):
         self._stream_ts: dict = {}       # (link id, sysid, compid) -> last signing timestamp accepted
         self.bytes_per_sample = self.encoder.bytes_per_sample
 
-    @property
-    def saturated(self) -> int:
-        return self.encoder.saturated.total
-
     def _frame(self, msgid: int, payload: bytes) -> bytes:
         params = self.encoder._params
         seq = int(params[P_SEQ])

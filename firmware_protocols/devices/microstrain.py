@@ -87,9 +87,8 @@ class MipDevice(Device):
             self._encoders[key] = MipEncoder(names, descriptor_set=descriptor_set, **self._options)
         return self._encoders[key]
 
-    @property
-    def saturated(self) -> int:
-        return sum(e.saturated.total for e in self._encoders.values())
+    def encoders(self):
+        return self._encoders.values()
 
     # - output -
     def output(self, samples: Samples, i: int) -> bytes:

@@ -118,6 +118,7 @@ class VectorNavDevice(Device):
         self._factory = factory
         self._saved = factory
         self._ascii_encoders = {}
+        self._made = []
         self._apply(factory)
         self.tick = 0
         self.paused = False
@@ -132,6 +133,7 @@ class VectorNavDevice(Device):
         self.ints = dict(settings["ints"])
         self.binary = [_BinaryOutput(mode, divisor, layout) for mode, divisor, layout in settings["binary"]]
         self.binary += [_BinaryOutput() for _ in range(3 - len(self.binary))]
+        self._made += [o.encoder for o in self.binary if o.encoder is not None]
 
     def _snapshot(self) -> dict:
         return {"user_tag": self.user_tag, "baud": self.baud, "ascii_type": self.ascii_type,
@@ -148,10 +150,9 @@ class VectorNavDevice(Device):
     def _samples_per(self, divisor: int) -> int:
         return max(1, int(round(divisor * self.rate_hz / self.base_rate_hz)))
 
-    @property
-    def saturated(self) -> int:
-        return (sum(o.encoder.saturated.total for o in self.binary if o.encoder is not None)
-                + sum(e.saturated.total for e in self._ascii_encoders.values()))
+    def encoders(self):
+        # every encoder ever made, so replaced outputs' saturation counts stay in the total
+        return self._made + list(self._ascii_encoders.values())
 
     # - output -
     def output(self, samples: Samples, i: int) -> bytes:
@@ -303,7 +304,9 @@ class VectorNavDevice(Device):
             _count(values, expected, expected)
             self.ints[register] = tuple(_integer(v) for v in values)
         else:
-            self.binary[register - 75] = self._binary_output(values)
+            self.binary[register - 75] = output = self._binary_output(values)
+            if output.encoder is not None:
+                self._made.append(output.encoder)
 
     @staticmethod
     def _binary_output(values: list) -> _BinaryOutput:
@@ -364,7 +367,7 @@ _OPTIONS = {
 _PRESET_LIST = {name: (settings, text) for name, (settings, text) in PRESETS.items()}
 attach_device("vectornav-binary", lambda rate_hz, **options: VectorNavDevice(rate_hz, **options), _OPTIONS,
               _PRESET_LIST, navigation=True)
-for _type, _name in ((1, "VNYPR"), (14, "VNYMR"), (19, "VNIMU")):
+for _type, _name in ((14, "VNYMR"), (19, "VNIMU")):
     attach_device(f"vectornav-{_name.lower()}",
                   lambda rate_hz, _t=_type, **options: VectorNavDevice(rate_hz, ascii_type=_t, **options),
                   {k: v for k, v in _OPTIONS.items() if k != "preset"}, navigation=True)

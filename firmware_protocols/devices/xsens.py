@@ -118,9 +118,8 @@ class XsensDevice(Device):
                                                **self._encoder_options)
         return self._encoders[due]
 
-    @property
-    def saturated(self) -> int:
-        return sum(e.saturated.total for e in self._encoders.values())
+    def encoders(self):
+        return self._encoders.values()
 
     # - output -
     def output(self, samples: Samples, i: int) -> bytes:
