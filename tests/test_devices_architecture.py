@@ -115,3 +115,13 @@ def test_device_off_streams_blindly(tmp_path):
     assert every and not bad
     assert {m.get_type() for m in every} == {"HIGHRES_IMU"}
     assert "input ignored (no device): 100" in err
+
+
+def test_stream_table_device_key():
+    from imu_emulator.errors import SceneError
+    from imu_emulator.streaming import streams_from_tables
+    tables = [{"format": "mavlink-highres", "to": "pty", "device": False}, {"format": "j1939", "to": "file:x.log"}]
+    configs = streams_from_tables(tables, ("imu0",))
+    assert [c.device for c in configs] == [False, True]
+    with pytest.raises(SceneError, match=r"stream\[0\]\.device: expected true or false"):
+        streams_from_tables([{"format": "mavlink-highres", "to": "pty", "device": "yes"}], ("imu0",))
