@@ -125,3 +125,15 @@ def test_stream_table_device_key():
     assert [c.device for c in configs] == [False, True]
     with pytest.raises(SceneError, match=r"stream\[0\]\.device: expected true or false"):
         streams_from_tables([{"format": "mavlink-highres", "to": "pty", "device": "yes"}], ("imu0",))
+
+
+def test_single_row_equals_samples_slice():
+    from firmware_protocols.devices.base import single
+    n = 5
+    samples = Samples(np.arange(n), np.random.default_rng(0).normal(size=(n, 3)), np.zeros((n, 3)),
+                      temperature_c=np.arange(n) * 1.5, quat=np.tile([1.0, 0, 0, 0], (n, 1)))
+    for i in range(n):
+        one, ref = single(samples, i), samples.slice(i, i + 1)
+        for name in ("time_ns", "accel", "gyro", "mag", "quat", "temperature_c", "position_llh"):
+            a, b = getattr(one, name), getattr(ref, name)
+            assert (a is None and b is None) or (np.array_equal(a, b) and a.flags.c_contiguous and a.shape == b.shape)

@@ -11,6 +11,7 @@ Devices know nothing of scenes: they see `Samples` (SI units, sensor frame) like
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 from firmware_protocols.base import Samples
@@ -82,9 +83,18 @@ class Device:
         return notes
 
 
+_SAMPLE_FIELDS = tuple(f.name for f in dataclasses.fields(Samples))
+
+
 def single(samples: Samples, i: int) -> Samples:
-    """Sample i as a block of one (views, no copies), for encoders that take blocks."""
-    return samples.slice(i, i + 1)
+    """Sample i as a block of one (views, no copies), for encoders that take blocks. The block's arrays are
+    already contiguous float64 (Samples.__post_init__ saw to it), so their one-row slices are too and the
+    checks are skipped: half the cost of Samples.slice, which this runs per sample in the sender."""
+    one = Samples.__new__(Samples)
+    for name in _SAMPLE_FIELDS:
+        value = getattr(samples, name)
+        setattr(one, name, None if value is None else value[i:i + 1])
+    return one
 
 
 class Divider:
