@@ -173,7 +173,12 @@ class Stream:
             else:
                 self.encoder = firmware_protocols.create_encoder(config.format, **config.options)
         except TypeError as exc:
-            known = {**self.info.options, **(self.info.device_options if self.device or config.device else {})}
+            talking = self.device is not None or (config.device and self.spec.kind not in _ONE_WAY_TARGETS)
+            device_only = sorted(set(config.options) & set(self.info.device_options) - set(self.info.options))
+            if device_only and not talking:
+                raise StreamError(f"{config.format}: option {device_only[0]!r} belongs to the device, which "
+                                  f"{'--device off' if not config.device else 'a one-way target'} leaves out") from None
+            known = {**self.info.options, **(self.info.device_options if talking else {})}
             raise StreamError(f"{config.format}: bad option ({exc}); known options: "
                               f"{', '.join(known) or 'none'}") from None
         except ValueError as exc:
