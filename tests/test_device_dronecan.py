@@ -64,3 +64,55 @@ def test_get_node_info_request_answered_with_what_pydronecan_decodes():
     assert decoded.status.mode == 0 and decoded.status.health == 0
     assert len(bytes(decoded.hardware_version.unique_id)) == 16
     assert device.stats.commands == 1 and device.stats.ignored_bytes > 0
+
+
+def test_dynamic_node_id_allocation_as_a_client():
+    """node_id=0: anonymous Allocation requests (decoded by pydronecan) until an allocator, answering with
+    pydronecan-encoded Allocation messages as the DSDL's allocator does (echo the unique id received so far,
+    then the whole of it with a node id), gives us one; then NodeStatus and RawIMU from that id."""
+    device = firmware_protocols.create_device("dronecan-rawimu", 100.0, node_id=0, preferred_node_id=60)
+    samples = _samples(400)
+    allocation = dronecan.uavcan.protocol.dynamic_node_id.Allocation
+    received, tid, i = b"", 0, 0
+    requests = []
+    while device.node_id == 0 and i < 400:
+        out = device.output(samples, i % 400)
+        i += 1
+        for row in out:
+            frame = Frame(int(row["can_id"]), bytearray(frame_bytes(row)))
+            transfer = Transfer()
+            transfer.from_frames([frame])
+            assert transfer.source_node_id == 0 and isinstance(transfer.payload, type(allocation()))
+            request = transfer.payload
+            requests.append((i, request.first_part_of_unique_id, request.node_id, bytes(request.unique_id)))
+            received = bytes(request.unique_id) if request.first_part_of_unique_id else received + bytes(request.unique_id)
+            reply = allocation(node_id=60 if len(received) == 16 else 0, first_part_of_unique_id=False,
+                               unique_id=list(received))
+            frames = Transfer(payload=reply, source_node_id=10, transfer_id=tid, transfer_priority=30).to_frames()
+            tid += 1
+            device.receive([can.Message(arbitration_id=f.message_id, data=bytes(f.bytes), is_extended_id=True)
+                            for f in frames])
+    assert device.node_id == 60
+    assert [(first, len(uid)) for _, first, _, uid in requests] == [(True, 6), (False, 6), (False, 4)]
+    assert requests[0][2] == 60                                  # the preferred id asked for
+    assert [s for s, *_ in requests][1:] == [requests[0][0] + 1, requests[0][0] + 2]   # follow-ups at once
+    assert device.take_notes() == ["DroneCAN node id 60 allocated by node 10"]
+    after = device.output(samples, i)
+    assert set(after["can_id"] & 0x7F) == {60} and len(after) == 1 + 7       # NodeStatus + RawIMU
+
+
+def test_allocation_reply_for_another_unique_id_restarts():
+    device = firmware_protocols.create_device("dronecan-rawimu", 100.0, node_id=0)
+    samples = _samples(300)
+    first = device.output(samples, 0)
+    assert len(first) == 1
+    other = dronecan.uavcan.protocol.dynamic_node_id.Allocation(node_id=0, first_part_of_unique_id=False,
+                                                                unique_id=[1, 2, 3, 4, 5, 6])
+    frames = Transfer(payload=other, source_node_id=10, transfer_id=0).to_frames()
+    device.receive([can.Message(arbitration_id=f.message_id, data=bytes(f.bytes), is_extended_id=True)
+                    for f in frames])
+    # no follow-up at the next sample: the next request is again a first part, 0.6-1.0 s later
+    later = [(k, device.output(samples, k)) for k in range(1, 150)]
+    sent = [(k, frames) for k, frames in later if len(frames)]
+    assert 60 <= sent[0][0] <= 100
+    assert frame_bytes(sent[0][1][0])[0] & 1 == 1               # first_part_of_unique_id

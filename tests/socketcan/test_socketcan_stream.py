@@ -94,3 +94,36 @@ def test_dronecan_node_sees_node_status_and_gets_node_info(tmp_path):
     assert len(set(uptimes)) >= 3 and sorted(uptimes) == uptimes      # one per second of samples, counting up
     assert infos and infos[0] is not None, "no GetNodeInfo response"
     assert bytes(infos[0].name).decode() == "org.imu_emulator.test"
+
+
+def test_dynamic_node_id_from_pydronecans_allocator(tmp_path):
+    """node_id=0: pydronecan's CentralizedServer on vcan0 allocates the emulated node an id (its own choice:
+    it does not honour the preferred id); NodeStatus then comes from that id."""
+    _vcan0_or_skip()
+    import time
+    import dronecan
+    from dronecan.app.dynamic_node_id import CentralizedServer
+    from dronecan.app.node_monitor import NodeMonitor
+    from dronecan.driver.socketcan import SocketCAN
+    scene_path = write_scene(tmp_path, rate=20, duration=60.0)
+    node = dronecan.node.Node(SocketCAN("vcan0"), node_id=10)
+    monitor = NodeMonitor(node)
+    server = CentralizedServer(node, monitor, database_storage=str(tmp_path / "allocation.db"))
+    statuses = []
+    node.add_handler(dronecan.uavcan.protocol.NodeStatus,
+                     lambda event: statuses.append(event.transfer.source_node_id))
+    try:
+        with Emulator(scene_path, "--format", "dronecan-rawimu", "--to", "can:socketcan:vcan0",
+                      "--duration", "40", "--option", "node_id=0", "--option", "preferred_node_id=77") as emu:
+            end = time.monotonic() + 60
+            while len([s for s in statuses if s != 10]) < 3 and time.monotonic() < end:
+                node.spin(0.2)
+            code, err = emu.interrupt()
+    finally:
+        server.close()
+        node.close()
+    assert code == 0, err
+    import re
+    allocated = re.search(r"DroneCAN node id (\d+) allocated by node 10", err)
+    assert allocated, err
+    assert {s for s in statuses if s != 10} == {int(allocated.group(1))}
