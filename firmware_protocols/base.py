@@ -31,6 +31,9 @@ class Samples:
     pressure_pa:    (n,) static pressure, pascal                    (optional)
     delta_theta:    (n, 3) integrated rate over the sample period, rad      (optional)
     delta_velocity: (n, 3) integrated specific force over the period, m/s   (optional)
+    position_llh:   (n, 3) geodetic latitude, longitude (deg), height above the WGS-84 ellipsoid (m)  (optional)
+    velocity_ned:   (n, 3) velocity north, east, down, m/s                  (optional)
+    linear_accel_ned: (n, 3) acceleration without gravity, north, east, down, m/s^2  (optional)
     Formats that need an optional field which is None use a documented default (usually zeros,
     identity quaternion, 25 degC, 101325 Pa) rather than failing.
     """
@@ -45,6 +48,9 @@ class Samples:
     pressure_pa: np.ndarray | None = None
     delta_theta: np.ndarray | None = None
     delta_velocity: np.ndarray | None = None
+    position_llh: np.ndarray | None = None
+    velocity_ned: np.ndarray | None = None
+    linear_accel_ned: np.ndarray | None = None
 
     def __post_init__(self):
         self.time_ns = np.ascontiguousarray(self.time_ns, dtype=np.int64).reshape(-1)
@@ -97,6 +103,7 @@ class Samples:
 _FIELD_WIDTHS = {
     "accel": 3, "gyro": 3, "mag": 3, "quat": 4, "euler": 3,
     "temperature_c": 0, "pressure_pa": 0, "delta_theta": 3, "delta_velocity": 3,
+    "position_llh": 3, "velocity_ned": 3, "linear_accel_ned": 3,
 }
 
 

@@ -41,8 +41,8 @@ import numpy as np
 from firmware_protocols.base import DecoderStats, Packet, SaturationStats, Samples, SerialBatch
 from firmware_protocols.registry import FormatInfo, register
 from firmware_protocols.packing import (CHECKSUM_FLETCHER16, FROM_CONSTANT, FROM_FIELD, FROM_TIME_DIV,
-                                      FROM_TIME_REM_S, KIND_F32, KIND_F64, KIND_SIZE, KIND_U16, NEED_MORE, Column,
-                                      FixedPacketPacker, FrameScanner, as_int, parse_names)
+                                      FROM_TIME_REM_S, KIND_F32, KIND_F64, KIND_SIZE, KIND_U8, KIND_U16, NEED_MORE,
+                                      Column, FixedPacketPacker, FrameScanner, as_int, parse_names)
 
 SYNC = b"\x75\x65"
 SENSOR_DATA_SET = 0x80
@@ -58,6 +58,9 @@ class Field:
     count: int
     unit: float = 1.0             # SI value of one wire unit
     default: tuple = ()
+    kind: int = KIND_F32          # wire type of the `count` values
+    first: int = 0                # first component of the source
+    tail: tuple = ()              # constants after the values: ((kind, value), ...), e.g. valid flags
 
 
 FIELDS = {
@@ -73,14 +76,50 @@ FIELDS = {
 }
 _BY_DESCRIPTOR = {f.descriptor: name for name, f in FIELDS.items()}
 DEFAULT_FIELDS = ("accel", "gyro", "mag", "pressure", "quaternion", "gps_timestamp")
+
+# Filter (0x82) and GNSS (0x81) data sets: what ArduPilot's MicroStrain 5/7 drivers need to report healthy.
+# Layouts from LORD-MicroStrain/mip_sdk src/mip/definitions/data_filter.h and data_gnss.h; every field ends
+# in valid flags. Positions are geodetic (deg, deg, m above the WGS-84 ellipsoid; mean-sea-level height is
+# reported equal to it: no geoid model), velocities NED, attitude as given in `quat` / `euler`.
+FILTER_SET, GNSS_SET = 0x82, 0x81
+FILTER_STATE_FULL_NAV = 4          # GQ7 filter mode "full navigation" (data_filter.h FilterMode)
+_VALID = ((KIND_U16, 1.0),)
+FILTER_FIELDS = {
+    "position_llh": Field(0x01, "position_llh", 3, kind=KIND_F64, tail=_VALID),
+    "velocity_ned": Field(0x02, "velocity_ned", 3, tail=_VALID),
+    "quaternion": Field(0x03, "quat", 4, default=(1.0, 0.0, 0.0, 0.0), tail=_VALID),
+    "euler": Field(0x05, "euler", 3, default=(0.0, 0.0, 0.0), tail=_VALID),
+    # filter state, dynamics mode (1 portable), status flags: constants (see MipEncoder filter_state)
+    "status": Field(0x10, "", 0),
+    "gps_time": Field(0xD3, "time_ns", 3),
+}
+GNSS_FIELDS = {
+    # lat, lon, height above ellipsoid, height above MSL (= ellipsoid here), horizontal and vertical
+    # accuracy (m), valid flags (all five quantities)
+    "position_llh": Field(0x03, "position_llh", 3, kind=KIND_F64,
+                          tail=((KIND_F64, None), (KIND_F32, 1.0), (KIND_F32, 1.5), (KIND_U16, 0x1F))),
+    # north, east, down, speed, ground speed, heading (deg), speed and heading accuracy, valid flags
+    "velocity_ned": Field(0x05, "velocity_ned", 3,
+                          tail=((KIND_F32, "speed"), (KIND_F32, "ground_speed"), (KIND_F32, "heading_deg"),
+                                (KIND_F32, 0.1), (KIND_F32, 1.0), (KIND_U16, 0x1F))),
+    # fix type 0 = 3D, satellites, fix flags, valid flags
+    "fix_info": Field(0x0B, "", 0, tail=((KIND_U8, 0.0), (KIND_U8, 12.0), (KIND_U16, 0.0), (KIND_U16, 0x07))),
+    "gps_time": Field(0x09, "time_ns", 3),
+}
+DATA_SETS = {SENSOR_DATA_SET: FIELDS, GNSS_SET: GNSS_FIELDS, FILTER_SET: FILTER_FIELDS}
 GPS_FLAGS_DEFAULT = 0x1C
 
 
 class MipEncoder:
     """Samples -> one MIP 0x80 packet per sample, fields in the order given."""
 
-    def __init__(self, fields=DEFAULT_FIELDS, gps_week_offset: int = 0, gps_flags: int = GPS_FLAGS_DEFAULT):
-        self.fields = parse_names(fields, FIELDS, "fields")
+    def __init__(self, fields=DEFAULT_FIELDS, gps_week_offset: int = 0, gps_flags: int = GPS_FLAGS_DEFAULT,
+                 descriptor_set: int = SENSOR_DATA_SET, filter_state: int = FILTER_STATE_FULL_NAV):
+        if descriptor_set not in DATA_SETS:
+            raise ValueError(f"descriptor_set: one of {', '.join(f'{d:#04x}' for d in DATA_SETS)}")
+        table = DATA_SETS[descriptor_set]
+        self.descriptor_set = descriptor_set
+        self.fields = parse_names(fields, table, "fields")
         gps_week_offset, gps_flags = as_int(gps_week_offset), as_int(gps_flags)
         if not 0 <= gps_flags <= 0xFFFF:
             raise ValueError(f"gps_flags: must fit in 16 bits, got {gps_flags!r}")
@@ -88,17 +127,34 @@ class MipEncoder:
         self.gps_flags = gps_flags
         self.saturated = SaturationStats()
 
-        packet = bytearray((0x75, 0x65, SENSOR_DATA_SET, 0))
+        packet = bytearray((0x75, 0x65, descriptor_set, 0))
         columns = []
+        self._derived = False
         for name in self.fields:
-            f = FIELDS[name]
-            if name == "gps_timestamp":
+            f = table[name]
+            if f.source == "time_ns":
                 offset = self.gps_week_offset * WEEK_NS
-                layout = [Column(KIND_F64, 0, "gps_timestamp.tow", FROM_TIME_REM_S, divisor=WEEK_NS, offset=offset),
-                          Column(KIND_U16, 0, "gps_timestamp.week", FROM_TIME_DIV, divisor=WEEK_NS, offset=offset),
-                          Column(KIND_U16, 0, "gps_timestamp.flags", FROM_CONSTANT, constant=float(self.gps_flags))]
+                # 0x80's flags are the GPS-correlation flags; the other sets' last word is valid flags
+                flags = self.gps_flags if descriptor_set == SENSOR_DATA_SET else 0x3
+                layout = [Column(KIND_F64, 0, f"{name}.tow", FROM_TIME_REM_S, divisor=WEEK_NS, offset=offset),
+                          Column(KIND_U16, 0, f"{name}.week", FROM_TIME_DIV, divisor=WEEK_NS, offset=offset),
+                          Column(KIND_U16, 0, f"{name}.flags", FROM_CONSTANT, constant=float(flags))]
+            elif name == "status":
+                layout = [Column(KIND_U16, 0, "status.filter_state", FROM_CONSTANT, constant=float(filter_state)),
+                          Column(KIND_U16, 0, "status.dynamics_mode", FROM_CONSTANT, constant=1.0),
+                          Column(KIND_U16, 0, "status.flags", FROM_CONSTANT, constant=0.0)]
             else:
-                layout = [Column(KIND_F32, 0, name, FROM_FIELD, f.source, c, 1.0 / f.unit) for c in range(f.count)]
+                layout = [Column(f.kind, 0, name, FROM_FIELD, f.source, f.first + c, 1.0 / f.unit)
+                          for c in range(f.count)]
+                for k, (kind, value) in enumerate(f.tail):
+                    if value is None:          # repeat the last value (height above MSL = ellipsoid height)
+                        layout.append(replace(layout[f.count - 1], label=f"{name}.tail{k}"))
+                    elif isinstance(value, str):
+                        self._derived = True
+                        layout.append(Column(kind, 0, f"{name}.{value}", FROM_FIELD, "gnss_speed",
+                                             ("speed", "ground_speed", "heading_deg").index(value)))
+                    else:
+                        layout.append(Column(kind, 0, f"{name}.tail{k}", FROM_CONSTANT, constant=float(value)))
             widths = [KIND_SIZE[c.kind] for c in layout]
             packet += bytes((2 + sum(widths), f.descriptor))
             for column, width in zip(layout, widths):
@@ -109,6 +165,8 @@ class MipEncoder:
             raise ValueError(f"fields: payload of {payload_len} bytes exceeds MIP's {MAX_PAYLOAD}")
         packet[3] = payload_len
         defaults = {f.source: f.default for f in FIELDS.values() if f.default}
+        defaults.update(position_llh=(47.397742, 8.545594, 488.0), velocity_ned=(0.0, 0.0, 0.0),
+                        gnss_speed=(0.0, 0.0, 0.0))
         self._packer = FixedPacketPacker(bytes(packet) + b"\x00\x00", columns, CHECKSUM_FLETCHER16, defaults)
 
     @property
@@ -116,7 +174,13 @@ class MipEncoder:
         return self._packer.packet_size
 
     def encode(self, samples: Samples) -> SerialBatch:
-        return self._packer.pack(samples, self.saturated)
+        extra = None
+        if self._derived and samples.velocity_ned is not None:
+            v = samples.velocity_ned
+            ground = np.hypot(v[:, 0], v[:, 1])
+            extra = {"gnss_speed": np.column_stack((np.linalg.norm(v, axis=1), ground,
+                                                    np.degrees(np.arctan2(v[:, 1], v[:, 0]))))}
+        return self._packer.pack(samples, self.saturated, extra=extra)
 
 
 # --- decoding --------------------------------------------------------------------------------

@@ -37,7 +37,7 @@ _KIND_RANGE = {
 # Fixed-point kinds carry their LSB inside the column scale, so the range check sees raw integers.
 _KIND_UNIT = {KIND_FP1220: 2.0 ** 20, KIND_FP1632: 2.0 ** 32}
 # Sources are passed as a fixed-length tuple so that one compiled kernel serves every layout.
-_SLOTS = 10
+_SLOTS = 12
 _EMPTY_SOURCE = np.zeros((1, 1), dtype=np.float64)
 
 

@@ -6,10 +6,12 @@ Each format module calls `register(FormatInfo(...))` at import; `_load_all` impo
 from __future__ import annotations
 
 import importlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 _MODULES = ("mavlink", "vectornav", "xsens", "microstrain", "dronecan", "j1939", "bosch")
+# Devices register themselves onto their format's entry (attach_device); imported after the formats.
+_DEVICE_MODULES = ("mavlink", "vectornav", "xsens", "microstrain", "dronecan", "j1939")
 
 
 @dataclass(frozen=True)
@@ -25,6 +27,14 @@ class FormatInfo:
     bytes_per_sample: int = 0
     frames_per_sample: tuple = field(default_factory=tuple)
     options: dict = field(default_factory=dict)   # option name -> one-line help
+    # device(rate_hz, **options) -> firmware_protocols.devices.base.Device: the part that answers a driver's
+    # commands and decides what the link carries; None for formats whose real parts only talk.
+    device: Callable | None = None
+    device_options: dict = field(default_factory=dict)   # options only the device takes -> one-line help
+    # Named option sets for drivers that expect one exact packet: preset name -> (options, one-line help).
+    presets: dict = field(default_factory=dict)
+    # The device reports navigation (position, velocity, linear acceleration): the streamer then computes truth.
+    device_navigation: bool = False
 
 
 _REGISTRY: dict[str, FormatInfo] = {}
@@ -38,15 +48,24 @@ def register(info: FormatInfo) -> FormatInfo:
     return info
 
 
+def attach_device(name: str, device: Callable, device_options: dict | None = None, presets: dict | None = None,
+                  navigation: bool = False) -> None:
+    """Give the registered format `name` a device (and its device-only options and presets)."""
+    info = _REGISTRY[name]
+    _REGISTRY[name] = replace(info, device=device, device_options=dict(device_options or {}),
+                              presets=dict(presets or {}), device_navigation=navigation)
+
+
 def _load_all() -> None:
     global _loaded
     if not _loaded:
-        for module in _MODULES:
-            try:
-                importlib.import_module(f"firmware_protocols.{module}")
-            except ModuleNotFoundError as exc:
-                if exc.name != f"firmware_protocols.{module}":
-                    raise
+        for package, modules in (("firmware_protocols", _MODULES), ("firmware_protocols.devices", _DEVICE_MODULES)):
+            for module in modules:
+                try:
+                    importlib.import_module(f"{package}.{module}")
+                except ModuleNotFoundError as exc:
+                    if exc.name != f"{package}.{module}":
+                        raise
         _loaded = True
 
 
@@ -68,3 +87,11 @@ def create_encoder(name: str, **options):
 
 def create_decoder(name: str, **options):
     return get(name).decoder(**options)
+
+
+def create_device(name: str, rate_hz: float, **options):
+    """The format's device at the given sample rate; ValueError when the format has none."""
+    info = get(name)
+    if info.device is None:
+        raise ValueError(f"format {name!r} has no device (its real parts only talk)")
+    return info.device(rate_hz, **options)

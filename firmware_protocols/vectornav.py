@@ -57,8 +57,13 @@ _F32_MAX = float(np.finfo(np.float32).max)
 # --- field table -----------------------------------------------------------------------------
 
 # Samples sources the packing kernel can read; the index is what the kernel switches on.
-_SOURCES = ("time_ns", "accel", "gyro", "mag", "quat", "euler", "temperature_c", "pressure_pa")
+_SOURCES = ("time_ns", "accel", "gyro", "mag", "quat", "euler", "temperature_c", "pressure_pa", "extra")
 _SOURCE_ID = {name: i for i, name in enumerate(_SOURCES)}
+# Navigation and status quantities: packed side by side into the kernel's one "extra" matrix (only when a
+# layout asks for them). Name -> width. Samples fields where Samples has them; the rest are constants.
+_EXTRA_WIDTH = {"position_llh": 3, "velocity_ned": 3, "linear_accel_ned": 3, "ypr_u": 3, "ins_status": 1,
+                "pos_u": 1, "vel_u": 1}
+_WIRE_CODE = {"f": 0, "Q": 1, "d": 2, "H": 3}
 # Documented defaults for optional Samples fields a selected wire field needs (one row, broadcast).
 _DEFAULTS = {
     "mag": (0.0, 0.0, 0.0),
@@ -66,6 +71,17 @@ _DEFAULTS = {
     "euler": (0.0, 0.0, 0.0),
     "temperature_c": (25.0,),
     "pressure_pa": (101325.0,),
+    # Until the scene has an origin the streaming side places it at PX4 SITL's default home (Zurich):
+    # a device asked for position without any truth at all reports that point, at rest.
+    "position_llh": (47.397742, 8.545594, 488.0),
+    "velocity_ned": (0.0, 0.0, 0.0),
+    "linear_accel_ned": (0.0, 0.0, 0.0),
+    # Uncertainties a healthy VN-300 INS reports (1 sigma): yaw, pitch, roll deg; position m; velocity m/s.
+    "ypr_u": (1.0, 0.5, 0.5),
+    "pos_u": (1.0,),
+    "vel_u": (0.05,),
+    # INS status: mode 2 (INS tracking, bits 0-1) + GNSS fix (bit 2), no error bits: 0x0006.
+    "ins_status": (6.0,),
 }
 
 
@@ -105,6 +121,13 @@ _ACCEL = (_q("accel"),)
 _MAG = (_q("mag"),)
 _TEMP = (_q("temperature_c", 1),)
 _PRES = (_q("pressure_pa", 1, scale=1e-3),)
+_LLA = (_q("position_llh", wire="d"),)
+_VEL_NED = (_q("velocity_ned"),)
+_LIN_ACC_NED = (_q("linear_accel_ned"),)
+_YPR_U = (_q("ypr_u"),)
+_INS_STATUS = (_q("ins_status", 1, wire="H"),)
+_POS_U = (_q("pos_u", 1),)
+_VEL_U = (_q("vel_u", 1),)
 
 
 def _lbl(quantities, label):
@@ -132,8 +155,13 @@ _GROUP_TABLE = (
     # Attitude bits 9-11 exist on some units but their names and sizes vary by library version.
     ("attitude", 4, [
         ("VpeStatus", 2, ()), ("YawPitchRoll", 12, _YPR), ("Quaternion", 16, _QUAT), ("Dcm", 36, ()),
-        ("MagNed", 12, ()), ("AccelNed", 12, ()), ("LinearAccelBody", 12, ()), ("LinearAccelNed", 12, ()),
-        ("YprU", 12, ())]),
+        ("MagNed", 12, ()), ("AccelNed", 12, ()), ("LinearAccelBody", 12, ()), ("LinearAccelNed", 12, _LIN_ACC_NED),
+        ("YprU", 12, _YPR_U)]),
+    # INS group: vnproglib 1.1 vnenum.h INSGROUP_* bits and vnupack.c sizes; PosLla is 3 x f64 (deg, deg, m).
+    ("ins", 5, [
+        ("InsStatus", 2, _INS_STATUS), ("PosLla", 24, _LLA), ("PosEcef", 24, ()), ("VelBody", 12, ()),
+        ("VelNed", 12, _VEL_NED), ("VelEcef", 12, ()), ("MagEcef", 12, ()), ("AccelEcef", 12, ()),
+        ("LinearAccelEcef", 12, ()), ("PosU", 4, _POS_U), ("VelU", 4, _VEL_U)]),
 )
 
 _GROUP_BIT = {name: bit for name, bit, _ in _GROUP_TABLE}
@@ -239,11 +267,13 @@ def parse_fields(fields) -> Layout:
 # --- binary encoder --------------------------------------------------------------------------
 
 @numba.njit(cache=True, nogil=True)
-def _pack(out, size, header, items, scales, time_ns, accel, gyro, mag, quat, euler, temp, pres, steps, sat):
+def _pack(out, size, header, items, scales, time_ns, accel, gyro, mag, quat, euler, temp, pres, extra, steps, sat):
     """Write len(time_ns) packets of `size` bytes into `out`. items[j] = (source id, column, wire type
-    0 f32 / 1 u64) in wire order. Returns the first sample with a non-finite value, or -1."""
+    0 f32 / 1 u64 time / 2 f64 / 3 u16) in wire order. Returns the first sample with a non-finite value, or -1."""
     scratch = np.empty(1, np.float32)
     bits = scratch.view(np.uint32)
+    scratch64 = np.empty(1, np.float64)
+    bits64 = scratch64.view(np.uint64)
     n_head = header.shape[0]
     for i in range(time_ns.shape[0]):
         base = i * size
@@ -275,11 +305,29 @@ def _pack(out, size, header, items, scales, time_ns, accel, gyro, mag, quat, eul
                 v = euler[i * steps[5], col]
             elif src == 6:
                 v = temp[i * steps[6], col]
-            else:
+            elif src == 7:
                 v = pres[i * steps[7], col]
+            else:
+                v = extra[i * steps[8], col]
             if not np.isfinite(v):
                 return i
             v *= scales[j]
+            if items[j, 2] == 2:
+                scratch64[0] = v
+                w = bits64[0]
+                for b in range(8):
+                    out[p + b] = (w >> np.uint64(8 * b)) & np.uint64(0xFF)
+                p += 8
+                continue
+            if items[j, 2] == 3:
+                if v < 0.0 or v > 65535.0:
+                    sat[j] += 1
+                    v = min(max(v, 0.0), 65535.0)
+                u16 = int(np.rint(v))
+                out[p] = u16 & 0xFF
+                out[p + 1] = (u16 >> 8) & 0xFF
+                p += 2
+                continue
             if v > 3.4028234663852886e38:
                 v = 3.4028234663852886e38
                 sat[j] += 1
@@ -310,16 +358,23 @@ class BinaryEncoder:
         self.bytes_per_sample = self.layout.packet_size
         self.saturated = SaturationStats()
         rows, scales, self._item_field = [], [], []
+        self._extra_base = {}     # extra source -> first column in the extra matrix
         for field in self.layout.fields:
             for q in field.quantities:
                 for col in q.order:
-                    rows.append((_SOURCE_ID[q.source], col, 1 if q.wire == "Q" else 0))
+                    if q.source in _EXTRA_WIDTH:
+                        if q.source not in self._extra_base:
+                            self._extra_base[q.source] = sum(_EXTRA_WIDTH[e] for e in self._extra_base)
+                        rows.append((_SOURCE_ID["extra"], self._extra_base[q.source] + col, _WIRE_CODE[q.wire]))
+                    else:
+                        rows.append((_SOURCE_ID[q.source], col, _WIRE_CODE[q.wire]))
                     scales.append(q.scale)
                     self._item_field.append(field.key)
         self._items = np.array(rows, dtype=np.int64).reshape(-1, 3)
         self._scales = np.array(scales, dtype=np.float64)
         self._header = np.frombuffer(self.layout.header, dtype=np.uint8).copy()
-        self._sources = sorted({q.source for f in self.layout.fields for q in f.quantities} - {"time_ns"})
+        self._sources = sorted({q.source for f in self.layout.fields for q in f.quantities}
+                               - {"time_ns"} - set(_EXTRA_WIDTH))
         self._defaults = {name: np.array([value], dtype=np.float64) for name, value in _DEFAULTS.items()}
         self._unused = np.zeros((1, 4), dtype=np.float64)
         self._offsets = np.zeros(1, dtype=np.int64)   # reused while block sizes repeat (the live path)
@@ -339,6 +394,15 @@ class BinaryEncoder:
                 if value.ndim == 1:
                     value = value.reshape(-1, 1)
             arrays[k - 1] = value
+        if self._extra_base:
+            parts = []
+            for name in self._extra_base:
+                value = getattr(samples, name, None)
+                parts.append(self._defaults[name] if value is None else value.reshape(len(samples), -1))
+            if any(part.shape[0] != 1 for part in parts):
+                steps[_SOURCE_ID["extra"]] = 1
+                parts = [np.broadcast_to(part, (len(samples), part.shape[1])) for part in parts]
+            arrays[_SOURCE_ID["extra"] - 1] = np.ascontiguousarray(np.hstack(parts))
         return arrays, steps
 
     def encode(self, samples: Samples) -> SerialBatch:
@@ -453,6 +517,7 @@ class _Sentence:
 
 
 _SENTENCES = {
+    "VNYPR": _Sentence("VNYPR", (("euler", (2, 1, 0), _DEG, "%+08.3f"),)),
     "VNYMR": _Sentence("VNYMR", (("euler", (2, 1, 0), _DEG, "%+08.3f"), ("mag", (0, 1, 2), 1.0, "%+08.4f"),
                                  ("accel", (0, 1, 2), 1.0, "%+07.3f"), ("gyro", (0, 1, 2), 1.0, "%+010.6f"))),
     "VNIMU": _Sentence("VNIMU", (("mag", (0, 1, 2), 1.0, "%+08.4f"), ("accel", (0, 1, 2), 1.0, "%+07.3f"),
@@ -670,7 +735,7 @@ register(FormatInfo(
     options={"fields": f"groups and fields, e.g. 'common:timestartup,accel;imu:uncompgyro' "
                        f"(default {DEFAULT_FIELDS!r}, PX4's binary output 1)"},
 ))
-for _name in _SENTENCES:
+for _name in ("VNYMR", "VNIMU"):      # VNYPR only for the device's register 6 (ADOR 1), not a format of its own
     register(FormatInfo(
         name=f"vectornav-{_name.lower()}", kind="serial",
         description=f"VectorNav ${_name} ASCII sentence",

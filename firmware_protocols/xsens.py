@@ -47,6 +47,14 @@ Items, units on the wire, source in `Samples`:
 | magnetic_field     | 0xC020 | 3 reals, arbitrary units           | mag / mag_reference_gauss    |
 | temperature        | 0x0810 | 1 real, deg C                      | temperature_c (default 25)   |
 | status_word        | 0xE020 | u32                                | the `status_word` option     |
+| lat_lon            | 0x5040 | 2 reals, degrees                   | position_llh[0:2] (default   |
+|                    |        |                                    | origin, see Samples)         |
+| altitude_ellipsoid | 0x5020 | 1 real, m above WGS-84             | position_llh[2]              |
+| velocity_xyz       | 0xD010 | 3 reals m/s in the declared frame  | velocity_ned, re-ordered and |
+|                    |        |                                    | signed for ENU / NWU         |
+
+Each real item may have its own precision (`precisions`, e.g. ArduPilot asks float32 for the IMU items but
+FP16.32 for LatLon, AltitudeEllipsoid and VelocityXYZ); the XDI announces it per item.
 
 SampleTimeFine is in 10 kHz ticks: Movella's ROS 2 driver (xsenssupport/Xsens_MTi_ROS_Driver_and_Ntrip_Client,
 messagepublishers/timereferencepublisher.h) converts it with SAMPLE_TIME_FINE_HZ = 10000.
@@ -104,6 +112,7 @@ class Item:
     has_frame: bool = False
     source: str = ""      # Samples field the values come from ("" for time, state and options)
     unit: float = 1.0     # SI -> wire multiplier
+    first: int = 0        # first component of the source
 
 
 ITEMS = {
@@ -122,7 +131,13 @@ ITEMS = {
     "magnetic_field": Item(0xC020, 3, True, source="mag"),
     "temperature": Item(0x0810, 1, True, source="temperature_c"),
     "status_word": Item(0xE020, 1, False, KIND_U32),
+    "lat_lon": Item(0x5040, 2, True, source="position_llh"),
+    "altitude_ellipsoid": Item(0x5020, 1, True, source="position_llh", first=2),
+    "velocity_xyz": Item(0xD010, 3, True, has_frame=True, source="velocity_ned"),
 }
+# velocity_xyz in each declared frame: (component of NED, sign) per axis
+_VELOCITY_AXES = {"ENU": ((1, 1.0), (0, 1.0), (2, -1.0)), "NED": ((0, 1.0), (1, 1.0), (2, 1.0)),
+                  "NWU": ((0, 1.0), (1, -1.0), (2, -1.0))}
 _ITEM_BY_XDI = {item.xdi: name for name, item in ITEMS.items()}
 # Decoded but never encoded: free acceleration needs gravity removed in the navigation frame, which is
 # the kernel's business, not the packetizer's. The recorded MTi-300 packet carries it.
@@ -130,6 +145,7 @@ _DECODE_ONLY = {0x4030: ("free_acceleration", Item(0x4030, 3, True))}
 
 DEFAULT_ITEMS = ("packet_counter", "sample_time_fine", "acceleration", "rate_of_turn")
 _DEFAULTS = {"quat": (1.0, 0.0, 0.0, 0.0), "euler": (0.0, 0.0, 0.0), "pressure_pa": (101325.0,),
+             "position_llh": (47.397742, 8.545594, 488.0), "velocity_ned": (0.0, 0.0, 0.0),
              "delta_velocity": (0.0, 0.0, 0.0), "mag": (0.0, 0.0, 0.0), "temperature_c": (25.0,),
              "delta_q": (1.0, 0.0, 0.0, 0.0)}
 
@@ -151,10 +167,13 @@ class XsensEncoder:
     """Samples -> MTData2 packets, one per sample. Stateful: the packet counter continues across calls."""
 
     def __init__(self, items=DEFAULT_ITEMS, precision: str = "float32", frame: str = "ENU",
-                 mag_reference_gauss: float = 0.5, status_word: int = 0, packet_counter_start: int = 0):
+                 mag_reference_gauss: float = 0.5, status_word: int = 0, packet_counter_start: int = 0,
+                 precisions: dict | None = None):
         self.items = parse_names(items, ITEMS, "items")
-        if precision not in PRECISIONS:
-            raise ValueError(f"precision: {precision!r}; choose from {', '.join(PRECISIONS)}")
+        precisions = dict(precisions or {})
+        for name, value in [("precision", precision)] + [(f"precisions[{k}]", v) for k, v in precisions.items()]:
+            if value not in PRECISIONS:
+                raise ValueError(f"{name}: {value!r}; choose from {', '.join(PRECISIONS)}")
         frame = str(frame).upper()
         if frame not in FRAMES:
             raise ValueError(f"frame: {frame!r}; choose from {', '.join(FRAMES)}")
@@ -170,11 +189,11 @@ class XsensEncoder:
         self.packet_counter = packet_counter_start & 0xFFFF
         self.saturated = SaturationStats()
 
-        prec_bits, real_kind, real_size = PRECISIONS[precision]
         payload = bytearray()
         placed = []                   # (item name, payload offset of its data, value kind, value width)
         for name in self.items:
             item = ITEMS[name]
+            prec_bits, real_kind, real_size = PRECISIONS[precisions.get(name, precision)]
             kind, width = (real_kind, real_size) if item.real else (item.int_kind, KIND_SIZE[item.int_kind])
             xdi = item.xdi | (prec_bits if item.real else 0) | (FRAMES[frame] if item.has_frame else 0)
             payload += bytes((xdi >> 8, xdi & 0xFF, item.count * width))
@@ -201,8 +220,12 @@ class XsensEncoder:
         if name == "status_word":
             return [Column(kind, position, name, FROM_CONSTANT, constant=float(self.status_word))]
         item = ITEMS[name]
+        if name == "velocity_xyz":
+            return [Column(kind, position + c * width, name, FROM_FIELD, item.source, axis, sign)
+                    for c, (axis, sign) in enumerate(_VELOCITY_AXES[self.frame])]
         unit = item.unit / self.mag_reference_gauss if name == "magnetic_field" else item.unit
-        return [Column(kind, position + c * width, name, FROM_FIELD, item.source, c, unit) for c in range(item.count)]
+        return [Column(kind, position + c * width, name, FROM_FIELD, item.source, item.first + c, unit)
+                for c in range(item.count)]
 
     @property
     def bytes_per_sample(self) -> int:
@@ -333,7 +356,8 @@ class XsensDecoder:
         si = {"quaternion": "quat", "euler_angles": "euler", "delta_v": "delta_velocity",
               "acceleration": "accel", "acceleration_hr": "accel_hr", "rate_of_turn": "gyro",
               "rate_of_turn_hr": "gyro_hr", "magnetic_field": "mag", "temperature": "temperature_c",
-              "delta_q": "delta_q", "free_acceleration": "free_accel"}[name]
+              "delta_q": "delta_q", "free_acceleration": "free_accel", "lat_lon": "lat_lon",
+              "altitude_ellipsoid": "altitude_ellipsoid", "velocity_xyz": "velocity"}[name]
         if name == "magnetic_field":
             fields["mag_au"] = values
             values = tuple(v * self.mag_reference_gauss for v in values)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import select
 import time
 from dataclasses import dataclass
 
@@ -20,6 +21,9 @@ _SPIN_NS = 200_000
 # throttling (95 % of each second) and stall for tens of milliseconds; this uses at most 40 %.
 _FIFO_SPIN_NS = 100_000
 _FIFO_SPIN_SHARE = 0.4
+# Answering a command costs tens to hundreds of microseconds in Python: none is started this close to a
+# deadline (a command then waits at most one sample period).
+_SERVE_MARGIN_NS = 300_000
 
 
 @dataclass(frozen=True)
@@ -71,14 +75,36 @@ class Pacer:
 
     def __init__(self, fifo: bool, period_ns: float = 1e6):
         self.spin_ns = int(min(_FIFO_SPIN_NS, _FIFO_SPIN_SHARE * period_ns)) if fifo else _SPIN_NS
+        self.serve_margin_ns = _SERVE_MARGIN_NS
+        # When the descriptors were last looked at: at high rates the whole period may be spin and margin,
+        # and the caller then polls them itself after a send (see streaming).
+        self.watched_ns = 0
 
-    def wait_until(self, deadline_ns: int) -> int:
-        """Returns the time we woke (ns, monotonic), at or after the deadline."""
+    def sleep_until(self, wake_ns: int, fds=(), on_ready=None) -> None:
+        """Sleep until `wake_ns` (monotonic) or a little after, but while any of `fds` is readable call
+        on_ready(readable fds) at once (it returns whether it found any input) and go back to sleep: replies go out between two deadlines.
+        Input arriving within _SERVE_MARGIN_NS of the wake time waits in the kernel until after the
+        deadline's send, so answering never makes a sample late. select() rather than poll/epoll because its
+        timeout has microsecond resolution (theirs is ms)."""
+        while True:
+            early = wake_ns - time.monotonic_ns()
+            if early <= 0:
+                return
+            if not fds or early <= self.serve_margin_ns:
+                time.sleep(early / 1e9)
+                return
+            ready, _, _ = select.select(fds, (), (), (early - self.serve_margin_ns) / 1e9)
+            self.watched_ns = time.monotonic_ns()
+            if ready and not on_ready(ready):
+                # Readable but nothing to read: a hang-up (a pty whose reader has gone away stays readable).
+                # Stop watching until this deadline instead of spinning on select.
+                fds = ()
+
+    def wait_until(self, deadline_ns: int, fds=(), on_ready=None) -> int:
+        """Returns the time we woke (ns, monotonic), at or after the deadline; input on `fds` is handed to
+        on_ready while sleeping (never while spinning)."""
+        self.sleep_until(deadline_ns - self.spin_ns, fds, on_ready)
         now = time.monotonic_ns()
-        early = deadline_ns - now - self.spin_ns
-        if early > 0:
-            time.sleep(early / 1e9)
-            now = time.monotonic_ns()
         while now < deadline_ns:
             now = time.monotonic_ns()
         return now

@@ -1,8 +1,19 @@
-"""Live streaming: scene blocks -> Samples -> wire format encoder -> transport, at wall-clock rate.
+"""Live streaming: scene blocks -> Samples -> wire format encoder or device -> transport, at wall-clock rate.
 
-A producer process computes and encodes blocks ahead of time into a pipe (bounded by its buffer); the
-send loop only waits for each sample's deadline and hands prepared packets to the transports. Several streams (one
-IMU, one format, one target each) share one clock and one simulation.
+A producer process computes blocks ahead of time into a pipe (bounded by its buffer). For a stream without a
+device it also encodes them, and the send loop only waits for each sample's deadline and hands prepared
+packets to the transport. A stream with a device (a format whose real part answers its driver, and
+`--device on`, the default) gets raw samples instead: the send loop asks the device for sample k's output
+shortly before k's deadline, so a configuration command takes effect at the next sample. Encoding in the
+sender rather than sending changes to the producer down a control channel was chosen because the producer
+runs up to a pipe's worth of blocks ahead (tens of ms to seconds): a control channel would have to discard
+and re-encode that queue and roll back sequence numbers, while one sample's encode costs a few microseconds
+(tools/bench_device.py prints the figure).
+
+While waiting for a deadline the loop watches every transport's descriptor (select): bytes a driver writes
+are fed to the device at once and its replies go out between two deadlines, without moving the sample
+clock. Input on a link without a device is read and counted as ignored, so the writer never blocks.
+Several streams (one IMU, one format, one target each) share one clock and one simulation.
 """
 from __future__ import annotations
 
@@ -11,6 +22,7 @@ import json
 import math
 import multiprocessing
 import os
+import select
 import signal
 import sys
 import threading
@@ -24,6 +36,8 @@ import firmware_protocols
 from firmware_protocols.base import EncodeError, can_bits_worst_case
 from imu_emulator.errors import ImuEmulatorError, SceneError, TargetError
 from imu_emulator.outfile import AtomicOutput
+from imu_emulator.geodesy import local_to_geodetic, to_ned
+from imu_emulator.rotations import quat_to_euler, quat_to_matrix
 from imu_emulator.realtime import LatenessStats, Pacer, drop_realtime, enable_realtime
 from imu_emulator.transport import TargetOptions, check_carries, link_capacity, open_target, parse_target
 
@@ -35,7 +49,13 @@ _MAX_BLOCK = 500
 _LEAD_NS = 30_000_000
 _STATUS_INTERVAL_NS = 500_000_000
 
-STREAM_TABLE_KEYS = {"imu", "format", "to", "options", "link", "pace_baud", "bitrate", "data_bitrate", "fd"}
+STREAM_TABLE_KEYS = {"imu", "format", "to", "options", "link", "pace_baud", "bitrate", "data_bitrate", "fd", "device"}
+# Targets that cannot talk back: a device there would only change what is streamed, so none is made.
+_ONE_WAY_TARGETS = ("file",)
+# With a pacer, links are looked at after a send when the waits have had no room to (high rates).
+_INPUT_STARVED_NS = 1_000_000
+# Without a pacer (--speed 0) the links are looked at every this many samples.
+_UNPACED_POLL_EVERY = 64
 
 
 class StreamError(ImuEmulatorError):
@@ -47,8 +67,9 @@ class StreamConfig:
     imu: str
     format: str
     target: str
-    options: dict = field(default_factory=dict)             # encoder options
+    options: dict = field(default_factory=dict)             # encoder (and device) options
     target_options: TargetOptions = TargetOptions()
+    device: bool = True     # answer the driver when the format has a device and the link is two-way
 
 
 @dataclass(frozen=True)
@@ -82,6 +103,9 @@ def streams_from_tables(tables, imu_names, defaults: TargetOptions = TargetOptio
         if not isinstance(options, dict):
             raise SceneError(f"{where}.options: expected a table")
         overrides = {}
+        device = table.get("device", True)
+        if not isinstance(device, bool):
+            raise SceneError(f"{where}.device: expected true or false, got {device!r}")
         for key, kind in (("link", str), ("pace_baud", int), ("bitrate", int), ("data_bitrate", int), ("fd", bool)):
             if key in table:
                 value = table[key]
@@ -89,7 +113,8 @@ def streams_from_tables(tables, imu_names, defaults: TargetOptions = TargetOptio
                     raise SceneError(f"{where}.{key}: expected {'a positive integer' if kind is int else kind.__name__}, "
                                      f"got {value!r}")
                 overrides[key] = value
-        configs.append(StreamConfig(imu, table["format"], table["to"], dict(options), replace(defaults, **overrides)))
+        configs.append(StreamConfig(imu, table["format"], table["to"], dict(options), replace(defaults, **overrides),
+                                    device))
     return configs
 
 
@@ -133,33 +158,67 @@ def link_budget_problem(stream: "Stream", rate_hz: float) -> str | None:
 # --- one stream: encoder + transport + counters --------------------------------------------------
 
 class Stream:
-    def __init__(self, config: StreamConfig, imu_index: int, info):
+    def __init__(self, config: StreamConfig, imu_index: int, info, rate_hz: float):
         self.config = config
         self.imu_index = imu_index
         self.info = info
         self.spec = parse_target(config.target)   # malformed specs fail before anything is opened
         check_carries(self.spec, info.kind)
         self.capacity = link_capacity(self.spec, info.kind, config.target_options)
+        self.device = None
+        self.navigation = None     # (frame, gravity) when the device reports navigation quantities
         try:
-            self.encoder = firmware_protocols.create_encoder(config.format, **config.options)
+            if config.device and info.device is not None and self.spec.kind not in _ONE_WAY_TARGETS:
+                # The device encodes too: budgets read its bytes_per_sample / frames_per_sample.
+                self.device = self.encoder = info.device(rate_hz, **config.options)
+            else:
+                self.encoder = firmware_protocols.create_encoder(config.format, **config.options)
         except TypeError as exc:
+            talking = self.device is not None or (config.device and self.spec.kind not in _ONE_WAY_TARGETS)
+            device_only = sorted(set(config.options) & set(self.info.device_options) - set(self.info.options))
+            if device_only and not talking:
+                raise StreamError(f"{config.format}: option {device_only[0]!r} belongs to the device, which "
+                                  f"{'--device off' if not config.device else 'a one-way target'} leaves out") from None
+            known = {**self.info.options, **(self.info.device_options if talking else {})}
             raise StreamError(f"{config.format}: bad option ({exc}); known options: "
-                              f"{', '.join(self.info.options) or 'none'}") from None
+                              f"{', '.join(known) or 'none'}") from None
         except ValueError as exc:
             raise StreamError(f"{config.format}: {exc}") from None
         self.transport = None
         self.sent = 0
         self.dropped = 0
         self.saturated = 0
+        self.idle = 0               # samples for which the device had nothing to send (paused, divided)
+        self.replies_sent = 0
+        self.replies_dropped = 0
+        self.ignored_input = 0      # bytes or frames that arrived on a link without a device
 
     def open(self) -> None:
         self.transport = open_target(self.spec, self.info.kind, self.config.target_options)
 
-    def encode(self, block, time_ns: np.ndarray) -> tuple[list, int]:
-        """Per-sample prepared payloads for one block, and the saturation count after it."""
+    def samples(self, block, time_ns: np.ndarray):
         from firmware_protocols import Samples
         i = self.imu_index
-        encoded = self.encoder.encode(Samples(time_ns, block.accel[i], block.gyro[i], quat=block.quat[i]))
+        if self.device is None:
+            return Samples(time_ns, block.accel[i], block.gyro[i], quat=block.quat[i])
+        # A device may be asked for any field its format knows at any moment: give it all we have.
+        nav = {}
+        if self.navigation is not None and block.truth is not None:
+            frame, gravity = self.navigation
+            specific_force = np.einsum("nij,nj->ni", quat_to_matrix(block.quat[i]), block.accel[i])
+            specific_force[:, 2] += -gravity if frame == "ENU" else gravity
+            nav = {"position_llh": local_to_geodetic(block.truth["position"], frame),
+                   "velocity_ned": to_ned(block.truth["velocity"], frame),
+                   "linear_accel_ned": to_ned(specific_force, frame)}
+        return Samples(time_ns, block.accel[i], block.gyro[i], quat=block.quat[i], euler=quat_to_euler(block.quat[i]),
+                       **nav)
+
+    def encode(self, block, time_ns: np.ndarray) -> tuple[list, int]:
+        """Per-sample prepared payloads for one block, and the saturation count after it. A device stream
+        gets the raw samples: its device encodes each one at its deadline, with the configuration then."""
+        if self.device is not None:
+            return self.samples(block, time_ns), 0
+        encoded = self.encoder.encode(self.samples(block, time_ns))
         if self.info.kind == "serial":
             items = _Packets(bytes(encoded.data), encoded.offsets.tolist())
         else:
@@ -173,16 +232,31 @@ class Stream:
             self.transport.close()
             self.transport = None
 
+    def device_item(self, samples, i: int):
+        """What the device sends for sample i now, prepared for the transport; None when nothing is due."""
+        out = self.device.output(samples, i)
+        if not len(out):
+            return None
+        if self.info.kind == "serial":
+            return out
+        return self.transport.prepare(out, int(samples.time_ns[i]))
+
     def summary(self) -> dict:
-        return {"imu": self.config.imu, "format": self.config.format, "target": self.config.target,
-                "sent": self.sent, "dropped": self.dropped, "saturated": self.saturated}
+        out = {"imu": self.config.imu, "format": self.config.format, "target": self.config.target,
+               "sent": self.sent, "dropped": self.dropped, "saturated": self.saturated}
+        if self.device is not None:
+            out["device"] = {**self.device.stats.as_dict(), "replies_sent": self.replies_sent,
+                             "replies_dropped": self.replies_dropped, "idle": self.idle}
+        if self.ignored_input:
+            out["ignored_input"] = self.ignored_input
+        return out
 
 
 def _saturation_total(encoder) -> int:
     return encoder.saturated.total
 
 
-def build_streams(configs: list[StreamConfig], imu_names) -> list[Stream]:
+def build_streams(configs: list[StreamConfig], imu_names, rate_hz: float) -> list[Stream]:
     streams = []
     for config in configs:
         if config.imu not in imu_names:
@@ -191,7 +265,7 @@ def build_streams(configs: list[StreamConfig], imu_names) -> list[Stream]:
             info = firmware_protocols.get(config.format)
         except KeyError as exc:
             raise StreamError(exc.args[0]) from None
-        streams.append(Stream(config, list(imu_names).index(config.imu), info))
+        streams.append(Stream(config, list(imu_names).index(config.imu), info, rate_hz))
     return streams
 
 
@@ -240,8 +314,74 @@ class _ProducerFailure:
 @dataclass
 class _Block:
     j0: int                  # run index of the first sample (0 = first sample streamed)
-    items: list              # per stream: list of prepared payloads, one per sample
+    n: int                   # samples in the block
+    items: list              # per stream: prepared payloads, one per sample (or the raw Samples, for a device)
     saturated: list          # per stream: encoder saturation total after this block
+
+    def __len__(self) -> int:
+        return self.n
+
+
+class _Inputs:
+    """The links' incoming side: which descriptors to watch, and what to do with what arrives. Bytes or
+    frames go to the stream's device and its replies out at once; a link without a device has its input
+    read and counted (so the writer never blocks) and otherwise ignored."""
+
+    def __init__(self, streams: list[Stream], note):
+        self.note = note
+        self.by_fd = {}
+        self.unwatched = []
+        for stream in streams:
+            fd = stream.transport.fileno()
+            if fd is None:
+                self.unwatched.append(stream)
+            else:
+                self.by_fd.setdefault(fd, []).append(stream)
+        self.fds = list(self.by_fd)
+        # Unwatched links that can talk are polled at each deadline; one-way ones not at all.
+        self.unwatched = [s for s in self.unwatched if s.device is not None]
+
+    def ready(self, fds) -> bool:
+        """Serve the streams on these descriptors; whether any of them had input."""
+        found = False
+        for fd in fds:
+            for stream in self.by_fd[fd]:
+                found = self.serve(stream) or found
+        return found
+
+    def poll_unwatched(self) -> None:
+        for stream in self.unwatched:
+            self.serve(stream)
+
+    def poll_all(self) -> None:
+        if self.fds:
+            ready, _, _ = select.select(self.fds, (), (), 0)
+            self.ready(ready)
+        self.poll_unwatched()
+
+    def serve(self, stream: Stream) -> bool:
+        data = stream.transport.recv()
+        if not len(data):
+            return False
+        device = stream.device
+        if device is None:
+            stream.ignored_input += len(data)
+            return True
+        transport = stream.transport
+        for reply in device.receive(data, time.monotonic_ns()):
+            item = reply if stream.info.kind == "serial" else transport.prepare(reply, 0)
+            if transport.send(item):
+                stream.replies_sent += 1
+            else:
+                stream.replies_dropped += 1
+        for request in device.take_link_requests():
+            if request.baud:
+                followed = transport.set_baud(request.baud)
+                self.note(f"{stream.config.format}: baud rate {request.baud} "
+                          + ("followed" if followed else "acknowledged (this link has no baud rate to follow)"))
+        for text in device.take_notes():
+            self.note(f"{stream.config.format}: {text}")
+        return True
 
 
 class _Stop(Exception):
@@ -285,7 +425,7 @@ class Streamer:
                 offset += (j // self.scene_samples) * self._loop_period_ns()
             time_ns = block.time_ns(offset)
             encoded = [stream.encode(block, time_ns) for stream in self.streams]
-            yield _Block(j, [e[0] for e in encoded], [e[1] for e in encoded])
+            yield _Block(j, n, [e[0] for e in encoded], [e[1] for e in encoded])
             j += n
 
     def _start_producer(self):
@@ -394,6 +534,13 @@ class Streamer:
         for s in summary["streams"]:
             print(f"  {s['imu']} {s['format']} -> {s['target']}: sent {s['sent']}, dropped {s['dropped']}, "
                   f"saturated {s['saturated']}", file=sys.stderr, flush=True)
+            if "device" in s:
+                d = s["device"]
+                print(f"    device: {d['commands']} commands answered, {d['errors']} error replies, "
+                      f"{d['replies_sent']} replies sent, {d['replies_dropped']} dropped, {d['ignored_bytes']} "
+                      f"input bytes ignored, {d['idle']} samples with nothing due", file=sys.stderr, flush=True)
+            if s.get("ignored_input"):
+                print(f"    input ignored (no device): {s['ignored_input']}", file=sys.stderr, flush=True)
 
     def _check_budgets(self) -> None:
         if self.options.speed == 0:
@@ -406,23 +553,27 @@ class Streamer:
                 self._note("overload: " + problem.split(";")[0])
 
     def _warm_up(self) -> None:
-        """Compile kernels and encoders now rather than inside the first deadlines (throwaway encoders
-        keep the real ones' sequence numbers at zero)."""
+        """Compile kernels and encoders now rather than inside the first deadlines (throwaway encoders and
+        devices keep the real ones' sequence numbers and counters at zero)."""
         block = self.sim.block(0, 1)
-        from firmware_protocols import Samples
         for stream in self.streams:
-            i = stream.imu_index
-            throwaway = firmware_protocols.create_encoder(stream.config.format, **stream.config.options)
-            throwaway.encode(Samples(block.time_ns(), block.accel[i], block.gyro[i], quat=block.quat[i]))
+            samples = stream.samples(block, block.time_ns())
+            if stream.device is not None:
+                stream.info.device(self.rate_hz, **stream.config.options).output(samples, 0)
+            else:
+                firmware_protocols.create_encoder(stream.config.format, **stream.config.options).encode(samples)
 
     def _send_loop(self, blocks, pacer: Pacer | None, start: int) -> None:
         period = 1e9 / (self.rate_hz * self.options.speed) if pacer else 0.0
         streams = self.streams
         transports = [s.transport for s in streams]
+        devices = [s.device for s in streams]
+        inputs = _Inputs(streams, self._note)
         stats = self.stats
         next_status = start + _STATUS_INTERVAL_NS
         show_status = not self.options.quiet
         done = 0
+        items = None
         while True:
             block = blocks.recv()
             if block is None:
@@ -430,17 +581,32 @@ class Streamer:
             if isinstance(block, _ProducerFailure):
                 block.raise_()
             items = block.items
-            for i in range(len(items[0])):
+            for i in range(len(block)):
                 j = block.j0 + i
                 if pacer:
                     deadline = start + int(j * period)
+                    # Commands are answered while waiting; the devices encode with the configuration in
+                    # force just before the deadline, then the last stretch is spun.
+                    pacer.sleep_until(deadline - pacer.spin_ns, inputs.fds, inputs.ready)
+                    inputs.poll_unwatched()
+                elif j % _UNPACED_POLL_EVERY == 0:
+                    inputs.poll_all()
+                payloads = [p[i] if d is None else s.device_item(p, i)
+                            for s, d, p in zip(streams, devices, items)]
+                if pacer:
                     now = pacer.wait_until(deadline)
                     stats.add(now - deadline)
-                for stream, transport, payloads in zip(streams, transports, items):
-                    if transport.send(payloads[i]):
+                for stream, transport, payload in zip(streams, transports, payloads):
+                    if payload is None:
+                        stream.idle += 1
+                    elif transport.send(payload):
                         stream.sent += 1
                     else:
                         stream.dropped += 1
+                if pacer and inputs.fds and deadline - pacer.watched_ns > _INPUT_STARVED_NS:
+                    # No slack left to watch the links while waiting (high rates): look right after the send.
+                    inputs.poll_all()
+                    pacer.watched_ns = deadline
                 done += 1
                 self.samples_done = done
                 if done == 1:
@@ -452,7 +618,7 @@ class Streamer:
                         print(self._status_text("streaming"), end="\r" if sys.stderr.isatty() else "\n",
                               file=sys.stderr, flush=True)
             for stream, saturated in zip(streams, block.saturated):
-                stream.saturated = saturated
+                stream.saturated = saturated if stream.device is None else stream.device.saturated
             self._last_ns = time.monotonic_ns()
 
     # - reporting -
@@ -504,8 +670,23 @@ def _close_all(streams) -> ImuEmulatorError | None:
     return first
 
 
+def needs_truth(configs: list[StreamConfig]) -> bool:
+    """Whether a device among the streams reports navigation (then the simulation must compute truth)."""
+    for config in configs:
+        try:
+            info = firmware_protocols.get(config.format)
+        except KeyError:
+            continue
+        if config.device and info.device is not None and info.device_navigation:
+            return True
+    return False
+
+
 def run_streams(scene, sim, configs: list[StreamConfig], options: RunOptions) -> dict:
-    streams = build_streams(configs, tuple(sim.imu_names))
+    streams = build_streams(configs, tuple(sim.imu_names), float(scene.rate_hz))
+    for stream in streams:
+        if stream.device is not None and stream.info.device_navigation:
+            stream.navigation = (scene.frame, float(scene.gravity_mps2))
     if not math.isfinite(options.speed) or options.speed < 0:
         raise StreamError(f"--speed: expected a number >= 0, got {options.speed}")
     return Streamer(sim, float(scene.rate_hz), float(scene.t0_s), streams, options).run()

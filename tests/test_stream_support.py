@@ -125,13 +125,14 @@ def read_for(fd: int, seconds: float, stop_after: int | None = None) -> bytes:
     return b"".join(chunks)
 
 
-def mavlink_parse(data: bytes):
-    """HIGHRES_IMU messages and the count of bad packets, by pymavlink's own parser."""
+def mavlink_parse(data: bytes, types=("HIGHRES_IMU",)):
+    """Messages of `types` (None: every valid one; the device interleaves HEARTBEAT) and the bad packets,
+    by pymavlink's own parser."""
     from pymavlink.dialects.v20 import common as mavlink2
     mav = mavlink2.MAVLink(None)
     mav.robust_parsing = True
     messages = mav.parse_buffer(data) or []
-    good = [m for m in messages if m.get_type() == "HIGHRES_IMU"]
+    good = [m for m in messages if m.get_type() != "BAD_DATA" and (types is None or m.get_type() in types)]
     bad = [m for m in messages if m.get_type() == "BAD_DATA"]
     return good, bad
 

@@ -1,4 +1,5 @@
-"""`imu-emulator formats`: the wire formats, with their size per sample."""
+"""`imu-emulator formats`: the wire formats, with their size per sample, whether a device answers the driver
+([device]) and the named presets (`--option preset=NAME`)."""
 from __future__ import annotations
 
 
@@ -16,5 +17,8 @@ def cmd_formats(args) -> int:
         else:
             bits = sum(can_bits_worst_case(*frame) for frame in info.frames_per_sample)
             size = f"{len(info.frames_per_sample)} frames/sample, {bits} bits worst case"
-        print(f"{name:24} {info.kind:6} {size:40} {info.description}")
+        talks = " [device]" if info.device is not None else ""
+        print(f"{name:24} {info.kind:6} {size:40} {info.description}{talks}")
+        for preset, (options, text) in info.presets.items():
+            print(f"{'':24} preset={preset}: {text}")
     return 0

@@ -1,6 +1,7 @@
 """`imu-emulator stream`: a scene live to ports, buses, UDP or capture files at wall-clock rate."""
 from __future__ import annotations
 
+from dataclasses import replace
 
 import math
 
@@ -25,6 +26,9 @@ def register(subparsers) -> None:
     p.add_argument("--imu", help="IMU name (default: the scene's first)")
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="encoder option, repeatable (e.g. sysid=1)")
+    p.add_argument("--device", choices=("on", "off"), default="on",
+                   help="on (default): formats with a device answer the driver's commands, announce themselves "
+                        "and follow the output configuration they are given; off: stream blindly (one-way links)")
     p.add_argument("--link", help="pty: make a stable symlink at this path to the slave")
     p.add_argument("--pace-baud", type=number(1, _MAX_RATE, integer=True), metavar="BAUD", help="pty: deliver no faster than a UART at BAUD")
     p.add_argument("--bitrate", type=number(1, _MAX_RATE, integer=True), help="CAN nominal bit rate, bit/s (default 1000000)")
@@ -85,7 +89,7 @@ def cmd_stream(args) -> int:
 
 def _stream(args, stats) -> None:
     from imu_emulator.simulation import Simulation
-    from imu_emulator.streaming import RunOptions, StreamConfig, run_streams, streams_from_tables
+    from imu_emulator.streaming import RunOptions, StreamConfig, needs_truth, run_streams, streams_from_tables
 
     scene = load_scene_with_warnings(args.scene)
     if args.duration is not None and round(args.duration * scene.rate_hz) < 1:
@@ -97,11 +101,13 @@ def _stream(args, stats) -> None:
         if not (args.format and args.target):
             raise StreamError("stream: --format and --to go together")
         configs = [StreamConfig(args.imu or imu_names[0], args.format, args.target,
-                                _parse_options(args.option), target_options)]
+                                _parse_options(args.option), target_options, args.device == "on")]
     else:
         if not scene.streams:
             raise StreamError(f"{args.scene}: no [[stream]] tables; give --format and --to")
         configs = streams_from_tables(scene.streams, imu_names, target_options)
+        if args.device == "off":
+            configs = [replace(c, device=False) for c in configs]
         if args.imu:
             configs = [c for c in configs if c.imu == args.imu]
             if not configs:
@@ -109,4 +115,4 @@ def _stream(args, stats) -> None:
     options = RunOptions(speed=args.speed, loop=args.loop, epoch_time=args.epoch_time, duration_s=args.duration,
                          count=args.count, quiet=args.quiet, allow_overload=args.allow_overload,
                          realtime=not args.no_realtime, stats_json=stats)
-    run_streams(scene, Simulation(scene), configs, options)
+    run_streams(scene, Simulation(scene, truth=needs_truth(configs)), configs, options)

@@ -26,8 +26,14 @@ class LinkCapacity:
 
 
 class Transport:
-    """One open target. `send` takes everything belonging to ONE sample (as made by `prepare`) and either sends all of it or
-    drops all of it (returns False), so a receiver never sees half a packet or half a transfer.
+    """One open target, two-way like python-can's `BusABC` (`send`, `recv`, `fileno`).
+
+    `send` takes everything belonging to ONE sample (as made by `prepare`), or one reply, and either sends
+    all of it or drops all of it (returns False), so a receiver never sees half a packet or half a transfer.
+    `recv` never blocks: what the other end wrote since the last call (bytes for byte streams, a list of
+    `can.Message` for buses), empty when nothing came. `fileno` is a descriptor that becomes readable
+    when `recv` has something, or None when the link has none to offer (then it is polled at each
+    deadline instead).
     """
 
     def prepare(self, payload, time_ns: int):
@@ -37,6 +43,17 @@ class Transport:
 
     def send(self, item) -> bool:  # pragma: no cover - interface
         raise NotImplementedError
+
+    def recv(self):
+        """What arrived since the last call; this default is a one-way link (capture files)."""
+        return b""
+
+    def fileno(self) -> int | None:
+        return None
+
+    def set_baud(self, baud: int) -> bool:
+        """Follow a baud-rate change the device agreed to; False when the link has no baud rate to follow."""
+        return False
 
     def describe(self) -> str:  # pragma: no cover - interface
         raise NotImplementedError

@@ -52,6 +52,24 @@ class CanBusTransport(Transport):
                 return False
         return True
 
+    def recv(self) -> list:
+        messages = []
+        while True:
+            try:
+                message = self.bus.recv(timeout=0)
+            except can.CanError:
+                return messages
+            if message is None:
+                return messages
+            messages.append(message)
+
+    def fileno(self) -> int | None:
+        try:
+            fd = self.bus.fileno()
+        except NotImplementedError:   # virtual and some vendor interfaces: polled at each deadline instead
+            return None
+        return fd if isinstance(fd, int) and fd >= 0 else None
+
     def describe(self) -> str:
         return f"can:{self.interface}:{self.channel}"
 

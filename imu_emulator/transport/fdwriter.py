@@ -7,6 +7,19 @@ import select
 import time
 
 
+def read_available(fd: int, limit: int = 65536) -> bytes:
+    """What a non-blocking fd holds now (at most `limit` bytes; the rest waits for the next call), b"" when
+    nothing. EIO (a pty with no reader) and EAGAIN read as nothing: the stream goes on."""
+    try:
+        return os.read(fd, limit)
+    except (BlockingIOError, InterruptedError):
+        return b""
+    except OSError as exc:
+        if exc.errno != errno.EIO:
+            raise
+        return b""
+
+
 class FdPacketWriter:
     """Write packets to a non-blocking fd without ever leaving half a packet on the line.
 
@@ -28,6 +41,15 @@ class FdPacketWriter:
         self._line_free_ns = 0
         self._poll = select.poll()
         self._poll.register(fd, select.POLLOUT)
+
+    @property
+    def paced(self) -> bool:
+        return bool(self._ns_per_byte)
+
+    def set_pace_baud(self, pace_baud: int) -> None:
+        fifo_bytes = self._fifo_ns / self._ns_per_byte if self._ns_per_byte else 4096
+        self._ns_per_byte = 10e9 / pace_baud
+        self._fifo_ns = fifo_bytes * self._ns_per_byte
 
     def send(self, packet: bytes) -> bool:
         if self._tail and not self._write_tail():

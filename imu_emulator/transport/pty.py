@@ -9,7 +9,7 @@ import tty
 
 from imu_emulator.errors import TargetError
 from imu_emulator.transport.base import TargetOptions, Transport
-from imu_emulator.transport.fdwriter import FdPacketWriter
+from imu_emulator.transport.fdwriter import FdPacketWriter, read_available
 
 _OPEN_FLAGS = os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK
 
@@ -58,14 +58,6 @@ class PtyPair:
         finally:
             os.close(slave)
 
-    def drain_input(self) -> None:
-        """Discard what the reader wrote to us (commands, slcan 'O' lines) so its writes never block."""
-        try:
-            while os.read(self.master, 4096):
-                pass
-        except OSError:
-            pass
-
     def close(self) -> None:
         if self.link and os.path.islink(self.link) and os.readlink(self.link) == self.path:
             os.unlink(self.link)
@@ -77,15 +69,15 @@ class PtyPair:
 
 class PtyTransport(Transport):
     """Packets go out only while a reader has the port open; the others are dropped and counted (with
-    --speed 0, sending waits for a reader instead)."""
+    --speed 0, sending waits for a reader instead). What the reader writes (a driver's commands) comes back
+    from `recv`; the streaming loop reads it whether or not a device answers, so the reader's writes never
+    block."""
 
-    _DRAIN_EVERY = 256
     _READER_WAIT_S = 0.01
 
     def __init__(self, options: TargetOptions):
         self.pty = PtyPair(options.link)
         self.writer = FdPacketWriter(self.pty.master, pace_baud=options.pace_baud, blocking=options.blocking)
-        self._writes = 0
         self._reader = False
 
     def _reader_present(self) -> bool:
@@ -104,10 +96,20 @@ class PtyTransport(Transport):
     def send(self, payload: bytes) -> bool:
         if not self._reader_present():
             return False
-        self._writes += 1
-        if self._writes % self._DRAIN_EVERY == 0:
-            self.pty.drain_input()
         return self.writer.send(payload)
+
+    def recv(self) -> bytes:
+        return read_available(self.pty.master)
+
+    def fileno(self) -> int:
+        return self.pty.master
+
+    def set_baud(self, baud: int) -> bool:
+        """A pty has no baud rate; with --pace-baud the pacing follows the new rate, as the UART would."""
+        if not self.writer.paced:
+            return False
+        self.writer.set_pace_baud(baud)
+        return True
 
     def describe(self) -> str:
         return self.pty.path + (f" (link {self.pty.link})" if self.pty.link else "")

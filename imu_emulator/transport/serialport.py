@@ -7,7 +7,7 @@ import serial
 
 from imu_emulator.errors import TargetError
 from imu_emulator.transport.base import TargetOptions, Transport
-from imu_emulator.transport.fdwriter import FdPacketWriter
+from imu_emulator.transport.fdwriter import FdPacketWriter, read_available
 
 
 class SerialTransport(Transport):
@@ -25,6 +25,21 @@ class SerialTransport(Transport):
 
     def send(self, payload: bytes) -> bool:
         return self.writer.send(payload)
+
+    def recv(self) -> bytes:
+        return read_available(self.port.fileno())
+
+    def fileno(self) -> int:
+        return self.port.fileno()
+
+    def set_baud(self, baud: int) -> bool:
+        """Follow a baud-rate change the device echoed: the echo leaves at the old rate first."""
+        self.port.flush()
+        self.port.baudrate = baud
+        self.baud = baud
+        if self.writer.paced:
+            self.writer.set_pace_baud(baud)
+        return True
 
     def describe(self) -> str:
         return f"{self.device} @ {self.baud} baud"

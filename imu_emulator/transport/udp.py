@@ -27,6 +27,18 @@ class UdpTransport(Transport):
             return False
         return True
 
+    def recv(self) -> bytes:
+        """Datagrams from the peer (a connected socket receives from that address only)."""
+        chunks = []
+        while True:
+            try:
+                chunks.append(self.sock.recv(65536, socket.MSG_DONTWAIT))
+            except (BlockingIOError, InterruptedError, ConnectionRefusedError):
+                return b"".join(chunks)
+
+    def fileno(self) -> int:
+        return self.sock.fileno()
+
     def describe(self) -> str:
         return f"udp {self.host}:{self.port}"
 

@@ -37,12 +37,15 @@ def test_rawimu_on_vcan0_decoded_by_dronecan_and_seen_by_candump(tmp_path):
     try:
         with Emulator(scene_path, "--format", "dronecan-rawimu", "--to", "can:socketcan:vcan0",
                       "--count", str(count), "--quiet", "--stats-json", stats) as emu:
-            frames = []
-            while len(frames) < 7 * count:
+            frames, raw_imu_frames = [], 0
+            # NodeStatus (data type 341) shares the bus once a second: count RawIMU (1003) frames only
+            # (incrementally: the guest is slow, and a reader that falls behind loses frames in the kernel)
+            while raw_imu_frames < 7 * count:
                 message = bus.recv(timeout=30 if not frames else 5)
                 if message is None:
                     break
                 frames.append((message.arbitration_id, bytes(message.data)))
+                raw_imu_frames += (message.arbitration_id >> 8) & 0xFFFF == 1003
             code, err = emu.wait(timeout=60)
     finally:
         bus.shutdown()
@@ -50,7 +53,77 @@ def test_rawimu_on_vcan0_decoded_by_dronecan_and_seen_by_candump(tmp_path):
     dumped, _ = candump.communicate(timeout=10)
     assert code == 0, err
     assert json.loads(stats.read_text())["dropped"] == 0
-    assert len(frames) == 7 * count
-    _check_rawimu(frames, scene_path, minimum=count)
+    raw_imu = [(i, d) for i, d in frames if (i >> 8) & 0xFFFF == 1003]
+    assert len(raw_imu) == 7 * count
+    _check_rawimu(raw_imu, scene_path, minimum=count)
     seen = [line.split()[2].split("#") for line in dumped.splitlines() if line.strip()]
     assert [(int(can_id, 16), bytes.fromhex(data)) for can_id, data in seen] == frames
+
+
+def test_dronecan_node_sees_node_status_and_gets_node_info(tmp_path):
+    """A pydronecan node on vcan0 beside the emulated one: NodeStatus at 1 Hz from node 42, and GetNodeInfo
+    answered (the emulator reads the bus between deadlines)."""
+    _vcan0_or_skip()
+    import time
+    import dronecan
+    scene_path = write_scene(tmp_path, rate=20, duration=60.0)
+    # pydronecan's own SocketCAN driver (its python-can one calls flush_tx_buffer, which python-can's
+    # socketcan bus does not implement)
+    from dronecan.driver.socketcan import SocketCAN
+    node = dronecan.node.Node(SocketCAN("vcan0"), node_id=100)
+    statuses, infos = [], []
+    node.add_handler(dronecan.uavcan.protocol.NodeStatus,
+                     lambda event: statuses.append((event.transfer.source_node_id, event.message.uptime_sec)))
+    try:
+        with Emulator(scene_path, "--format", "dronecan-rawimu", "--to", "can:socketcan:vcan0",
+                      "--duration", "30", "--quiet", "--option", "node_id=42",
+                      "--option", "node_name=org.imu_emulator.test") as emu:
+            end = time.monotonic() + 60
+            while len({s for n, s in statuses if n == 42}) < 3 and time.monotonic() < end:
+                node.spin(0.2)
+            node.request(dronecan.uavcan.protocol.GetNodeInfo.Request(), 42,
+                         lambda event: infos.append(event.response if event else None))
+            end = time.monotonic() + 30
+            while not infos and time.monotonic() < end:
+                node.spin(0.2)
+            code, err = emu.interrupt()
+    finally:
+        node.close()
+    assert code == 0, err
+    uptimes = [s for n, s in statuses if n == 42]
+    assert len(set(uptimes)) >= 3 and sorted(uptimes) == uptimes      # one per second of samples, counting up
+    assert infos and infos[0] is not None, "no GetNodeInfo response"
+    assert bytes(infos[0].name).decode() == "org.imu_emulator.test"
+
+
+def test_dynamic_node_id_from_pydronecans_allocator(tmp_path):
+    """node_id=0: pydronecan's CentralizedServer on vcan0 allocates the emulated node an id (its own choice:
+    it does not honour the preferred id); NodeStatus then comes from that id."""
+    _vcan0_or_skip()
+    import time
+    import dronecan
+    from dronecan.app.dynamic_node_id import CentralizedServer
+    from dronecan.app.node_monitor import NodeMonitor
+    from dronecan.driver.socketcan import SocketCAN
+    scene_path = write_scene(tmp_path, rate=20, duration=60.0)
+    node = dronecan.node.Node(SocketCAN("vcan0"), node_id=10)
+    monitor = NodeMonitor(node)
+    server = CentralizedServer(node, monitor, database_storage=str(tmp_path / "allocation.db"))
+    statuses = []
+    node.add_handler(dronecan.uavcan.protocol.NodeStatus,
+                     lambda event: statuses.append(event.transfer.source_node_id))
+    try:
+        with Emulator(scene_path, "--format", "dronecan-rawimu", "--to", "can:socketcan:vcan0",
+                      "--duration", "40", "--option", "node_id=0", "--option", "preferred_node_id=77") as emu:
+            end = time.monotonic() + 60
+            while len([s for s in statuses if s != 10]) < 3 and time.monotonic() < end:
+                node.spin(0.2)
+            code, err = emu.interrupt()
+    finally:
+        server.close()
+        node.close()
+    assert code == 0, err
+    import re
+    allocated = re.search(r"DroneCAN node id (\d+) allocated by node 10", err)
+    assert allocated, err
+    assert {s for s in statuses if s != 10} == {int(allocated.group(1))}

@@ -1,0 +1,135 @@
+"""What every emulated device shares: the conversation half of a format.
+
+A device is a state machine behind one link. It consumes what the driver writes (`receive`: bytes from a
+byte stream, or CAN frames), returns the replies the real part would send, and owns the active output
+configuration (which messages and fields, rate divider, paused or streaming, mode). `output(samples, i)`
+is everything the device puts on the link for sample i under the configuration in force at that moment, so
+a command takes effect at the next sample the link carries. Periodic announcements (MAVLink HEARTBEAT,
+DroneCAN NodeStatus) ride on `output` too, counted in samples, so they keep the sample clock's rhythm.
+
+Devices know nothing of scenes: they see `Samples` (SI units, sensor frame) like the encoders.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+from firmware_protocols.base import Samples
+
+
+@dataclass
+class DeviceStats:
+    """What the device made of its input; every command lands in exactly one of these counters."""
+
+    commands: int = 0         # well-formed commands answered with an acknowledgement / the data asked for
+    errors: int = 0           # commands answered with an error (bad checksum, unknown register, bad value)
+    ignored_bytes: int = 0    # input that was no command at all (noise, other protocols' traffic)
+    replies: int = 0          # replies produced (a command may produce several)
+
+    def as_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+@dataclass
+class LinkRequest:
+    """A change of the link itself the device agreed to (sent after the reply that announced it)."""
+
+    baud: int | None = None
+
+
+class Device:
+    """Base of the per-format devices. Subclasses implement `_receive` and `output`."""
+
+    kind = "serial"           # "serial": bytes in, bytes out; "can": frames in, frame rows out
+
+    def __init__(self, rate_hz: float):
+        if not rate_hz > 0:
+            raise ValueError(f"rate_hz: must be positive, got {rate_hz}")
+        self.rate_hz = float(rate_hz)
+        self.stats = DeviceStats()
+        self.link_requests: list[LinkRequest] = []
+        self.notes: list[str] = []     # things the user should hear about (lost address claim, ...)
+
+    # - input -
+    def receive(self, data, now_ns: int = 0) -> list:
+        """Feed what the driver wrote; returns the replies in order (bytes, or CAN frame row arrays)."""
+        replies = self._receive(data, now_ns)
+        self.stats.replies += len(replies)
+        return replies
+
+    def _receive(self, data, now_ns: int) -> list:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    # - output -
+    def output(self, samples: Samples, i: int):  # pragma: no cover - interface
+        """Everything sent for sample i of `samples` (b"" / an empty frame array when nothing is due)."""
+        raise NotImplementedError
+
+    def encoders(self):
+        """The encoders whose saturation counts this device reports (one `encoder` unless overridden)."""
+        encoder = getattr(self, "encoder", None)
+        return [] if encoder is None else [encoder]
+
+    @property
+    def saturated(self) -> int:
+        return sum(e.saturated.total for e in self.encoders())
+
+    def take_link_requests(self) -> list[LinkRequest]:
+        requests, self.link_requests = self.link_requests, []
+        return requests
+
+    def take_notes(self) -> list[str]:
+        notes, self.notes = self.notes, []
+        return notes
+
+
+_SAMPLE_FIELDS = tuple(f.name for f in dataclasses.fields(Samples))
+
+
+def single(samples: Samples, i: int) -> Samples:
+    """Sample i as a block of one (views, no copies), for encoders that take blocks. The block's arrays are
+    already contiguous float64 (Samples.__post_init__ saw to it), so their one-row slices are too and the
+    checks are skipped: half the cost of Samples.slice, which this runs per sample in the sender."""
+    one = Samples.__new__(Samples)
+    for name in _SAMPLE_FIELDS:
+        value = getattr(samples, name)
+        setattr(one, name, None if value is None else value[i:i + 1])
+    return one
+
+
+class Divider:
+    """Every `divider`-th sample, counted from the moment the divider was set: rate = sample rate / divider.
+    divider 0 means off."""
+
+    __slots__ = ("divider", "count")
+
+    def __init__(self, divider: int = 1):
+        self.set(divider)
+
+    def set(self, divider: int) -> None:
+        self.divider = int(divider)
+        self.count = 0
+
+    def due(self) -> bool:
+        if self.divider <= 0:
+            return False
+        due = self.count == 0
+        self.count = (self.count + 1) % self.divider
+        return due
+
+
+@dataclass
+class Periodic:
+    """A message every `period_s` seconds of sample time (HEARTBEAT, NodeStatus), first one at once."""
+
+    period_samples: int
+    count: int = field(default=0)
+
+    @classmethod
+    def every(cls, period_s: float, rate_hz: float) -> "Periodic":
+        return cls(max(1, int(round(period_s * rate_hz))))
+
+    def due(self) -> bool:
+        due = self.count == 0
+        self.count = (self.count + 1) % self.period_samples
+        return due

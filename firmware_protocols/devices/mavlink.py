@@ -1,0 +1,238 @@
+"""A MAVLink IMU component that announces itself and honours rate requests.
+
+What a ground station or companion library needs (../shared/specs/devices.md, "MAVLink"): MAVSDK calls a
+system connected, and MAVProxy keeps a link up, only while HEARTBEAT (msg 0) arrives at 1 Hz; rates are
+asked for with COMMAND_LONG (msg 76) carrying MAV_CMD_SET_MESSAGE_INTERVAL (511: param1 message id,
+param2 interval in us, -1 = off, 0 = default) or MAV_CMD_REQUEST_MESSAGE (512: param1 message id), and
+every COMMAND_LONG addressed to us is answered with COMMAND_ACK (msg 77). Message layouts, CRC_EXTRA
+values and enum values are those of MAVLink's common.xml as pymavlink generates it (HEARTBEAT 50,
+COMMAND_LONG 152, COMMAND_ACK 143; MAV_TYPE_IMU 40, MAV_AUTOPILOT_INVALID 8, MAV_STATE_ACTIVE 4,
+MAV_RESULT ACCEPTED 0 / DENIED 2 / UNSUPPORTED 3).
+
+- HEARTBEAT goes out from the stream's sysid/compid once per second of sample time, interleaved with the IMU
+  messages on the same link and sharing their sequence numbers (one sender, one sequence). Type and
+  autopilot are options; the default describes a sensor component (MAV_TYPE_IMU, MAV_AUTOPILOT_INVALID).
+- A COMMAND_LONG is ours when its target system is ours or 0 (broadcast) and its target component is ours
+  or 0. Others are ignored (counted as ignored input): on a shared link they belong to someone else.
+- SET_MESSAGE_INTERVAL for the streamed IMU message sets a divider of the sample rate: the interval is
+  rounded to the nearest whole number of sample periods (at least one), since samples exist only at the
+  scene's rate; -1 stops the message, 0 restores every sample. For HEARTBEAT it sets the heartbeat
+  period the same way. Other message ids: DENIED (we cannot stream them).
+- REQUEST_MESSAGE for the IMU message or HEARTBEAT: ACCEPTED and the message is sent once with the next
+  sample; others: DENIED. Any other command: UNSUPPORTED.
+- Signing as configured: with a signing key every frame we send (HEARTBEAT and COMMAND_ACK too) is signed on
+  the encoder's SigningLink, so timestamps stay increasing across all of them; incoming commands must
+  then carry a valid signature with that key (unsigned or forged ones are counted as errors and not
+  answered, as MAVLink's signing rules ask).
+Incoming frames may be MAVLink 1 or 2; replies are MAVLink 2.
+"""
+from __future__ import annotations
+
+import hashlib
+import struct
+import time
+
+import numpy as np
+
+from firmware_protocols.base import Samples
+from firmware_protocols.crc import crc16_mcrf4xx_bytes
+from firmware_protocols.devices.base import Device, Divider, Periodic, single
+from firmware_protocols.mavlink import (EPOCH_2015_NS, HEADER_LEN, INCOMPAT_SIGNED, MESSAGES, P_COMPID, P_SEQ,
+                                        P_SYSID, SIGNATURE_LEN, STX_V1, STX_V2, MavlinkEncoder)
+from firmware_protocols.registry import attach_device
+
+HEARTBEAT, COMMAND_LONG, COMMAND_ACK = 0, 76, 77
+_CRC_EXTRA = {HEARTBEAT: 50, COMMAND_LONG: 152, COMMAND_ACK: 143}
+MAV_CMD_SET_MESSAGE_INTERVAL, MAV_CMD_REQUEST_MESSAGE = 511, 512
+MAV_RESULT_ACCEPTED, MAV_RESULT_DENIED, MAV_RESULT_UNSUPPORTED = 0, 2, 3
+MAV_TYPE_IMU, MAV_AUTOPILOT_INVALID, MAV_STATE_ACTIVE = 40, 8, 4
+MAVLINK_VERSION = 3
+_COMMAND_LONG = struct.Struct("<7fHBBB")
+_COMMAND_LONG_LEN = _COMMAND_LONG.size   # 33
+
+
+def _signed_tail(link, frame: bytes) -> bytes:
+    """link_id, timestamp (10 us since 2015, strictly increasing on the link), SHA-256 signature[:6]."""
+    stamp = max((time.time_ns() - EPOCH_2015_NS) // 10_000, int(link.state[0]) + 1)
+    link.state[0] = stamp
+    head = frame + bytes([link.link_id]) + stamp.to_bytes(6, "little")
+    return head[len(frame):] + hashlib.sha256(link.secret_key + head).digest()[:6]
+
+
+def pack_frame(msgid: int, payload: bytes, seq: int, sysid: int, compid: int, link=None) -> bytes:
+    """One MAVLink 2 frame of a message whose CRC_EXTRA is in _CRC_EXTRA (trailing zeros cut, >= 1 byte)."""
+    payload = payload.rstrip(b"\0") or b"\0"
+    header = bytes([STX_V2, len(payload), INCOMPAT_SIGNED if link is not None else 0, 0, seq & 0xFF, sysid,
+                    compid]) + msgid.to_bytes(3, "little")
+    crc = crc16_mcrf4xx_bytes(header[1:] + payload + bytes([_CRC_EXTRA[msgid]]))
+    frame = header + payload + crc.to_bytes(2, "little")
+    return frame + _signed_tail(link, frame) if link is not None else frame
+
+
+class _FrameReader:
+    """Byte stream -> (msgid, payload, sysid, compid, signed frame bytes or None) for the message ids we
+    know the CRC_EXTRA of; everything else is skipped and counted. Never raises."""
+
+    def __init__(self):
+        self.buf = bytearray()
+        self.skipped = 0
+
+    def feed(self, data: bytes) -> list:
+        buf = self.buf
+        buf += data
+        out, pos = [], 0
+        while True:
+            v2, v1 = buf.find(STX_V2, pos), buf.find(STX_V1, pos)
+            start = min(x for x in (v2, v1, len(buf)) if x >= 0)
+            self.skipped += start - pos
+            pos = start
+            if pos >= len(buf):
+                break
+            step = self._frame(buf, pos, out)
+            if step is None:
+                break
+            pos += step
+        del buf[:pos]
+        if len(buf) > 4096:          # a flood of half frames must not grow memory
+            self.skipped += len(buf)
+            del buf[:]
+        return out
+
+    def _frame(self, buf, pos, out):
+        """Bytes consumed at pos: a frame's length, 1 for a false start, None when more bytes are needed."""
+        v2 = buf[pos] == STX_V2
+        head = HEADER_LEN if v2 else 6
+        if len(buf) - pos < head:
+            return None
+        plen = buf[pos + 1]
+        signed = v2 and bool(buf[pos + 2] & INCOMPAT_SIGNED)
+        msgid = int.from_bytes(buf[pos + 7:pos + 10], "little") if v2 else buf[pos + 5]
+        total = head + plen + 2 + (SIGNATURE_LEN if signed else 0)
+        extra = _CRC_EXTRA.get(msgid)
+        if extra is None or (v2 and buf[pos + 2] & ~INCOMPAT_SIGNED):
+            self.skipped += 1
+            return 1
+        if len(buf) - pos < total:
+            return None
+        end = pos + head + plen
+        if crc16_mcrf4xx_bytes(bytes(buf[pos + 1:end]) + bytes([extra])) != buf[end] | buf[end + 1] << 8:
+            self.skipped += 1
+            return 1
+        sysid, compid = (buf[pos + 5], buf[pos + 6]) if v2 else (buf[pos + 3], buf[pos + 4])
+        frame = bytes(buf[pos:pos + total])
+        out.append((msgid, frame[head:head + plen], sysid, compid, frame if signed else None, v2))
+        return total
+
+
+class MavlinkDevice(Device):
+    """The IMU message of `message` at the scene's rate (or as asked), HEARTBEAT at 1 Hz, COMMAND_ACKs."""
+
+    def __init__(self, rate_hz: float, message: str = "mavlink-highres", heartbeat_type: int = MAV_TYPE_IMU,
+                 heartbeat_autopilot: int = MAV_AUTOPILOT_INVALID, **encoder_options):
+        super().__init__(rate_hz)
+        self.encoder = MavlinkEncoder(message, **encoder_options)
+        self.spec = MESSAGES[message]
+        for name, value in (("heartbeat_type", heartbeat_type), ("heartbeat_autopilot", heartbeat_autopilot)):
+            if not 0 <= int(value) <= 255:
+                raise ValueError(f"{name}: must be 0..255, got {value}")
+        self.heartbeat_payload = struct.pack("<IBBBBB", 0, int(heartbeat_type), int(heartbeat_autopilot), 0,
+                                             MAV_STATE_ACTIVE, MAVLINK_VERSION)
+        self.imu = Divider(1)
+        self.heartbeat = Periodic.every(1.0, rate_hz)
+        self._once: set = set()          # message ids asked for once with REQUEST_MESSAGE
+        self._reader = _FrameReader()
+        params = self.encoder._params
+        self.sysid, self.compid = int(params[P_SYSID]), int(params[P_COMPID])
+        self.link = self.encoder.signing_link
+        self._stream_ts: dict = {}       # (link id, sysid, compid) -> last signing timestamp accepted
+        self.bytes_per_sample = self.encoder.bytes_per_sample
+
+    def _frame(self, msgid: int, payload: bytes) -> bytes:
+        params = self.encoder._params
+        seq = int(params[P_SEQ])
+        params[P_SEQ] = (seq + 1) & 0xFF
+        return pack_frame(msgid, payload, seq, self.sysid, self.compid, self.link)
+
+    # - output -
+    def output(self, samples: Samples, i: int) -> bytes:
+        parts = []
+        if self.heartbeat.due() or HEARTBEAT in self._once:
+            parts.append(self._frame(HEARTBEAT, self.heartbeat_payload))
+        if self.imu.due() or self.spec.msgid in self._once:
+            parts.append(self.encoder.encode(single(samples, i)).data)
+        self._once.clear()
+        return b"".join(parts)
+
+    # - input -
+    def _receive(self, data: bytes, now_ns: int) -> list:
+        replies = []
+        skipped = self._reader.skipped
+        for msgid, payload, sysid, compid, signed, v2 in self._reader.feed(data):
+            if msgid != COMMAND_LONG:
+                continue                               # a ground station's own HEARTBEAT and the like
+            values = _COMMAND_LONG.unpack(bytes(payload).ljust(_COMMAND_LONG_LEN, b"\0"))
+            params, command, target_sys, target_comp = values[:7], values[7], values[8], values[9]
+            if target_sys not in (0, self.sysid) or target_comp not in (0, self.compid):
+                self.stats.ignored_bytes += len(payload)
+                continue
+            if self.link is not None and not self._authentic(signed, sysid, compid):
+                self.stats.errors += 1
+                continue
+            result = self._command(command, params)
+            if result == MAV_RESULT_ACCEPTED:
+                self.stats.commands += 1
+            else:
+                self.stats.errors += 1
+            ack = struct.pack("<HBBiBB", command, result, 0, 0, sysid, compid)
+            replies.append(self._frame(COMMAND_ACK, ack))
+        self.stats.ignored_bytes += self._reader.skipped - skipped
+        return replies
+
+    def _authentic(self, frame: bytes | None, sysid: int, compid: int) -> bool:
+        if frame is None or hashlib.sha256(self.link.secret_key + frame[:-6]).digest()[:6] != frame[-6:]:
+            return False
+        stream = (frame[-13], sysid, compid)
+        stamp = int.from_bytes(frame[-12:-6], "little")
+        if stamp <= self._stream_ts.get(stream, -1):
+            return False                                # replayed
+        self._stream_ts[stream] = stamp
+        return True
+
+    def _command(self, command: int, params) -> int:
+        if command == MAV_CMD_SET_MESSAGE_INTERVAL:
+            msgid, interval_us = params[0], params[1]
+            target = {self.spec.msgid: self.imu, HEARTBEAT: None}.get(int(msgid) if msgid == msgid else -1, "no")
+            if target == "no" or not np.isfinite(interval_us):
+                return MAV_RESULT_DENIED
+            divider = self._divider(interval_us)
+            if target is None:
+                if divider <= 0:
+                    return MAV_RESULT_DENIED             # a component keeps announcing itself
+                self.heartbeat = Periodic(divider)
+            else:
+                target.set(divider)
+            return MAV_RESULT_ACCEPTED
+        if command == MAV_CMD_REQUEST_MESSAGE:
+            msgid = int(params[0]) if np.isfinite(params[0]) else -1
+            if msgid not in (self.spec.msgid, HEARTBEAT):
+                return MAV_RESULT_DENIED
+            self._once.add(msgid)
+            return MAV_RESULT_ACCEPTED
+        return MAV_RESULT_UNSUPPORTED
+
+    def _divider(self, interval_us: float) -> int:
+        """Interval in us -> samples between messages; 0 = off, 1 = every sample (interval 0 = default)."""
+        if interval_us < 0:
+            return 0
+        if interval_us == 0:
+            return 1
+        return max(1, int(round(interval_us * 1e-6 * self.rate_hz)))
+
+
+_DEVICE_OPTIONS = {
+    "heartbeat_type": f"HEARTBEAT type (MAV_TYPE), default {MAV_TYPE_IMU} (MAV_TYPE_IMU)",
+    "heartbeat_autopilot": f"HEARTBEAT autopilot (MAV_AUTOPILOT), default {MAV_AUTOPILOT_INVALID} (not a flight "
+                           "controller); 0 (generic) makes MAVSDK's first_autopilot() return this system",
+}
+for _name in MESSAGES:
+    attach_device(_name, lambda rate_hz, _m=_name, **options: MavlinkDevice(rate_hz, _m, **options), _DEVICE_OPTIONS)

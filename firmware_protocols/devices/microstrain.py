@@ -1,0 +1,262 @@
+"""A MicroStrain (HBK) inertial device speaking MIP: base and 3DM commands with ACK/NACK fields, and the
+data sets the configuration turns on.
+
+Sources: LORD-MicroStrain/mip_sdk (src/mip/definitions/commands_base.h, commands_3dm.h: descriptors and
+reply fields; mip_result.h: ACK 0x00, NACK 0x01 unknown command, 0x02 invalid checksum, 0x03 invalid
+parameter, 0x04 command failed), ../shared/specs/devices.md (what SDK clients send: ping, set idle, device
+information and descriptors, message formats, enable streams, resume), and MicroStrain's own MSCL (pymscl)
+as the client in tests/test_device_microstrain.py.
+
+A reply is one packet in the command's descriptor set: the ACK/NACK field `04 F1 <command> <code>`, then
+any data the command returns. Commands:
+
+    0x01 base:  01 ping, 02 set to idle (data stops), 03 get device information (field 0x81: firmware
+                version u16, model name, model number, serial number, lot number, options: 16 chars each),
+                04 get device descriptors (0x82: u16 set<<8|field for every command and data field
+                supported), 05 built-in test (0x83: u32 0), 06 resume (data resumes), 07 get extended
+                descriptors (0x86, none), 7E reset (back to the start-up configuration, streaming)
+    0x0C 3DM:   06 / 07 get IMU / GNSS base rate (legacy; 0x83 / 0x84: u16 Hz), 0E get base rate (0x8E:
+                set u8, Hz u16), 08 / 09 / 0A IMU / GNSS / filter message format (legacy: function, count,
+                (field, decimation u16)...; read answers 0x80 / 0x81 / 0x82), 0F message format (function,
+                set, count, entries; read answers 0x8F), 11 enable data stream (function, set, enable;
+                read answers 0x85), 30 device settings (save / load / default: acknowledged)
+    Functions: 1 apply, 2 read, 3 save, 4 load saved, 5 load default.
+
+The base rate of every data set is the scene's sample rate (the emulator has no other), so a decimation d
+sends the field every d-th sample; fields of one set due at the same sample share one packet, in the
+configured order. Data flow only while the device is not idle and the set's stream is enabled. A
+field the emulator cannot produce is NACKed with 0x03 (invalid parameter) as a device does for a field it
+lacks; an unknown command with 0x01; a packet with a bad checksum with 0x02 (echoing the first field's
+descriptor). Bytes outside packets are ignored and counted.
+"""
+from __future__ import annotations
+
+import struct
+
+from firmware_protocols.base import Samples
+from firmware_protocols.devices.base import Device, single
+from firmware_protocols.microstrain import (DATA_SETS, DEFAULT_FIELDS, FILTER_SET, FILTER_STATE_FULL_NAV, GNSS_SET,
+                                           SENSOR_DATA_SET, MipEncoder, fletcher16)
+from firmware_protocols.registry import attach_device
+
+BASE_SET, DM_SET = 0x01, 0x0C
+ACK_FIELD = 0xF1
+ACK_OK, NACK_UNKNOWN, NACK_CHECKSUM, NACK_PARAM, NACK_FAILED = 0, 1, 2, 3, 4
+APPLY, READ, SAVE, LOAD, DEFAULT = 1, 2, 3, 4, 5
+_LEGACY_FORMAT = {0x08: SENSOR_DATA_SET, 0x09: GNSS_SET, 0x0A: FILTER_SET}
+_LEGACY_REPLY = {SENSOR_DATA_SET: 0x80, GNSS_SET: 0x81, FILTER_SET: 0x82}
+_BASE_COMMANDS = (0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07, 0x7E)
+_DM_COMMANDS = (0x06, 0x07, 0x08, 0x09, 0x0A, 0x0E, 0x0F, 0x11, 0x30)
+
+
+def packet(descriptor_set: int, fields: list) -> bytes:
+    """75 65 set len (len desc data)... checksum: one MIP packet from (descriptor, data) fields."""
+    payload = b"".join(bytes([2 + len(data), descriptor]) + data for descriptor, data in fields)
+    head = bytes([0x75, 0x65, descriptor_set, len(payload)]) + payload
+    return head + bytes(fletcher16(head))
+
+
+def _text(value: str) -> bytes:
+    return str(value).encode("ascii", "replace")[:16].rjust(16)
+
+
+class MipDevice(Device):
+    def __init__(self, rate_hz: float, fields=DEFAULT_FIELDS, gps_week_offset: int = 0, gps_flags: int = 0x1C,
+                 model_name: str = "3DM-GQ7", model_number: str = "6284-4220", serial_number: str = "6284.12345",
+                 firmware_version: int = 1100, filter_state: int = FILTER_STATE_FULL_NAV):
+        super().__init__(rate_hz)
+        self._options = {"gps_week_offset": gps_week_offset, "gps_flags": gps_flags, "filter_state": filter_state}
+        MipEncoder(fields, **self._options)          # validates the fields and options now
+        if isinstance(fields, str):
+            fields = [f.strip() for f in fields.split(",") if f.strip()]
+        self.info = (struct.pack(">H", int(firmware_version)) + _text(model_name) + _text(model_number)
+                     + _text(serial_number) + _text("") + _text("emulated"))
+        startup = {SENSOR_DATA_SET: [(name, 1) for name in fields], GNSS_SET: [], FILTER_SET: []}
+        self._startup = self._saved = startup
+        self.formats = {k: list(v) for k, v in startup.items()}
+        self.enabled = {k: True for k in DATA_SETS}
+        self.idle = False
+        self.tick = 0
+        self._encoders: dict = {}
+        self._buf = bytearray()
+        self.bytes_per_sample = self._encoder(SENSOR_DATA_SET, tuple(fields)).bytes_per_sample
+
+    def _encoder(self, descriptor_set: int, names: tuple) -> MipEncoder:
+        key = (descriptor_set, names)
+        if key not in self._encoders:
+            self._encoders[key] = MipEncoder(names, descriptor_set=descriptor_set, **self._options)
+        return self._encoders[key]
+
+    def encoders(self):
+        return self._encoders.values()
+
+    # - output -
+    def output(self, samples: Samples, i: int) -> bytes:
+        tick = self.tick
+        self.tick += 1
+        if self.idle:
+            return b""
+        parts, one = [], None
+        for descriptor_set, entries in self.formats.items():
+            if not self.enabled[descriptor_set]:
+                continue
+            due = tuple(name for name, decimation in entries if tick % decimation == 0)
+            if due:
+                one = one or single(samples, i)
+                parts.append(self._encoder(descriptor_set, due).encode(one).data)
+        return b"".join(parts)
+
+    # - input -
+    def _receive(self, data: bytes, now_ns: int) -> list:
+        buf = self._buf
+        buf += data
+        replies, pos = [], 0
+        while True:
+            start = buf.find(b"\x75\x65", pos)
+            if start < 0:
+                keep = 1 if buf[-1:] == b"\x75" else 0
+                self.stats.ignored_bytes += len(buf) - pos - keep
+                pos = len(buf) - keep
+                break
+            self.stats.ignored_bytes += start - pos
+            pos = start
+            if len(buf) - pos < 4:
+                break
+            total = 4 + buf[pos + 3] + 2
+            if len(buf) - pos < total:
+                break
+            frame = bytes(buf[pos:pos + total])
+            if bytes(fletcher16(frame[:-2])) != frame[-2:]:
+                first = frame[5] if len(frame) > 6 else 0
+                replies.append(packet(frame[2], [(ACK_FIELD, bytes([first, NACK_CHECKSUM]))]))
+                self.stats.errors += 1
+                pos += 2             # a packet may begin inside what looked like this one
+                continue
+            pos += total
+            replies.append(self._command_packet(frame[2], frame[4:-2]))
+        del buf[:pos]
+        return replies
+
+    def _command_packet(self, descriptor_set: int, payload: bytes) -> bytes:
+        out, k = [], 0
+        while k + 2 <= len(payload):
+            size, command = payload[k], payload[k + 1]
+            if size < 2 or k + size > len(payload):
+                break
+            code, reply_fields = self._command(descriptor_set, command, payload[k + 2:k + size])
+            if code == ACK_OK:
+                self.stats.commands += 1
+            else:
+                self.stats.errors += 1
+            out.append((ACK_FIELD, bytes([command, code])))
+            out.extend(reply_fields if code == ACK_OK else [])
+            k += size
+        if not out:                  # an empty or malformed payload: answer it as an unknown command
+            self.stats.errors += 1
+            out.append((ACK_FIELD, bytes([payload[1] if len(payload) > 1 else 0, NACK_UNKNOWN])))
+        return packet(descriptor_set, out)
+
+    def _command(self, descriptor_set: int, command: int, args: bytes):
+        try:
+            if descriptor_set == BASE_SET and command in _BASE_COMMANDS:
+                return self._base(command)
+            if descriptor_set == DM_SET and command in _DM_COMMANDS:
+                return self._dm(command, args)
+        except (struct.error, IndexError, KeyError, ValueError):
+            return NACK_PARAM, []
+        return NACK_UNKNOWN, []
+
+    def _base(self, command: int):
+        if command == 0x02:
+            self.idle = True
+        elif command == 0x06:
+            self.idle = False
+        elif command == 0x7E:
+            self.formats = {k: list(v) for k, v in self._startup.items()}
+            self.enabled = {k: True for k in DATA_SETS}
+            self.idle = False
+        elif command == 0x03:
+            return ACK_OK, [(0x81, self.info)]
+        elif command == 0x04:
+            return ACK_OK, [(0x82, self._descriptors())]
+        elif command == 0x05:
+            return ACK_OK, [(0x83, struct.pack(">I", 0))]
+        elif command == 0x07:
+            return ACK_OK, [(0x86, b"")]
+        return ACK_OK, []
+
+    def _descriptors(self) -> bytes:
+        pairs = [(BASE_SET, c) for c in _BASE_COMMANDS] + [(DM_SET, c) for c in _DM_COMMANDS]
+        pairs += [(s, f.descriptor) for s, table in DATA_SETS.items() for f in table.values()]
+        return b"".join(struct.pack(">BB", *pair) for pair in pairs)
+
+    def _dm(self, command: int, args: bytes):
+        rate = struct.pack(">H", min(0xFFFF, int(round(self.rate_hz))))
+        if command in (0x06, 0x07):
+            return ACK_OK, [(0x83 if command == 0x06 else 0x84, rate)]
+        if command == 0x0E:
+            if args[0] not in DATA_SETS:
+                return NACK_PARAM, []
+            return ACK_OK, [(0x8E, bytes([args[0]]) + rate)]
+        if command in _LEGACY_FORMAT:
+            descriptor_set = _LEGACY_FORMAT[command]
+            code, entries = self._format(args[0], descriptor_set, args[1:])
+            return code, [(_LEGACY_REPLY[descriptor_set], entries)] if entries is not None else []
+        if command == 0x0F:
+            code, entries = self._format(args[0], args[1], args[2:])
+            return code, [(0x8F, bytes([args[1]]) + entries)] if entries is not None else []
+        if command == 0x11:
+            function, descriptor_set = args[0], args[1]
+            if descriptor_set not in DATA_SETS:
+                return NACK_PARAM, []
+            if function == APPLY:
+                self.enabled[descriptor_set] = bool(args[2])
+            elif function == READ:
+                return ACK_OK, [(0x85, bytes([descriptor_set, int(self.enabled[descriptor_set])]))]
+            return ACK_OK, []
+        # 0x30 device settings: save / load / default of everything configured
+        function = args[0]
+        if function == SAVE:
+            self._saved = {k: list(v) for k, v in self.formats.items()}
+        elif function == LOAD:
+            self.formats = {k: list(v) for k, v in self._saved.items()}
+        elif function == DEFAULT:
+            self.formats = {k: list(v) for k, v in self._startup.items()}
+        else:
+            return NACK_PARAM, []
+        return ACK_OK, []
+
+    def _format(self, function: int, descriptor_set: int, rest: bytes):
+        """Message format command for one set: (ack code, reply entries for READ or None)."""
+        if descriptor_set not in DATA_SETS:
+            return NACK_PARAM, None
+        by_descriptor = {f.descriptor: name for name, f in DATA_SETS[descriptor_set].items()}
+        if function == APPLY:
+            count = rest[0]
+            entries = [struct.unpack_from(">BH", rest, 1 + 3 * j) for j in range(count)]
+            if len(rest) != 1 + 3 * count or any(d not in by_descriptor or rate == 0 for d, rate in entries):
+                return NACK_PARAM, None
+            self.formats[descriptor_set] = [(by_descriptor[d], rate) for d, rate in entries]
+            return ACK_OK, None
+        if function == READ:
+            table = DATA_SETS[descriptor_set]
+            entries = self.formats[descriptor_set]
+            return ACK_OK, bytes([len(entries)]) + b"".join(struct.pack(">BH", table[n].descriptor, d)
+                                                             for n, d in entries)
+        if function == SAVE:
+            self._saved = {**self._saved, descriptor_set: list(self.formats[descriptor_set])}
+        elif function == LOAD:
+            self.formats[descriptor_set] = list(self._saved[descriptor_set])
+        elif function == DEFAULT:
+            self.formats[descriptor_set] = list(self._startup[descriptor_set])
+        else:
+            return NACK_PARAM, None
+        return ACK_OK, None
+
+
+attach_device("microstrain-mip", lambda rate_hz, **options: MipDevice(rate_hz, **options),
+              {"model_name": "device information: model name (default 3DM-GQ7)",
+               "model_number": "device information: model number", "serial_number": "device information",
+               "firmware_version": "device information: firmware version number (default 1100)",
+               "filter_state": f"filter status (0x82, 0x10) state (default {FILTER_STATE_FULL_NAV}: full navigation)"},
+              navigation=True)

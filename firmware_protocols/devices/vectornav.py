@@ -1,0 +1,373 @@
+"""A VectorNav VN-100 / VN-300 on its serial link: registers, commands, and the outputs they configure.
+
+Sources: VectorNav's programming library (vnproglib 1.1 as vendored by dawonn/vectornav: vnenum.h for the
+binary groups, field bits, async modes and the sensor error codes; vn/protocol/uart/types.h for the ASCII
+async types VNOFF 0, VNYPR 1, VNYMR 14, VNIMU 19), the driver sequences in ../shared/specs/devices.md, ArduPilot's
+AP_ExternalAHRS_VectorNav.cpp (resends each command every 500 ms until a reply whose first two terms match
+it; panics on $VNERR, so every command it sends must succeed; matches packets by exact header) and PX4's
+drivers/ins/vectornav (vnproglib: takes any reply as the answer, 1 s timeout).
+
+Commands (`$<body>*<checksum>\\r\\n`; the checksum is the 8-bit XOR of the body as 2 hex digits, a CRC-16
+as 4, or `XX` = unchecked; replies use the command's kind):
+
+    $VNRRG,<reg>              read: `$VNRRG,<reg 2 digits>,<contents>`
+    $VNWRG,<reg>,<values>     write: echoed (`$VNWRG,<reg 2 digits>,<values as sent>`), takes effect at the
+                              next sample
+    $VNASY,0 | 1              pause / resume every asynchronous output (binary and ASCII); echoed
+    $VNWNV                    save the registers (what $VNRST restores); echoed
+    $VNRFS                    restore factory settings (the emulator's start-up configuration); echoed
+    $VNRST                    reset: back to the saved registers, outputs resumed; echoed
+
+Registers: 0 user tag (<= 20 printable characters, writable), 1 model, 2 hardware revision, 3 serial
+number, 4 firmware version (read-only: a write answers error 8), 5 baud rate (9600 ... 921600; the echo
+goes out at the old rate, then the link follows), 6 async ASCII type (0 off, 1 VNYPR, 14 VNYMR, 19 VNIMU; other
+types are error 7: the emulator cannot produce them) and 7 its frequency (1 ... 200 Hz as the device
+allows), both with an optional serial port argument; 30 communication protocol control (7 integers),
+32 synchronization control (9), 35 VPE basic control (4): stored and read back, and register 30's
+SerialChecksum field (1 8-bit, 2 CRC-16; the `checksum` option sets it at start) picks the checksum of the
+asynchronous ASCII sentences (replies always use the command's kind); 75-77 binary outputs 1-3:
+`asyncMode, rateDivisor, outputGroup (hex), groupField (hex) per set group bit`. A binary output is sent at
+sample rate * rateDivisor^-1 scaled by base_rate_hz (the IMU rate the divisor divides: default the scene's
+rate; ArduPilot writes 800/rate for a VN-100, so set base_rate_hz=800 there), asyncMode 0 turns it off. All
+outputs count samples from one counter, so outputs with related divisors fall on the same samples as on the
+device. Fields the emulator has no data for (GPS groups, ECEF quantities, ...) are error 7, never a packet
+with invented layout.
+
+Errors (`$VNERR,<2 digits>`): 03 bad checksum (or none), 04 unknown command, 05 / 06 too few / too many
+parameters, 07 invalid parameter, 08 invalid register (unknown, or read-only on write). Input that is not a
+command line is ignored and counted; a line cut by a new `$` is answered as what it is (usually 03).
+"""
+from __future__ import annotations
+
+from firmware_protocols.base import Samples
+from firmware_protocols.devices.base import Device, LinkRequest, single
+from firmware_protocols.registry import attach_device
+from firmware_protocols.vectornav import (_FIELDS, DEFAULT_FIELDS, DEFAULT_MODEL, AsciiEncoder, BinaryEncoder,
+                                          _layout_from_selection, checksum_text, parse_fields, verify_line)
+
+ERR_CHECKSUM, ERR_COMMAND, ERR_FEW, ERR_MANY, ERR_PARAMETER, ERR_REGISTER = 3, 4, 5, 6, 7, 8
+ASCII_TYPES = {0: None, 1: "VNYPR", 14: "VNYMR", 19: "VNIMU"}
+ASCII_RATES = (1, 2, 4, 5, 10, 20, 25, 40, 50, 100, 200)
+BAUD_RATES = (9600, 19200, 38400, 57600, 115200, 128000, 230400, 460800, 921600)
+_CHECKSUM_CODE = {"xor": 1, "crc": 2}
+_INT_REGISTERS = {30: (0, 0, 0, 0, 1, 0, 1), 32: (3, 0, 0, 0, 0, 0, 0, 100000000, 0), 35: (1, 1, 1, 1)}
+_MAX_LINE = 256
+
+# Presets: what a driver's parser expects before (or instead of) configuring the unit.
+ARDUPILOT_IMU = "common:timestartup,angularrate,accel,imu,magpres"      # FA 01 21 07
+ARDUPILOT_AHRS = "common:timestartup;attitude:yawpitchroll,quaternion,ypru"   # FA 11 01 00 06 01
+PX4_OUTPUT2 = ("time:timestartup;imu:temp,pres,mag;attitude:quaternion,linearaccelned;"
+               "ins:insstatus,poslla,velned,posu,velu")
+PRESETS = {
+    "ardupilot": ({"outputs": ((ARDUPILOT_IMU, 1), (ARDUPILOT_AHRS, 16)), "base_rate_hz": 800.0},
+                  "ArduPilot's VN-100 pair: IMU packet FA 01 21 07 every sample, AHRS packet FA 11 01 00 06 01 "
+                  "at 800/16 = 50 Hz of an 800 Hz unit"),
+    "px4": ({"outputs": ((DEFAULT_FIELDS, 1), (PX4_OUTPUT2, 8))},
+            "PX4's binary outputs 1 (TimeStartup; IMU Accel, AngularRate) and 2 (divider 8: IMU Temp, Pres, Mag; "
+            "Attitude Quaternion, LinearAccelNed; INS InsStatus, PosLla, VelNed, PosU, VelU)"),
+}
+
+
+class _Reject(Exception):
+    """A command the device answers with $VNERR,<code>."""
+
+    def __init__(self, code: int):
+        self.code = code
+
+
+class _BinaryOutput:
+    def __init__(self, mode: int = 0, divisor: int = 1, layout=None):
+        self.mode, self.divisor, self.layout = mode, divisor, layout
+        self.encoder = BinaryEncoder(layout) if layout is not None else None
+
+    def register_text(self) -> str:
+        if self.layout is None:
+            return f"{self.mode},{self.divisor},00"
+        return f"{self.mode},{self.divisor},{self.layout.groups:02X}," + ",".join(f"{m:04X}" for m in self.layout.masks)
+
+
+class VectorNavDevice(Device):
+    def __init__(self, rate_hz: float, fields=None, ascii_type: int = 0, checksum: str = "xor",
+                 model: str = DEFAULT_MODEL, preset: str | None = None, base_rate_hz: float | None = None,
+                 serial_number: int = 100012345, firmware: str = "2.1.0.0", hardware_revision: int = 2,
+                 baud: int = 115200):
+        super().__init__(rate_hz)
+        outputs = ((fields if fields is not None else DEFAULT_FIELDS, 1),) if ascii_type == 0 else ()
+        if preset is not None:
+            if preset not in PRESETS:
+                raise ValueError(f"preset: unknown {preset!r} (known: {', '.join(PRESETS)})")
+            if fields is not None:
+                raise ValueError("preset and fields: give one or the other")
+            settings = PRESETS[preset][0]
+            outputs = settings["outputs"]
+            base_rate_hz = settings.get("base_rate_hz", base_rate_hz) if base_rate_hz is None else base_rate_hz
+        if not str(model).startswith("VN-"):
+            raise ValueError(f"model: VectorNav model numbers begin 'VN-' (drivers check), got {model!r}")
+        if baud not in BAUD_RATES:
+            raise ValueError(f"baud: one of {', '.join(map(str, BAUD_RATES))}, got {baud}")
+        self.base_rate_hz = float(base_rate_hz or rate_hz)
+        if checksum not in _CHECKSUM_CODE:
+            raise ValueError(f"checksum: 'xor' or 'crc', got {checksum!r}")
+        ints = dict(_INT_REGISTERS)
+        ints[30] = ints[30][:4] + (_CHECKSUM_CODE[checksum],) + ints[30][5:]
+        self.fixed = {1: str(model), 2: str(int(hardware_revision)), 3: str(int(serial_number)), 4: str(firmware)}
+        factory = {"user_tag": "", "baud": baud, "ascii_type": ascii_type,
+                   "ascii_rate": min(ASCII_RATES, key=lambda r: abs(r - rate_hz)) if ascii_type else 40,
+                   "ints": ints,
+                   "binary": [(3, divisor, parse_fields(spec)) for spec, divisor in outputs]}
+        self._factory = factory
+        self._saved = factory
+        self._ascii_encoders = {}
+        self._made = []
+        self._apply(factory)
+        self.tick = 0
+        self.paused = False
+        self._buf = bytearray()
+        self.bytes_per_sample = sum(out.layout.packet_size for out in self.binary if out.layout is not None) or (
+            self._ascii_encoder().bytes_per_sample if self.ascii_type else 0)
+
+    # - configuration -
+    def _apply(self, settings: dict) -> None:
+        self.user_tag, self.baud = settings["user_tag"], settings["baud"]
+        self.ascii_type, self.ascii_rate = settings["ascii_type"], settings["ascii_rate"]
+        self.ints = dict(settings["ints"])
+        self.binary = [_BinaryOutput(mode, divisor, layout) for mode, divisor, layout in settings["binary"]]
+        self.binary += [_BinaryOutput() for _ in range(3 - len(self.binary))]
+        self._made += [o.encoder for o in self.binary if o.encoder is not None]
+
+    def _snapshot(self) -> dict:
+        return {"user_tag": self.user_tag, "baud": self.baud, "ascii_type": self.ascii_type,
+                "ascii_rate": self.ascii_rate, "ints": dict(self.ints),
+                "binary": [(o.mode, o.divisor, o.layout) for o in self.binary]}
+
+    def _ascii_encoder(self):
+        # Asynchronous sentences carry the checksum register 30's SerialChecksum field selects (2 = CRC-16).
+        key = (ASCII_TYPES[self.ascii_type], "crc" if self.ints[30][4] == 2 else "xor")
+        if key not in self._ascii_encoders:
+            self._ascii_encoders[key] = AsciiEncoder(*key)
+        return self._ascii_encoders[key]
+
+    def _samples_per(self, divisor: int) -> int:
+        return max(1, int(round(divisor * self.rate_hz / self.base_rate_hz)))
+
+    def encoders(self):
+        # every encoder ever made, so replaced outputs' saturation counts stay in the total
+        return self._made + list(self._ascii_encoders.values())
+
+    # - output -
+    def output(self, samples: Samples, i: int) -> bytes:
+        tick = self.tick
+        self.tick += 1
+        if self.paused:
+            return b""
+        parts = []
+        one = None
+        for out in self.binary:
+            if out.mode and out.encoder is not None and tick % self._samples_per(out.divisor) == 0:
+                one = one or single(samples, i)
+                parts.append(out.encoder.encode(one).data)
+        if self.ascii_type and tick % max(1, int(round(self.rate_hz / self.ascii_rate))) == 0:
+            parts.append(self._ascii_encoder().encode(one or single(samples, i)).data)
+        return b"".join(parts)
+
+    # - input -
+    def _receive(self, data: bytes, now_ns: int) -> list:
+        buf = self._buf
+        buf += data
+        replies = []
+        while True:
+            start = buf.find(b"$")
+            if start < 0:
+                self.stats.ignored_bytes += len(buf)
+                buf.clear()
+                break
+            if start:
+                self.stats.ignored_bytes += start
+                del buf[:start]
+            ends = [x for x in (buf.find(b"\r"), buf.find(b"\n"), buf.find(b"$", 1)) if x > 0]
+            if not ends:
+                if len(buf) > _MAX_LINE:        # a '$' followed by a flood without a line end
+                    self.stats.ignored_bytes += len(buf)
+                    buf.clear()
+                break
+            end = min(ends)
+            line = bytes(buf[:end])
+            del buf[:end]
+            while buf[:1] in (b"\r", b"\n"):
+                del buf[:1]
+            replies.append(self._answer(line[:_MAX_LINE]))
+        return replies
+
+    def _answer(self, line: bytes) -> bytes:
+        body, star, cs = line[1:].partition(b"*")
+        kind = "crc" if len(cs) == 4 else "xor"
+        try:
+            if not star or (cs.upper() != b"XX" and verify_line(line) is None):
+                raise _Reject(ERR_CHECKSUM)
+            try:
+                text = body.decode("ascii")
+            except UnicodeDecodeError:
+                raise _Reject(ERR_COMMAND) from None
+            command, *args = text.split(",")
+            reply = self._command(command, args)
+        except _Reject as reject:
+            self.stats.errors += 1
+            return _sentence(f"VNERR,{reject.code:02d}", kind)
+        self.stats.commands += 1
+        return _sentence(reply, kind)
+
+    def _command(self, command: str, args: list) -> str:
+        if command == "VNRRG":
+            register = self._register_number(args, 1)
+            return f"VNRRG,{register:02d},{self._read(register)}"
+        if command == "VNWRG":
+            register = self._register_number(args, 2)
+            self._write(register, args[1:])
+            return ",".join([f"VNWRG,{register:02d}"] + args[1:])
+        if command == "VNASY":
+            _count(args, 1, 1)
+            if args[0] not in ("0", "1"):
+                raise _Reject(ERR_PARAMETER)
+            self.paused = args[0] == "0"
+            return f"VNASY,{args[0]}"
+        if command in ("VNWNV", "VNRFS", "VNRST"):
+            _count(args, 0, 0)
+            if command == "VNWNV":
+                self._saved = self._snapshot()
+            elif command == "VNRFS":
+                self._saved = self._factory
+                self._apply(self._factory)
+            else:
+                old_baud = self.baud
+                self._apply(self._saved)
+                self.paused = False
+                if self.baud != old_baud:
+                    self.link_requests.append(LinkRequest(baud=self.baud))
+            return command
+        raise _Reject(ERR_COMMAND)
+
+    @staticmethod
+    def _register_number(args: list, least: int) -> int:
+        if len(args) < least or not args[0]:
+            raise _Reject(ERR_FEW)
+        if not args[0].isdigit():
+            raise _Reject(ERR_PARAMETER)
+        return int(args[0])
+
+    def _read(self, register: int) -> str:
+        if register in self.fixed:
+            return self.fixed[register]
+        if register == 0:
+            return self.user_tag
+        if register == 5:
+            return str(self.baud)
+        if register == 6:
+            return str(self.ascii_type)
+        if register == 7:
+            return str(self.ascii_rate)
+        if register in self.ints:
+            return ",".join(map(str, self.ints[register]))
+        if 75 <= register <= 77:
+            return self.binary[register - 75].register_text()
+        raise _Reject(ERR_REGISTER)
+
+    def _write(self, register: int, values: list) -> None:
+        if register in self.fixed or not (register in (0, 5, 6, 7) or register in self.ints or 75 <= register <= 77):
+            raise _Reject(ERR_REGISTER)
+        if register == 0:
+            _count(values, 1, 1)
+            tag = values[0]
+            if len(tag) > 20 or not tag.isprintable():
+                raise _Reject(ERR_PARAMETER)
+            self.user_tag = tag
+        elif register in (5, 6, 7):       # value [, serial port 1 or 2]
+            _count(values, 1, 2)
+            value = _integer(values[0])
+            if len(values) == 2 and values[1] not in ("1", "2"):
+                raise _Reject(ERR_PARAMETER)
+            if register == 5:
+                if value not in BAUD_RATES:
+                    raise _Reject(ERR_PARAMETER)
+                if value != self.baud:
+                    self.baud = value
+                    self.link_requests.append(LinkRequest(baud=value))
+            elif register == 6:
+                if value not in ASCII_TYPES:
+                    raise _Reject(ERR_PARAMETER)
+                self.ascii_type = value
+            else:
+                if value not in ASCII_RATES:
+                    raise _Reject(ERR_PARAMETER)
+                self.ascii_rate = value
+        elif register in self.ints:
+            expected = len(_INT_REGISTERS[register])
+            _count(values, expected, expected)
+            self.ints[register] = tuple(_integer(v) for v in values)
+        else:
+            self.binary[register - 75] = output = self._binary_output(values)
+            if output.encoder is not None:
+                self._made.append(output.encoder)
+
+    @staticmethod
+    def _binary_output(values: list) -> _BinaryOutput:
+        _count(values, 3, 3 + 7)
+        mode, divisor = _integer(values[0]), _integer(values[1])
+        groups = _hex(values[2])
+        if not 0 <= mode <= 3 or not 1 <= divisor <= 65535 or not 0 <= groups <= 0x7F:
+            raise _Reject(ERR_PARAMETER)
+        bits = [b for b in range(8) if groups >> b & 1]
+        _count(values[3:], len(bits), len(bits))
+        if not bits:
+            return _BinaryOutput(mode, divisor)
+        selection = dict(zip(bits, (_hex(v) for v in values[3:])))
+        if any(b not in _FIELDS for b in bits) or any(not 0 < m <= 0xFFFF for m in selection.values()):
+            raise _Reject(ERR_PARAMETER)
+        layout = _layout_from_selection(selection)
+        if layout is None or any(not f.quantities for f in layout.fields):
+            raise _Reject(ERR_PARAMETER)       # a field the emulator has no data for
+        return _BinaryOutput(mode, divisor, layout)
+
+
+def _count(values: list, least: int, most: int) -> None:
+    if len(values) < least:
+        raise _Reject(ERR_FEW)
+    if len(values) > most:
+        raise _Reject(ERR_MANY)
+
+
+def _integer(text: str) -> int:
+    try:
+        value = int(text, 10)
+    except ValueError:
+        raise _Reject(ERR_PARAMETER) from None
+    return value
+
+
+def _hex(text: str) -> int:
+    try:
+        return int(text, 16)
+    except ValueError:
+        raise _Reject(ERR_PARAMETER) from None
+
+
+def _sentence(body: str, kind: str) -> bytes:
+    raw = body.encode("ascii")
+    return b"$" + raw + b"*" + checksum_text(raw, kind) + b"\r\n"
+
+
+_OPTIONS = {
+    "model": f"register 1, the model number (default {DEFAULT_MODEL}; ArduPilot picks AHRS or INS by it)",
+    "preset": "named output set: " + "; ".join(f"{k}: {v[1]}" for k, v in PRESETS.items()),
+    "base_rate_hz": "the IMU rate that binary-output rate divisors divide (default: the scene's rate)",
+    "serial_number": "register 3 (default 100012345)",
+    "firmware": "register 4 (default 2.1.0.0)",
+    "hardware_revision": "register 2 (default 2)",
+    "baud": "register 5 at start (default 115200)",
+}
+_PRESET_LIST = {name: (settings, text) for name, (settings, text) in PRESETS.items()}
+attach_device("vectornav-binary", lambda rate_hz, **options: VectorNavDevice(rate_hz, **options), _OPTIONS,
+              _PRESET_LIST, navigation=True)
+for _type, _name in ((14, "VNYMR"), (19, "VNIMU")):
+    attach_device(f"vectornav-{_name.lower()}",
+                  lambda rate_hz, _t=_type, **options: VectorNavDevice(rate_hz, ascii_type=_t, **options),
+                  {k: v for k, v in _OPTIONS.items() if k != "preset"}, navigation=True)

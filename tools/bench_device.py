@@ -1,0 +1,172 @@
+"""Benchmark: how fast the emulated device answers while it streams, and what answering costs the stream.
+
+Runs `imu-emulator stream` (VectorNav binary, 1 kHz by default) on a pty and plays a driver from this
+process: in runs "quiet" it only reads; in runs "commands" it also sends `$VNRRG,01` every 10 ms and times
+each reply from the write to the read that delivers its last byte. Runs alternate (quiet, commands, quiet,
+...) so that machine load hits both alike. Prints per run: reply latency p50/p99/max, the stream's lateness
+p50/p99 (from the emulator's --stats-json), the emulator's CPU time per second of wall time (from
+/proc/<pid>/stat), and finally the cost of one sample's device output in-process (thread CPU time).
+
+The reader runs in Python on the same machine (under SCHED_FIFO below the emulator's priority unless
+--reader-normal): its own wake-up delay is part of the measured latency, so the figures are upper bounds of
+what a driver in C would see. A third kind of run, "off", streams with
+--device off (encoded ahead in the producer process) as the baseline the sender-side encoding is compared to.
+
+    .venv/bin/python tools/bench_device.py [--rate 1000] [--seconds 5] [--pairs 3]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import select
+import subprocess
+import sys
+import tempfile
+import time
+from functools import reduce
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_stream import SCENE  # noqa: E402  (a 1 s circle, streamed with --loop)
+
+
+# off: --device off, encoded ahead by the producer (the baseline); quiet: the device encodes each sample in
+# the sender, no commands; commands: the same with $VNRRG,01 every 10 ms.
+KINDS = ("off", "quiet", "commands")
+_READER_FIFO = True
+
+
+def command(body: bytes) -> bytes:
+    return b"$" + body + b"*%02X\r\n" % reduce(lambda a, b: a ^ b, body, 0)
+
+
+def cpu_seconds(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def one_run(scene: Path, rate: float, seconds: float, kind: str) -> dict:
+    with_commands = kind == "commands"
+    stats = Path(tempfile.mkstemp(suffix=".json")[1])
+    proc = subprocess.Popen([sys.executable, "-m", "imu_emulator", "stream", str(scene), "--format",
+                             "vectornav-binary", "--to", "pty", "--quiet", "--loop", "--duration", str(seconds + 3),
+                             "--stats-json", str(stats), "--device", "off" if kind == "off" else "on"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, cwd=REPO)
+    path = re.search(r"-> (\S+)", proc.stdout.readline()).group(1)
+    if _READER_FIFO:     # after the fork: the emulator sets its own scheduling
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
+    fd = os.open(path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+    request = command(b"VNRRG,01")
+    marker = re.compile(rb"\$VNRRG,01,[^*]*\*[0-9A-F]{2}\r\n")
+    pending, latencies = [], []
+    buf = bytearray()
+    # Wait for the stream to run before timing anything.
+    while not select.select([fd], [], [], 10)[0]:
+        pass
+    cpu0, wall0 = cpu_seconds(proc.pid), time.monotonic()
+    end = wall0 + seconds
+    next_command = wall0
+    while time.monotonic() < end:
+        now = time.monotonic()
+        if with_commands and now >= next_command:
+            os.write(fd, request)
+            pending.append(time.monotonic_ns())
+            next_command += 0.010
+        timeout = max(0.0, min(next_command if with_commands else end, end) - time.monotonic())
+        if select.select([fd], [], [], timeout)[0]:
+            try:
+                buf += os.read(fd, 65536)
+            except BlockingIOError:
+                continue
+            arrived = time.monotonic_ns()
+            for match in list(marker.finditer(buf)):
+                if pending:
+                    latencies.append((arrived - pending.pop(0)) / 1000)
+            last = None
+            for match in marker.finditer(buf):
+                last = match
+            if last is not None:
+                del buf[:last.end()]
+            elif len(buf) > 1 << 16:
+                del buf[:-256]
+    cpu = (cpu_seconds(proc.pid) - cpu0) / (time.monotonic() - wall0)
+    os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    os.close(fd)
+    proc.send_signal(2)
+    proc.communicate(timeout=30)
+    summary = json.loads(stats.read_text())
+    stats.unlink()
+    late = summary["lateness"]
+    out = {"kind": kind, "late_p50_us": late["p50_us"],
+           "late_p99_us": late["p99_us"], "missed": late["missed"], "cpu_per_s": cpu,
+           "unanswered": len(pending)}
+    if latencies:
+        lat = np.array(latencies)
+        out.update(replies=len(lat), reply_p50_us=float(np.percentile(lat, 50)),
+                   reply_p99_us=float(np.percentile(lat, 99)), reply_max_us=float(lat.max()))
+    return out
+
+
+def output_cost(rate: float, repeats: int = 20000) -> dict:
+    """Thread CPU time of one device.output (the encode a device stream does per sample in the sender)."""
+    import firmware_protocols
+    from firmware_protocols import Samples
+    n = 100
+    samples = Samples(np.arange(n) * 1_000_000, np.random.default_rng(1).normal(size=(n, 3)),
+                      np.random.default_rng(2).normal(size=(n, 3)), quat=np.tile([1.0, 0, 0, 0], (n, 1)),
+                      euler=np.zeros((n, 3)))
+    out = {}
+    for name in ("vectornav-binary", "mavlink-highres", "xsens-mtdata2"):
+        device = firmware_protocols.create_device(name, rate)
+        device.output(samples, 0)
+        t0 = time.thread_time_ns()
+        for k in range(repeats):
+            device.output(samples, k % n)
+        out[name] = (time.thread_time_ns() - t0) / repeats / 1000
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--rate", type=float, default=1000.0)
+    parser.add_argument("--seconds", type=float, default=5.0)
+    parser.add_argument("--pairs", type=int, default=3)
+    parser.add_argument("--reader-normal", action="store_true",
+                        help="read at normal priority (default: SCHED_FIFO 10, below the emulator's 20, so the "
+                             "reader's own wake-up delay under load weighs less in the reply latency)")
+    args = parser.parse_args()
+    global _READER_FIFO
+    _READER_FIFO = not args.reader_normal
+    with tempfile.TemporaryDirectory() as tmp:
+        scene = Path(tmp) / "scene.toml"
+        scene.write_text(SCENE.format(rate=args.rate))
+        runs = []
+        for _ in range(args.pairs):
+            for kind in KINDS:
+                run = one_run(scene, args.rate, args.seconds, kind)
+                runs.append(run)
+                print(json.dumps({k: round(v, 1) if isinstance(v, float) else v for k, v in run.items()}),
+                      flush=True)
+    def listed(sel, key):
+        return ", ".join(f"{r[key]:.0f}" for r in sel)
+
+    for kind in KINDS:
+        sel = [r for r in runs if r["kind"] == kind]
+        line = (f"{kind:9}: stream lateness p99 median of runs {np.median([r['late_p99_us'] for r in sel]):.0f} us "
+                f"(runs: {listed(sel, 'late_p99_us')}), emulator CPU {np.median([r['cpu_per_s'] for r in sel]) * 100:.0f} %")
+        if kind == "commands":
+            line += (f"; reply latency p50 {np.median([r['reply_p50_us'] for r in sel]):.0f} us, p99 "
+                     f"{np.median([r['reply_p99_us'] for r in sel]):.0f} us (median of runs; per run p99: "
+                     f"{listed(sel, 'reply_p99_us')}), unanswered {sum(r['unanswered'] for r in sel)}")
+        print(line)
+    costs = output_cost(args.rate)
+    print("one sample's device output, thread CPU: " + ", ".join(f"{k} {v:.1f} us" for k, v in costs.items()))
+
+
+if __name__ == "__main__":
+    main()
