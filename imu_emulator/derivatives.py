@@ -60,6 +60,7 @@ Angles: differentiate `unwrap_angles(angles)`, never wrapped angles (a jump of 2
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import Callable
 
@@ -257,22 +258,26 @@ def smoothing_condition(n: int, sigma: float) -> float:
 
 
 class _SmoothFit:
-    """A quintic smoothing spline per column (scipy's make_splrep: FITPACK's knot placement, smoothing
-    condition sum of squared residuals <= s). Quintic, so that jerk, which tangent attitude needs, is smooth.
-    The noise is the stated one combined with the rounding of the original values, so that coordinates
-    of ECEF size (6.4e6 m: 2.7e-10 m of rounding) are smoothed even when the user states none."""
+    """A quintic smoothing spline per column (FITPACK's curfit through scipy's UnivariateSpline: knots
+    placed where the residuals need them, smoothing condition sum of squared residuals <= s). Quintic, so
+    that jerk, which tangent attitude needs, is smooth. The noise is the stated one combined with the
+    rounding of the original values, so that coordinates of ECEF size (6.4e6 m: 2.7e-10 m of rounding) are
+    smoothed even when the user states none. A column whose noise is below 1e-12 of its own variation has
+    nothing to smooth and is interpolated (FITPACK would add knots up to one per sample, slowly, to get there)."""
 
     def __init__(self, tau: np.ndarray, y: np.ndarray, noise: float, magnitude: np.ndarray):
-        from scipy.interpolate import make_splrep
+        from scipy.interpolate import UnivariateSpline
         self.splines = []
         for j in range(y.shape[1]):
             sigma = float(np.hypot(noise, rounding_noise(magnitude[j])))
-            try:
-                spline = make_splrep(tau, y[:, j], k=5, s=smoothing_condition(tau.size, sigma))
-            except ValueError:
-                # FITPACK cannot meet an s this small (noise-free data): interpolate, which is what s -> 0 means
-                spline = make_interp_spline(tau, y[:, j], k=5, check_finite=False)
-            self.splines.append(spline)
+            variation = float(np.ptp(y[:, j]))
+            if sigma <= 1e-12 * variation:
+                self.splines.append(make_interp_spline(tau, y[:, j], k=5, check_finite=False))
+                continue
+            with warnings.catch_warnings():
+                # "s too small" and friends: FITPACK then returns its best approximation, which we keep
+                warnings.simplefilter("ignore", UserWarning)
+                self.splines.append(UnivariateSpline(tau, y[:, j], k=5, s=smoothing_condition(tau.size, sigma)))
 
     def evaluate(self, tau_out: np.ndarray, order: int) -> np.ndarray:
         return np.stack([np.column_stack([s(tau_out, nu=d) for s in self.splines]) for d in range(order + 1)])

@@ -327,14 +327,14 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
         attitude = None
     else:
         _no_unknown(att_table, {"mode", "derivative", "attitude_noise_rad"}, "attitude")
+        if log is None and (track is None or (track.euler is None and track.quat is None)):
+            raise SceneError("attitude.mode: 'file' needs a trajectory file with roll, pitch, yaw or qw, qx, qy, "
+                             "qz columns")
         derivative = _check_derivative(att_table.get("derivative", trajectory.derivative), "attitude.derivative")
         noise = _noise(att_table, "attitude_noise_rad", "attitude", derivative)
         if log is not None:
             attitude = SampledData(t=log.attitude.t, values=log.attitude.values, derivative=derivative,
                                    source=f"{log.source}:{log.attitude.name}", kind="quaternion", noise=noise)
-        elif track is None or (track.euler is None and track.quat is None):
-            raise SceneError("attitude.mode: 'file' needs a trajectory file with roll, pitch, yaw or qw, qx, qy, "
-                             "qz columns")
         else:
             attitude = _sampled_from_track(track, "attitude", derivative, noise)
 
