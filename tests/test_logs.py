@@ -106,8 +106,9 @@ EULER = ("0.3*sin(2*pi*0.6*t)", "0.2*cos(2*pi*0.4*t)", "0.8*t")
 T0_UNIX = 1_700_000_000
 
 
-def write_bag(path, times, drop=()):
-    """nav_msgs/Odometry at the given times (seconds after T0_UNIX), serialized by rosbags, framed by mcap."""
+def write_bag(path, times, drop=(), imu_times=None):
+    """nav_msgs/Odometry at the given times (seconds after T0_UNIX), serialized by rosbags, framed by mcap;
+    with imu_times, also a sensor_msgs/msg/Imu topic holding the exact IMU output (sympy twin, ENU, gravity)."""
     from mcap.writer import Writer
     from rosbags.typesys import Stores, get_typestore
     store = get_typestore(Stores.ROS2_HUMBLE)
@@ -141,6 +142,22 @@ def write_bag(path, times, drop=()):
             data = bytes(store.serialize_cdr(msg, "nav_msgs/msg/Odometry"))
             writer.add_message(channel, log_time=(T0_UNIX * 10**9 + ns), data=data,
                                publish_time=(T0_UNIX * 10**9 + ns))
+        if imu_times is not None:
+            Imu = store.types["sensor_msgs/msg/Imu"]
+            imu_def, _ = store.generate_msgdef("sensor_msgs/msg/Imu", ros_version=2)
+            imu_channel = writer.register_channel(
+                "/imu", "cdr", writer.register_schema("sensor_msgs/msg/Imu", "ros2msg", imu_def.encode()))
+            acc, gyro = imu_functions([sp.sympify(e, locals={"t": T}) for e in POSITION],
+                                      [sp.sympify(e, locals={"t": T}) for e in EULER])(imu_times)
+            for t, a, w in zip(imu_times, acc, gyro):
+                ns = int(round(t * 1e9))
+                msg = Imu(header=Header(stamp=Time(sec=T0_UNIX + ns // 10**9, nanosec=ns % 10**9), frame_id="imu"),
+                          orientation=Quat(x=0., y=0., z=0., w=1.), orientation_covariance=np.zeros(9),
+                          angular_velocity=Vector3(x=w[0], y=w[1], z=w[2]), angular_velocity_covariance=np.zeros(9),
+                          linear_acceleration=Vector3(x=a[0], y=a[1], z=a[2]),
+                          linear_acceleration_covariance=np.zeros(9))
+                writer.add_message(imu_channel, log_time=T0_UNIX * 10**9 + ns, publish_time=T0_UNIX * 10**9 + ns,
+                                   data=bytes(store.serialize_cdr(msg, "sensor_msgs/msg/Imu")))
         writer.finish()
 
 
