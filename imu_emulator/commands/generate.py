@@ -10,7 +10,7 @@ from imu_emulator.progress import Progress
 def register(subparsers) -> None:
     gen = subparsers.add_parser("generate", help="write the samples of a scene to CSV or NPZ")
     gen.add_argument("scene", help="scene file (TOML)")
-    gen.add_argument("-o", "--output", required=True, help="output file, .csv or .npz")
+    gen.add_argument("-o", "--output", required=True, help="output file, .csv, .npz or .mcap (ROS 2 bag)")
     gen.add_argument("--truth", action="store_true", help="add position, velocity, attitude and body rates")
     gen.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     gen.add_argument("--block", type=int, default=65536, help=argparse.SUPPRESS)
@@ -18,7 +18,7 @@ def register(subparsers) -> None:
 
 
 def cmd_generate(args) -> int:
-    from imu_emulator.output import Writer, check_path
+    from imu_emulator.output import check_path, open_writer
     from imu_emulator.scene import load_scene
     from imu_emulator.simulation import Simulation
 
@@ -26,8 +26,9 @@ def cmd_generate(args) -> int:
     scene = load_scene(args.scene)
     for warning in scene.warnings:
         print(f"warning: {warning}", file=sys.stderr)
-    sim = Simulation(scene, attitude=False, truth=args.truth)
-    writer = Writer(args.output, scene.imu_names, args.truth)
+    # a ROS Imu message has an orientation field: fill it from the sensor frame's attitude
+    sim = Simulation(scene, attitude=args.output.lower().endswith(".mcap"), truth=args.truth)
+    writer = open_writer(args.output, scene.imu_names, args.truth)
     progress = Progress(args.quiet)
     total = sim.n_samples
     try:

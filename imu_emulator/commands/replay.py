@@ -16,7 +16,7 @@ def register(subparsers) -> None:
     rep.add_argument("--scene", help="TOML with overrides: [scene] rate_hz/t0_s/duration_s, [trajectory] "
                                      "derivative/position_source/attitude_source/max_gap_s/..., [[imu]], [effects]")
     rep.add_argument("--report", metavar="DIR", help="write report.md, report.json and PNG plots here")
-    rep.add_argument("-o", "--output", help="emulated IMU file (.csv or .npz; default DIR/emulated.csv with --report)")
+    rep.add_argument("-o", "--output", help="emulated IMU file (.csv, .npz or .mcap; default DIR/emulated.csv with --report)")
     rep.add_argument("--imu-source", help="the recorded IMU to compare with (topic[:instance], message[:instance])")
     rep.add_argument("--lowpass-hz", type=float, help="cut-off of the low-passed figures (default: 0.4 x the "
                                                      "slower of the log's position and attitude rates)")
@@ -62,7 +62,7 @@ def cmd_replay(args) -> int:
     from imu_emulator import logs
     from imu_emulator.errors import ImuEmulatorError
     from imu_emulator.fidelity import compare
-    from imu_emulator.output import Writer, check_path
+    from imu_emulator.output import check_path, open_writer
     from imu_emulator.simulation import Simulation
 
     log = Path(args.log)
@@ -83,7 +83,7 @@ def cmd_replay(args) -> int:
     for warning in scene.warnings:
         print(f"warning: {warning}", file=sys.stderr)
     out = Simulation(scene).run()
-    writer = Writer(output, scene.imu_names, truth=False)
+    writer = open_writer(output, scene.imu_names, truth=False)
     writer.write(out)
     writer.close()
     if not args.quiet:
