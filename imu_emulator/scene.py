@@ -188,8 +188,8 @@ def _sampled_from_track(track, columns: str, derivative: str, noise: float = 0.0
     return SampledData(t=track.t, values=values, derivative=derivative, source=str(track.source), noise=noise)
 
 
-def _noise(table: Mapping, key: str, where: str, derivative: str) -> float:
-    """The stated noise of sampled data; the smoothing method needs it, the others ignore it."""
+def _noise(table: Mapping, key: str, where: str, derivative: str, warnings: list[str]) -> float:
+    """The stated noise of sampled data; the smoothing method needs it, the others ignore it (with a warning)."""
     noise = _number(table, key, where, default=None)
     if noise is None:
         if derivative == "smooth":
@@ -197,6 +197,8 @@ def _noise(table: Mapping, key: str, where: str, derivative: str) -> float:
         return 0.0
     if noise < 0:
         raise SceneError(f"{where}.{key}: must be >= 0, got {noise}")
+    if derivative != "smooth":
+        warnings.append(f"{where}.{key} is ignored: only derivative 'smooth' uses it (this one is {derivative!r})")
     return noise
 
 
@@ -302,7 +304,7 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
         log = _load_log(traj_table, "trajectory", base_dir)
         trajectory = SampledData(t=log.position.t, values=log.position.values, derivative=derivative,
                                  source=f"{log.source}:{log.position.name}",
-                                 noise=_noise(traj_table, "position_noise_m", "trajectory", derivative))
+                                 noise=_noise(traj_table, "position_noise_m", "trajectory", derivative, warnings))
         warnings.extend(log.notes)
     elif "file" in traj_table or "t" in traj_table:
         _no_unknown(traj_table, {"file", "derivative", "t", "position", "euler", "quat", "position_noise_m"},
@@ -310,7 +312,7 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
         derivative = _check_derivative(traj_table.get("derivative", DEFAULT_DERIVATIVE), "trajectory.derivative")
         track = _load_track(traj_table, "trajectory", base_dir)
         trajectory = _sampled_from_track(track, "position", derivative,
-                                         _noise(traj_table, "position_noise_m", "trajectory", derivative))
+                                         _noise(traj_table, "position_noise_m", "trajectory", derivative, warnings))
     else:
         _no_unknown(traj_table, {"x", "y", "z"}, "trajectory")
         trajectory = _expressions(traj_table, ("x", "y", "z"), "trajectory", params)
@@ -331,7 +333,7 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
             raise SceneError("attitude.mode: 'file' needs a trajectory file with roll, pitch, yaw or qw, qx, qy, "
                              "qz columns")
         derivative = _check_derivative(att_table.get("derivative", trajectory.derivative), "attitude.derivative")
-        noise = _noise(att_table, "attitude_noise_rad", "attitude", derivative)
+        noise = _noise(att_table, "attitude_noise_rad", "attitude", derivative, warnings)
         if log is not None:
             attitude = SampledData(t=log.attitude.t, values=log.attitude.values, derivative=derivative,
                                    source=f"{log.source}:{log.attitude.name}", kind="quaternion", noise=noise)

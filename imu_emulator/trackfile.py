@@ -134,19 +134,16 @@ def _check_names(where: str, names: list[str], kind: str) -> bool:
     if unknown:
         raise DataError(f"{where}: unexpected {kind} '{unknown[0]}' (expected t, x, y, z and optionally "
                         "roll, pitch, yaw or qw, qx, qy, qz)")
-    angles = [c for c in EULER_COLUMNS if c in seen]
-    if angles and len(angles) < 3:
-        absent = [c for c in EULER_COLUMNS if c not in seen]
-        raise DataError(f"{where}: roll, pitch and yaw come together: found {', '.join(angles)} "
-                        f"but not {', '.join(absent)}")
-    return bool(angles)
+    return _all_or_none(where, seen, EULER_COLUMNS)
 
 
-def _has_quaternion(where: str, names) -> bool:
-    present = [c for c in QUAT_COLUMNS if c in names]
-    if present and len(present) < 4:
-        absent = [c for c in QUAT_COLUMNS if c not in names]
-        raise DataError(f"{where}: qw, qx, qy and qz come together: found {', '.join(present)} "
+def _all_or_none(where: str, names, group: tuple[str, ...]) -> bool:
+    """Whether the columns of `group` (roll, pitch, yaw; qw, qx, qy, qz) are present: all or none of them."""
+    present = [c for c in group if c in names]
+    if present and len(present) < len(group):
+        absent = [c for c in group if c not in names]
+        together = ", ".join(group[:-1]) + " and " + group[-1]
+        raise DataError(f"{where}: {together} come together: found {', '.join(present)} "
                         f"but not {', '.join(absent)}")
     return bool(present)
 
@@ -194,7 +191,7 @@ def _load_csv(path: Path) -> Track:
         source=path,
         lines=lines,
     )
-    if _has_quaternion(where, names):
+    if _all_or_none(where, names, QUAT_COLUMNS):
         track = _with_quaternions(track, np.column_stack([col[c] for c in QUAT_COLUMNS]))
     return track
 
@@ -253,7 +250,7 @@ def _load_npz(path: Path) -> Track:
         return np.column_stack([_numeric(where, c, arrays[c], (n,)) for c in names])
 
     track = _from_arrays(t, stacked(POSITION_COLUMNS), stacked(EULER_COLUMNS) if has_euler else None, path)
-    if _has_quaternion(where, list(arrays)):
+    if _all_or_none(where, list(arrays), QUAT_COLUMNS):
         track = _with_quaternions(track, stacked(QUAT_COLUMNS))
     return track
 

@@ -51,3 +51,12 @@ def test_smooth_needs_the_noise_and_refuses_negative_noise(tmp_path):
     scene = scene_from_dict({**base, "trajectory": {"file": str(path), "derivative": "smooth",
                                                     "position_noise_m": 0.01}})
     assert scene.trajectory.noise == 0.01
+
+
+def test_noise_with_another_method_is_ignored_with_a_warning(tmp_path):
+    path = tmp_path / "track.csv"
+    path.write_text("t,x,y,z\n" + "\n".join(f"{i / 10},{i},0,0" for i in range(20)) + "\n")
+    scene = scene_from_dict({"scene": {"rate_hz": 10}, "imu": [{}],
+                             "trajectory": {"file": str(path), "position_noise_m": 0.01}})
+    assert scene.warnings == ("trajectory.position_noise_m is ignored: only derivative 'smooth' uses it "
+                              "(this one is 'spline5c')",)
