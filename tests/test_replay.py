@@ -72,3 +72,11 @@ def test_replay_errors(argv, match, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and match in err and err.count("\n") == 1
+
+
+def test_example_replay_scene_loads_the_shipped_log():
+    from imu_emulator import load_scene
+    scene = load_scene(Path(__file__).resolve().parents[1] / "examples" / "replay_px4.toml")
+    assert scene.frame == "NED" and scene.trajectory.derivative == "smooth" and scene.attitude.kind == "quaternion"
+    assert scene.trajectory.source.endswith("sample_appended_multiple.ulg:vehicle_local_position")
+    assert scene.attitude.source.endswith("sample_appended_multiple.ulg:vehicle_attitude:0")
