@@ -60,6 +60,7 @@ Angles: differentiate `unwrap_angles(angles)`, never wrapped angles (a jump of 2
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import Callable
 
@@ -76,6 +77,8 @@ METHODS: dict[str, str] = {
     "spline3": "cubic interpolating spline (not-a-knot), as most simulators: jerk piecewise constant",
     "spline5c": "quintic interpolating spline clamped at the ends: first and second derivatives there from a "
                 "degree-9 least-squares polynomial through the 14 end samples; ends about as accurate as inside",
+    "smooth": "quintic smoothing spline for noisy data (logs): residual sum of squares = n * sigma^2 of the stated "
+              "noise (position_noise_m, attitude_noise_rad), plus the float rounding of the data's magnitude",
 }
 
 # Relative tolerance on the step for central4/6 (see module docstring) and on output times past the ends.
@@ -106,6 +109,7 @@ _SPECS = {
     "spline5": _MethodSpec("spline", 5),
     "spline3": _MethodSpec("spline", 3),
     "spline5c": _MethodSpec("spline", 5, end_fit=(9, 14)),
+    "smooth": _MethodSpec("smooth", 5),
 }
 assert _SPECS.keys() == METHODS.keys()
 
@@ -241,6 +245,44 @@ def _clamped_ends(tau: np.ndarray, y: np.ndarray, degree: int, points: int):
     return left, right
 
 
+def rounding_noise(magnitude: float) -> float:
+    """Standard deviation of the rounding of a float64 of this magnitude: a uniform error over one ulp."""
+    return float(np.spacing(abs(magnitude))) / np.sqrt(12.0)
+
+
+def smoothing_condition(n: int, sigma: float) -> float:
+    """FITPACK's s for n samples of noise sigma: the expected residual sum of squares n*sigma^2, raised by one
+    standard deviation of that chi-square sum (sqrt(2n) sigma^2). Below n*sigma^2 the fit starts to follow
+    the noise (knots multiply, acceleration errors grow a hundredfold: see tools/smoothing_scan.py)."""
+    return (n + np.sqrt(2.0 * n)) * sigma ** 2
+
+
+class _SmoothFit:
+    """A quintic smoothing spline per column (FITPACK's curfit through scipy's UnivariateSpline: knots
+    placed where the residuals need them, smoothing condition sum of squared residuals <= s). Quintic, so
+    that jerk, which tangent attitude needs, is smooth. The noise is the stated one combined with the
+    rounding of the original values, so that coordinates of ECEF size (6.4e6 m: 2.7e-10 m of rounding) are
+    smoothed even when the user states none. A column whose noise is below 1e-12 of its own variation has
+    nothing to smooth and is interpolated (FITPACK would add knots up to one per sample, slowly, to get there)."""
+
+    def __init__(self, tau: np.ndarray, y: np.ndarray, noise: float, magnitude: np.ndarray):
+        from scipy.interpolate import UnivariateSpline
+        self.splines = []
+        for j in range(y.shape[1]):
+            sigma = float(np.hypot(noise, rounding_noise(magnitude[j])))
+            variation = float(np.ptp(y[:, j]))
+            if sigma <= 1e-12 * variation:
+                self.splines.append(make_interp_spline(tau, y[:, j], k=5, check_finite=False))
+                continue
+            with warnings.catch_warnings():
+                # "s too small" and friends: FITPACK then returns its best approximation, which we keep
+                warnings.simplefilter("ignore", UserWarning)
+                self.splines.append(UnivariateSpline(tau, y[:, j], k=5, s=smoothing_condition(tau.size, sigma)))
+
+    def evaluate(self, tau_out: np.ndarray, order: int) -> np.ndarray:
+        return np.stack([np.column_stack([s(tau_out, nu=d) for s in self.splines]) for d in range(order + 1)])
+
+
 class _SplineFit:
     def __init__(self, tau: np.ndarray, y: np.ndarray, spec: _MethodSpec):
         bc = "not-a-knot" if spec.end_fit is None else _clamped_ends(tau, y, *spec.end_fit)
@@ -288,7 +330,7 @@ class SampledSeries:
 
     def __init__(self, t, values, method: str, max_order: int, name: str = "sampled series",
                  columns: tuple[str, ...] | None = None,
-                 row_label: Callable[[int], str] = _default_row_label):
+                 row_label: Callable[[int], str] = _default_row_label, noise: float = 0.0):
         if method not in _SPECS:
             raise DataError(f"{name}: unknown derivative method '{method}' (known: {', '.join(METHODS)})")
         spec = _SPECS[method]
@@ -321,8 +363,12 @@ class SampledSeries:
             self._require_uniform(tau, h, t, row_label)
         self._origin = y[0].copy()
         local = y - self._origin
-        self._fit = _SplineFit(tau, local, spec) if spec.kind == "spline" else \
-            _GridFit(tau, local, spec, max_order, h)
+        if spec.kind == "smooth":
+            self._fit = _SmoothFit(tau, local, noise, np.abs(y).max(axis=0))
+        elif spec.kind == "spline":
+            self._fit = _SplineFit(tau, local, spec)
+        else:
+            self._fit = _GridFit(tau, local, spec, max_order, h)
 
     def _require_uniform(self, tau, h, t, row_label) -> None:
         steps = np.diff(tau)

@@ -102,7 +102,8 @@ def generate_source(scene: Scene, attitude: bool, truth: bool) -> str:
     body = ["k = k0 + j", f"t = {scene.t0_s!r} + k * {1.0 / scene.rate_hz!r}"]
     body += [f"{name} = phases[jj, {i}]" for i, name in enumerate(motion.phase_vars)]
     body += motion.lines
-    body += _rotation_and_rates()
+    if not motion.rotation_given:
+        body += _rotation_and_rates()
     body += ["fnx = ax", "fny = ay", "fnz = az"]
     for name in effects:
         if "nav" in EFFECT_CODE[name]:
@@ -199,7 +200,7 @@ def scene_key(scene: Scene, attitude: bool, truth: bool) -> str:
     def describe(part):
         if isinstance(part, Expressions):
             return ["expr", list(part.texts)]
-        return ["sampled"] if part is not None else None
+        return ["sampled", part.kind] if part is not None else None
     spec = {
         "rate": scene.rate_hz, "t0": scene.t0_s, "frame": scene.frame, "g": scene.gravity_mps2,
         "params": sorted(scene.params.items()), "trajectory": describe(scene.trajectory),

@@ -33,6 +33,7 @@ class MotionCode:
     needs_jerk: bool
     phase_lines: list[str] = field(default_factory=list)  # computes sph_i, cph_i from k; run as a stage
     phase_vars: list[str] = field(default_factory=list)   # of its own so samples overlap in the CPU
+    rotation_given: bool = False  # the lines define R (r00..r22), w and alpha themselves (quaternion input)
 
 
 def _phase_constants(coef, offset, scene: Scene, index: int) -> dict[str, float]:
@@ -168,6 +169,36 @@ def sampled_attitude_lines(angles: bool) -> list[str]:
     return lines
 
 
+def sampled_quaternion_lines(angles: bool) -> list[str]:
+    """R, omega_B and alpha_B straight from a fitted quaternion curve p(t) (att[0..2]: p, p', p''), never
+    through Euler angles. p need not be unit: R is that of p/|p|, and with q = p/|p| the kinematic equation
+    q' = q (0, w)/2 gives w = 2 vec(p* p')/|p|^2 and, differentiated, alpha = (2 vec(p* p'') - 2 (p.p') w)/|p|^2
+    (vec(p'* p') vanishes: it is the scalar |p'|^2)."""
+    lines = [f"{c}{i} = att[{d}, j, {i}]" for d, c in enumerate("pde") for i in range(4)]
+    lines += [
+        "n2 = p0 * p0 + p1 * p1 + p2 * p2 + p3 * p3",
+        "inv = 1.0 / n2",
+        "r00 = (p0 * p0 + p1 * p1 - p2 * p2 - p3 * p3) * inv",
+        "r01 = 2.0 * (p1 * p2 - p0 * p3) * inv", "r02 = 2.0 * (p1 * p3 + p0 * p2) * inv",
+        "r10 = 2.0 * (p1 * p2 + p0 * p3) * inv",
+        "r11 = (p0 * p0 - p1 * p1 + p2 * p2 - p3 * p3) * inv", "r12 = 2.0 * (p2 * p3 - p0 * p1) * inv",
+        "r20 = 2.0 * (p1 * p3 - p0 * p2) * inv", "r21 = 2.0 * (p2 * p3 + p0 * p1) * inv",
+        "r22 = (p0 * p0 - p1 * p1 - p2 * p2 + p3 * p3) * inv",
+        # vec(p* x) = p0 x_v - x0 p_v - p_v cross x_v
+        "wx = 2.0 * (p0 * d1 - d0 * p1 - (p2 * d3 - p3 * d2)) * inv",
+        "wy = 2.0 * (p0 * d2 - d0 * p2 - (p3 * d1 - p1 * d3)) * inv",
+        "wz = 2.0 * (p0 * d3 - d0 * p3 - (p1 * d2 - p2 * d1)) * inv",
+        "pd = 2.0 * (p0 * d0 + p1 * d1 + p2 * d2 + p3 * d3) * inv",
+        "alx = 2.0 * (p0 * e1 - e0 * p1 - (p2 * e3 - p3 * e2)) * inv - pd * wx",
+        "aly = 2.0 * (p0 * e2 - e0 * p2 - (p3 * e1 - p1 * e3)) * inv - pd * wy",
+        "alz = 2.0 * (p0 * e3 - e0 * p3 - (p1 * e2 - p2 * e1)) * inv - pd * wz",
+    ]
+    if angles:
+        lines += ["roll = math.atan2(r21, r22)", "pitch = math.atan2(-r20, math.hypot(r21, r22))",
+                  "yaw = math.atan2(r10, r00)"]
+    return lines
+
+
 def tangent_lines(angles: bool) -> list[str]:
     """Attitude along the velocity (roll 0), from v, a, j, without trig: cos/sin come from v itself.
 
@@ -242,15 +273,20 @@ def motion_code(scene: Scene, angles: bool) -> MotionCode:
     else:
         lines += sampled_translational_lines(order)
     attitude_lines: list[str] = []
+    rotation_given = False
     if tangent:
         attitude_lines = tangent_lines(angles)
     elif isinstance(scene.attitude, Expressions):
         symbolic_parts += attitude_parts(scene.attitude, scene, angles)
+    elif scene.attitude.kind == "quaternion":
+        attitude_lines = sampled_quaternion_lines(angles)
+        rotation_given = True
     else:
         assert isinstance(scene.attitude, SampledData)
         attitude_lines = sampled_attitude_lines(angles)
     if not symbolic_parts:
-        return MotionCode(lines=lines + attitude_lines, constants={}, needs_jerk=tangent)
+        return MotionCode(lines=lines + attitude_lines, constants={}, needs_jerk=tangent,
+                          rotation_given=rotation_given)
     sym = _symbolic(symbolic_parts, scene)
     return MotionCode(lines=sym.lines + lines + attitude_lines, constants=sym.constants, needs_jerk=tangent,
-                      phase_lines=sym.phase_lines, phase_vars=sym.phase_vars)
+                      phase_lines=sym.phase_lines, phase_vars=sym.phase_vars, rotation_given=rotation_given)

@@ -12,7 +12,7 @@ from imu_emulator.samples import SampleBlock, concatenate
 
 CSV_COLUMNS = ("t", "imu", "ax", "ay", "az", "gx", "gy", "gz")
 TRUTH_COLUMNS = ("px", "py", "pz", "vx", "vy", "vz", "roll", "pitch", "yaw", "wbx", "wby", "wbz")
-SUFFIXES = (".csv", ".npz")
+SUFFIXES = (".csv", ".npz", ".mcap")
 
 
 def check_path(path: str | Path) -> Path:
@@ -81,3 +81,11 @@ class Writer(FinishOnExit):
             np.savez(self._out.file, **arrays)
         except OSError as exc:
             raise output_error(self.path, exc) from None
+
+
+def open_writer(path: str | Path, imu_names, truth: bool):
+    """The writer for the output file's suffix: .mcap is a ROS 2 bag (imu_emulator.output_mcap)."""
+    if Path(path).suffix.lower() == ".mcap":
+        from imu_emulator.output_mcap import McapWriter
+        return McapWriter(check_path(path), imu_names, truth)
+    return Writer(path, imu_names, truth)

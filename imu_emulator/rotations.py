@@ -128,3 +128,14 @@ def quat_to_euler(q) -> np.ndarray:
 def quat_multiply(a, b) -> np.ndarray:
     a, b = np.broadcast_arrays(np.asarray(a, float), np.asarray(b, float))
     return np.stack(quat_multiply_scalar(*np.moveaxis(a, -1, 0), *np.moveaxis(b, -1, 0)), axis=-1)
+
+
+def continuous_quaternions(q) -> np.ndarray:
+    """(n, 4) unit quaternions with the sign of each chosen so that neighbours are on the same sheet of the
+    double cover (q and -q are one attitude): logs flip signs freely (PX4 keeps w >= 0, so its sign jumps
+    as a rotation passes 180 degrees), and a curve fitted through both signs would pass near zero."""
+    q = np.asarray(q, dtype=float)
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    flips = np.concatenate([[False], np.einsum("ij,ij->i", q[1:], q[:-1]) < 0])
+    sign = np.where(np.cumsum(flips) % 2 == 1, -1.0, 1.0)
+    return q * sign[:, None]

@@ -46,6 +46,8 @@ class SampledData:
     values: np.ndarray = field(repr=False)   # (n, 3)
     derivative: str
     source: str                               # file path or "<array>", for messages
+    kind: str = "euler"                       # attitude only: "euler" (roll, pitch, yaw) or "quaternion" (qw..qz)
+    noise: float = 0.0                        # stated noise (m or rad, 1 sigma), for derivative = "smooth"
 
 
 @dataclass(frozen=True)
@@ -178,9 +180,69 @@ def _shape(table: Mapping, where: str) -> Expressions:
     return Expressions((f"{cx!r} + {r!r}*cos(2*pi*{f!r}*t)", f"{cy!r} + {r!r}*sin(2*pi*{f!r}*t)", repr(cz + h)))
 
 
-def _sampled_from_track(track, columns: str, derivative: str) -> SampledData:
+def _sampled_from_track(track, columns: str, derivative: str, noise: float = 0.0) -> SampledData:
+    if columns == "attitude" and track.quat is not None:
+        return SampledData(t=track.t, values=track.quat, derivative=derivative, source=str(track.source),
+                           kind="quaternion", noise=noise)
     values = track.position if columns == "position" else track.euler
-    return SampledData(t=track.t, values=values, derivative=derivative, source=str(track.source))
+    return SampledData(t=track.t, values=values, derivative=derivative, source=str(track.source), noise=noise)
+
+
+def _noise(table: Mapping, key: str, where: str, derivative: str, warnings: list[str]) -> float:
+    """The stated noise of sampled data; the smoothing method needs it, the others ignore it (with a warning)."""
+    noise = _number(table, key, where, default=None)
+    if noise is None:
+        if derivative == "smooth":
+            raise SceneError(f"{where}.{key}: derivative 'smooth' needs the data's noise (1 sigma)")
+        return 0.0
+    if noise < 0:
+        raise SceneError(f"{where}.{key}: must be >= 0, got {noise}")
+    if derivative != "smooth":
+        warnings.append(f"{where}.{key} is ignored: only derivative 'smooth' uses it (this one is {derivative!r})")
+    return noise
+
+
+LOG_KEYS = {"position_source", "attitude_source", "max_gap_s"}
+
+
+def _is_log(table: Mapping) -> bool:
+    from imu_emulator.logs import log_kind
+    return isinstance(table.get("file"), str) and log_kind(table["file"]) is not None
+
+
+def _load_log(table: Mapping, where: str, base_dir: Path):
+    from imu_emulator import logs
+    path = Path(table["file"])
+    full = path if path.is_absolute() else base_dir / path
+    if not full.exists():
+        raise SceneError(f"{where}.file: no such file: {full}")
+    for key in ("position_source", "attitude_source"):
+        if key in table and not isinstance(table[key], str):
+            raise SceneError(f"{where}.{key}: expected a topic or message name, got {table[key]!r}")
+    try:
+        return logs.load_log(full, table.get("position_source"), table.get("attitude_source"))
+    except DataError as exc:
+        raise SceneError(f"{where}.file: {exc}") from None
+
+
+def _log_window(motion, trajectory: SampledData, attitude: SampledData | None, t0: float, duration: float,
+                rate: float, max_gap: float | None):
+    """Crop the log's series to the replayed span (gaps outside it do not matter) and check them there."""
+    from dataclasses import replace
+
+    from imu_emulator import logs
+    t_hi = t0 + duration - 1.0 / rate
+    parts = []
+    for part, s in ((trajectory, motion.position), (attitude, motion.attitude)):
+        if part is None:
+            parts.append(None)
+            continue
+        try:
+            cropped = logs.window(s, t0, t_hi, motion.source.name, max_gap)
+        except DataError as exc:
+            raise SceneError(f"trajectory.file: {exc}") from None
+        parts.append(replace(part, t=cropped.t, values=cropped.values))
+    return parts
 
 
 def _check_derivative(name: str, where: str) -> str:
@@ -207,7 +269,8 @@ def _load_track(table: Mapping, where: str, base_dir: Path):
     try:
         return trackfile.track_from_arrays(np.asarray(table["t"], float), np.asarray(table["position"], float),
                                            None if table.get("euler") is None else np.asarray(table["euler"], float),
-                                           source="<arrays>")
+                                           source="<arrays>",
+                                           quat=None if table.get("quat") is None else np.asarray(table["quat"], float))
     except DataError as exc:
         raise SceneError(f"{where}: {exc}") from None
 
@@ -232,19 +295,31 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
     if not traj_table:
         raise SceneError("trajectory: missing (give x/y/z expressions, a shape, or a file)")
     track = None
+    log = None
     if "shape" in traj_table:
         trajectory = _shape(traj_table, "trajectory")
+    elif _is_log(traj_table):
+        _no_unknown(traj_table, {"file", "derivative", "position_noise_m"} | LOG_KEYS, "trajectory")
+        derivative = _check_derivative(traj_table.get("derivative", DEFAULT_DERIVATIVE), "trajectory.derivative")
+        log = _load_log(traj_table, "trajectory", base_dir)
+        trajectory = SampledData(t=log.position.t, values=log.position.values, derivative=derivative,
+                                 source=f"{log.source}:{log.position.name}",
+                                 noise=_noise(traj_table, "position_noise_m", "trajectory", derivative, warnings))
+        warnings.extend(log.notes)
     elif "file" in traj_table or "t" in traj_table:
-        _no_unknown(traj_table, {"file", "derivative", "t", "position", "euler"}, "trajectory")
+        _no_unknown(traj_table, {"file", "derivative", "t", "position", "euler", "quat", "position_noise_m"},
+                    "trajectory")
         derivative = _check_derivative(traj_table.get("derivative", DEFAULT_DERIVATIVE), "trajectory.derivative")
         track = _load_track(traj_table, "trajectory", base_dir)
-        trajectory = _sampled_from_track(track, "position", derivative)
+        trajectory = _sampled_from_track(track, "position", derivative,
+                                         _noise(traj_table, "position_noise_m", "trajectory", derivative, warnings))
     else:
         _no_unknown(traj_table, {"x", "y", "z"}, "trajectory")
         trajectory = _expressions(traj_table, ("x", "y", "z"), "trajectory", params)
 
     att_table = _table(raw, "attitude")
-    mode = _choice(att_table, "mode", "attitude", ATTITUDE_MODES, "euler")
+    # a log's attitude is what a replay is for: it is the default there
+    mode = _choice(att_table, "mode", "attitude", ATTITUDE_MODES, "file" if log is not None else "euler")
     heading = math.radians(_number(att_table, "initial_heading_deg", "attitude", default=0.0))
     if mode == "euler":
         _no_unknown(att_table, {"mode", "roll", "pitch", "yaw"}, "attitude")
@@ -253,14 +328,37 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
         _no_unknown(att_table, {"mode", "initial_heading_deg"}, "attitude")
         attitude = None
     else:
-        _no_unknown(att_table, {"mode", "derivative"}, "attitude")
-        if track is None or track.euler is None:
-            raise SceneError("attitude.mode: 'file' needs a trajectory file with roll, pitch, yaw columns")
+        _no_unknown(att_table, {"mode", "derivative", "attitude_noise_rad"}, "attitude")
+        if log is None and (track is None or (track.euler is None and track.quat is None)):
+            raise SceneError("attitude.mode: 'file' needs a trajectory file with roll, pitch, yaw or qw, qx, qy, "
+                             "qz columns")
         derivative = _check_derivative(att_table.get("derivative", trajectory.derivative), "attitude.derivative")
-        attitude = _sampled_from_track(track, "euler", derivative)
+        noise = _noise(att_table, "attitude_noise_rad", "attitude", derivative, warnings)
+        if log is not None:
+            attitude = SampledData(t=log.attitude.t, values=log.attitude.values, derivative=derivative,
+                                   source=f"{log.source}:{log.attitude.name}", kind="quaternion", noise=noise)
+        else:
+            attitude = _sampled_from_track(track, "attitude", derivative, noise)
 
     # Sampled input sets the time span unless the scene says otherwise.
-    if isinstance(trajectory, SampledData):
+    if log is not None:
+        if "frame" in head and frame != log.frame:
+            raise SceneError(f"scene.frame: {log.source.name} is a {log.frame} log; this scene says {frame!r} "
+                             f"(leave frame out, or set it to {log.frame!r})")
+        frame = log.frame
+        # both series must cover the replay; their spans may differ (separate topics)
+        spans = [trajectory] + ([attitude] if isinstance(attitude, SampledData) else [])
+        first, last = max(float(p.t[0]) for p in spans), min(float(p.t[-1]) for p in spans)
+        t0 = _number(head, "t0_s", "scene", default=first)
+        duration = _number(head, "duration_s", "scene", default=last - first, positive=True)
+        if t0 < first or t0 + duration - 1.0 / rate > last + 1e-9:
+            raise SceneError(f"scene.duration_s: {t0}..{t0 + duration} s reaches beyond the data "
+                             f"({first}..{last} s, where both position and attitude are logged)")
+        max_gap = _number(traj_table, "max_gap_s", "trajectory", default=None, positive=True)
+        trajectory, window_att = _log_window(log, trajectory, attitude if isinstance(attitude, SampledData)
+                                             else None, t0, duration, rate, max_gap)
+        attitude = window_att if window_att is not None else attitude
+    elif isinstance(trajectory, SampledData):
         span = float(trajectory.t[-1] - trajectory.t[0])
         t0 = _number(head, "t0_s", "scene", default=float(trajectory.t[0]))
         duration = _number(head, "duration_s", "scene", default=span, positive=True)

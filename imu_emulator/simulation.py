@@ -33,8 +33,16 @@ class Simulation:
         if not isinstance(part, SampledData):
             return None
         from imu_emulator.derivatives import SampledSeries, unwrap_angles
-        values = unwrap_angles(part.values) if where == "attitude" else part.values
-        return SampledSeries(part.t, values, part.derivative, max_order=order, name=part.source), order
+        from imu_emulator.rotations import continuous_quaternions
+        values, noise = part.values, part.noise
+        if where == "attitude":
+            if part.kind == "quaternion":
+                # a rotation by a small angle e moves the unit quaternion by e/2
+                values, noise = continuous_quaternions(part.values), part.noise / 2.0
+            else:
+                values = unwrap_angles(part.values)
+        return SampledSeries(part.t, values, part.derivative, max_order=order, name=part.source,
+                             noise=noise), order
 
     @property
     def n_samples(self) -> int:

@@ -7,7 +7,10 @@ second time base) is a column the user believed we used.  Blank lines and lines 
 skipped; error messages give line numbers as an editor shows them (the header is usually line 1, so the
 first data row is row 2).
 
-NPZ: arrays t, x, y, z [, roll, pitch, yaw] (each (n,)), or t, position (n, 3) [, euler (n, 3)] with euler
+Attitude may instead be given as a quaternion, columns qw, qx, qy, qz (all four; scalar first, body ->
+navigation, any norm and either sign: it is normalised and made sign-continuous before differentiation).
+
+NPZ: arrays t, x, y, z [, roll, pitch, yaw | qw, qx, qy, qz] (each (n,)), or t, position (n, 3) [, euler (n, 3)] with euler
 columns roll, pitch, yaw.  Error messages give 0-based sample indices there, as numpy shows them.
 
 Arrays built in code go through `track_from_arrays`, with the same checks.  `Track.position_series` and
@@ -16,6 +19,7 @@ file's rows and columns.
 """
 from __future__ import annotations
 
+import dataclasses
 import warnings
 import zipfile
 from dataclasses import dataclass
@@ -28,6 +32,7 @@ from imu_emulator.errors import DataError
 
 POSITION_COLUMNS = ("x", "y", "z")
 EULER_COLUMNS = ("roll", "pitch", "yaw")
+QUAT_COLUMNS = ("qw", "qx", "qy", "qz")     # attitude body -> navigation, scalar first, any sign
 
 
 @dataclass(frozen=True)
@@ -37,6 +42,7 @@ class Track:
     euler: np.ndarray | None        # (n, 3) roll, pitch, yaw in radians, as given (not unwrapped), or None
     source: Path
     lines: np.ndarray | None = None  # (n,) line number in the file of each sample (CSV), else None
+    quat: np.ndarray | None = None   # (n, 4) qw, qx, qy, qz as given (normalised later), or None
 
     def row_label(self, i: int) -> str:
         """How error messages point at sample i: a line of the CSV, an index of the NPZ arrays."""
@@ -66,9 +72,27 @@ def load_track(path) -> Track:
     return _validated(track)
 
 
-def track_from_arrays(t, position, euler=None, source: str = "<arrays>") -> Track:
-    """A Track from arrays built in code: t (n,), position (n, 3), euler (n, 3) or None; checked like a file."""
-    return _validated(_from_arrays(t, position, euler, Path(source)))
+def track_from_arrays(t, position, euler=None, source: str = "<arrays>", quat=None) -> Track:
+    """A Track from arrays built in code: t (n,), position (n, 3), euler (n, 3) or None, quat (n, 4) or None;
+    checked like a file."""
+    track = _from_arrays(t, position, euler, Path(source))
+    if quat is not None:
+        track = _with_quaternions(track, _numeric(track.source.name, "quat", np.asarray(quat), (track.t.size, 4)))
+    return _validated(track)
+
+
+def _with_quaternions(track: Track, quat: np.ndarray) -> Track:
+    """The track with attitude quaternions; a quaternion of (nearly) zero norm is no attitude at all."""
+    if track.euler is not None:
+        raise DataError(f"{track.source.name}: give the attitude either as roll, pitch, yaw or as qw, qx, qy, "
+                        "qz, not both")
+    norm = np.linalg.norm(quat, axis=1)
+    small = ~(norm > 1e-6)      # NaN counts as small here; validate_samples names NaN cells first
+    if small.any() and np.isfinite(quat).all():
+        i = int(np.argmax(small))
+        raise DataError(f"{track.source.name}: {track.row_label(i)}: quaternion norm {float(norm[i])!r} "
+                        "is not a rotation")
+    return dataclasses.replace(track, quat=quat)
 
 
 def _from_arrays(t, position, euler, source: Path) -> Track:
@@ -86,8 +110,10 @@ def _validated(track: Track) -> Track:
     """The track, checked for finite values and increasing time, with its arrays made read-only."""
     values = track.position if track.euler is None else np.hstack([track.position, track.euler])
     columns = POSITION_COLUMNS + (EULER_COLUMNS if track.euler is not None else ())
+    if track.quat is not None:
+        values, columns = np.hstack([values, track.quat]), columns + QUAT_COLUMNS
     validate_samples(track.t, values, where=track.source.name, columns=columns, row_label=track.row_label)
-    for a in (track.t, track.position, track.euler):
+    for a in (track.t, track.position, track.euler, track.quat):
         if a is not None:
             a.flags.writeable = False
     return track
@@ -104,16 +130,22 @@ def _check_names(where: str, names: list[str], kind: str) -> bool:
     if missing:
         raise DataError(f"{where}: missing {kind}{'s' if len(missing) > 1 else ''} {', '.join(missing)} "
                         "(need t, x, y, z)")
-    unknown = [c for c in names if c not in ("t",) + POSITION_COLUMNS + EULER_COLUMNS]
+    unknown = [c for c in names if c not in ("t",) + POSITION_COLUMNS + EULER_COLUMNS + QUAT_COLUMNS]
     if unknown:
         raise DataError(f"{where}: unexpected {kind} '{unknown[0]}' (expected t, x, y, z and optionally "
-                        "roll, pitch, yaw)")
-    angles = [c for c in EULER_COLUMNS if c in seen]
-    if angles and len(angles) < 3:
-        absent = [c for c in EULER_COLUMNS if c not in seen]
-        raise DataError(f"{where}: roll, pitch and yaw come together: found {', '.join(angles)} "
+                        "roll, pitch, yaw or qw, qx, qy, qz)")
+    return _all_or_none(where, seen, EULER_COLUMNS)
+
+
+def _all_or_none(where: str, names, group: tuple[str, ...]) -> bool:
+    """Whether the columns of `group` (roll, pitch, yaw; qw, qx, qy, qz) are present: all or none of them."""
+    present = [c for c in group if c in names]
+    if present and len(present) < len(group):
+        absent = [c for c in group if c not in names]
+        together = ", ".join(group[:-1]) + " and " + group[-1]
+        raise DataError(f"{where}: {together} come together: found {', '.join(present)} "
                         f"but not {', '.join(absent)}")
-    return bool(angles)
+    return bool(present)
 
 
 def read_csv_rows(path: Path, expected_header: str) -> tuple[int, str, list[str], list[tuple[int, str]]]:
@@ -152,13 +184,16 @@ def _load_csv(path: Path) -> Track:
     lines = np.array([number for number, _ in data])
     table = _parse_table(where, names, data)
     col = {name: table[:, j] for j, name in enumerate(names)}
-    return Track(
+    track = Track(
         t=col["t"].copy(),
         position=np.column_stack([col[c] for c in POSITION_COLUMNS]),
         euler=np.column_stack([col[c] for c in EULER_COLUMNS]) if has_euler else None,
         source=path,
         lines=lines,
     )
+    if _all_or_none(where, names, QUAT_COLUMNS):
+        track = _with_quaternions(track, np.column_stack([col[c] for c in QUAT_COLUMNS]))
+    return track
 
 
 def _parse(lines: list[str], width: int) -> np.ndarray | None:
@@ -214,7 +249,10 @@ def _load_npz(path: Path) -> Track:
     def stacked(names):
         return np.column_stack([_numeric(where, c, arrays[c], (n,)) for c in names])
 
-    return _from_arrays(t, stacked(POSITION_COLUMNS), stacked(EULER_COLUMNS) if has_euler else None, path)
+    track = _from_arrays(t, stacked(POSITION_COLUMNS), stacked(EULER_COLUMNS) if has_euler else None, path)
+    if _all_or_none(where, list(arrays), QUAT_COLUMNS):
+        track = _with_quaternions(track, stacked(QUAT_COLUMNS))
+    return track
 
 
 def _numeric(where: str, name: str, a: np.ndarray, shape: tuple[int, ...] | None) -> np.ndarray:

@@ -51,7 +51,7 @@ CASES = [
     ('name = "imu0"', 'name = "imu0"\n[[imu]]\nname = "imu0"', ["imu[1].name", "used twice"]),
     ('[[imu]]\nname = "imu0"', '', ["imu", "at least one"]),
     ('z = "0"', 'z = "0"\n[attitude]\nmode = "sideways"', ["attitude.mode", "'tangent'"]),
-    ('z = "0"', 'z = "0"\n[attitude]\nmode = "file"', ["attitude.mode", "roll, pitch, yaw columns"]),
+    ('z = "0"', 'z = "0"\n[attitude]\nmode = "file"', ["attitude.mode", "roll, pitch, yaw or qw, qx, qy, qz columns"]),
     ('[trajectory]\nx = "cos(2*pi*f*t)"\ny = "sin(2*pi*f*t)"\nz = "0"',
      '[trajectory]\nfile = "nowhere.csv"', ["trajectory.file", "no such file"]),
     ('[trajectory]\nx = "cos(2*pi*f*t)"\ny = "sin(2*pi*f*t)"\nz = "0"',

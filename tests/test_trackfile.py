@@ -107,7 +107,7 @@ def test_yaw_through_pi_is_unwrapped_for_differentiation(tmp_path):
     ("t,x,y\n0,0,0\n", r"^track\.csv: missing column z \(need t, x, y, z\)$"),
     ("x,y,z\n0,0,0\n", r"^track\.csv: missing column t "),
     ("t,x,y,z,speed\n0,0,0,0,1\n", r"^track\.csv: unexpected column 'speed' \(expected t, x, y, z and "
-                                   r"optionally roll, pitch, yaw\)$"),
+                                   r"optionally roll, pitch, yaw or qw, qx, qy, qz\)$"),
     ("t,x,y,z,yaw\n0,0,0,0,1\n", r"^track\.csv: roll, pitch and yaw come together: found yaw but not "
                                  r"roll, pitch$"),
     ("t,x,y,z,x\n0,0,0,0,1\n", r"^track\.csv: column 'x' appears twice$"),

@@ -50,6 +50,11 @@ OUTPUT_HZ = 1000.0
 DURATION = 5.0
 RATES = (50, 100, 200, 1000)
 SAMPLED_METHODS = ("gradient", "central4", "central6", "spline3", "spline5", "spline5c")
+# noisy input (logs): position noise of known sigma, fixed seed; smooth is told the sigma
+NOISE_M = (1e-3, 1e-2)
+NOISY_RATES = (10, 50, 100)
+NOISY_METHODS = ("spline3", "spline5c", "smooth")
+NOISY_MOTIONS = ("helix", "aggressive")
 ECEF = 6.4e6
 
 V_TURN = 20.0                      # m/s; a 1 g coordinated turn: radius V^2/g
@@ -105,17 +110,23 @@ class Motion:
                            else {"mode": "euler", **dict(zip(("roll", "pitch", "yaw"), self.euler))})
         return scene_from_dict(raw)
 
-    def sampled_scene(self, rate, method):
+    def sampled_scene(self, rate, method, noise=None):
         t = np.arange(int(round(DURATION * rate)) + 1) / rate
         raw = self.base()
-        traj = {"t": t, "position": self.position(t), "derivative": method}
+        position = self.position(t)
+        if noise:
+            position = position + np.random.default_rng(rate).normal(0.0, noise, position.shape)
+        traj = {"t": t, "position": position, "derivative": method}
+        if noise is not None and method == "smooth":
+            traj["position_noise_m"] = noise
         if self.euler is None:
             raw["attitude"] = {"mode": "tangent"}
         else:
             e = self.euler_samples(t)
             e[:, 2] = wrap_angles(e[:, 2])          # as a logger writes yaw; the simulation unwraps
             traj["euler"] = e
-            raw["attitude"] = {"mode": "file"}
+            # only the positions are noisy: the angles keep the default method
+            raw["attitude"] = {"mode": "file", "derivative": DEFAULT_DERIVATIVE if method == "smooth" else method}
         raw["trajectory"] = traj
         return scene_from_dict(raw)
 
@@ -204,6 +215,15 @@ def run_study(rates, repeats, fresh_compile_each, log=print):
         for rate in rates:
             for method in SAMPLED_METHODS:
                 simulate("sampled", lambda: motion.sampled_scene(rate, method), rate, method)
+        if name.startswith("circle") and 1000 in rates:
+            # the rounding floor of ECEF-sized coordinates, and what smoothing with no stated noise does to it
+            simulate("sampled", lambda: motion.sampled_scene(1000, "smooth", noise=0.0), 1000, "smooth")
+        if name in NOISY_MOTIONS:
+            for sigma in NOISE_M:
+                for rate in NOISY_RATES:
+                    for method in NOISY_METHODS:
+                        simulate(f"noisy {sigma * 1e3:g} mm", lambda: motion.sampled_scene(rate, method, sigma),
+                                 rate, method)
 
         if motion.euler is not None:
             for rate in rates:
@@ -278,7 +298,30 @@ def goal_lines(rows):
                               f"/{row['w_max_ends'] / row['w_max_interior']:.1f}")
         if ratios:
             lines.append(f"- {method} ends/interior (max f / max ω): " + ", ".join(ratios))
+    origin = _find(rows, "circle", "spline5c", 1000)
+    for method in ("spline5c", "smooth"):
+        row = _find(rows, "circle_ecef", method, 1000)
+        if origin and row:
+            lines.append(f"- ECEF circle, 1 kHz input, {method}: interior max |f error| {row['f_max_interior']:.2e} "
+                         f"m/s² vs the circle at the origin (spline5c) {origin['f_max_interior']:.2e}: "
+                         f"{row['f_max_interior'] / origin['f_max_interior']:.0f}× (goal ≤ 10×)")
+    for row in rows:
+        if row["source"].startswith("noisy") and row["method"] == "smooth":
+            best = min((r for r in rows if r["source"] == row["source"] and r["motion"] == row["motion"]
+                        and r["input_hz"] == row["input_hz"]), key=lambda r: r["f_rms_interior"])
+            other = _find_source(rows, row["motion"], "spline5c", row["input_hz"], row["source"])
+            lines.append(f"- {row['motion']}, {row['source']} at {row['input_hz']} Hz: smooth f rms "
+                         f"{row['f_rms_interior']:.2e}, ω rms {row['w_rms_interior']:.2e}; spline5c f rms "
+                         f"{other['f_rms_interior']:.2e} ({other['f_rms_interior'] / row['f_rms_interior']:.0f}×); "
+                         f"best: {best['method']}")
     return lines
+
+
+def _find_source(rows, motion, method, rate, source):
+    for row in rows:
+        if (row["motion"], row["method"], row["input_hz"], row["source"]) == (motion, method, rate, source):
+            return row
+    return None
 
 
 def write_markdown(rows, path, command, elapsed):

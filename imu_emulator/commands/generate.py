@@ -13,7 +13,7 @@ from imu_emulator.progress import Progress
 def register(subparsers) -> None:
     gen = subparsers.add_parser("generate", help="write the samples of a scene to CSV or NPZ")
     gen.add_argument("scene", help="scene file (TOML)")
-    gen.add_argument("-o", "--output", required=True, help="output file, .csv or .npz")
+    gen.add_argument("-o", "--output", required=True, help="output file, .csv, .npz or .mcap (ROS 2 bag)")
     gen.add_argument("--truth", action="store_true", help="add position, velocity, attitude and body rates")
     gen.add_argument("--quiet", action="store_true", help="no progress bar or summary (warnings still show)")
     gen.add_argument("--block", type=number(1, 10_000_000, integer=True), default=65536, help=argparse.SUPPRESS)
@@ -21,7 +21,7 @@ def register(subparsers) -> None:
 
 
 def cmd_generate(args) -> int:
-    from imu_emulator.output import Writer, check_path
+    from imu_emulator.output import check_path, open_writer
     from imu_emulator.simulation import Simulation
 
     check_path(args.output)
@@ -29,8 +29,9 @@ def cmd_generate(args) -> int:
     stopped = _exit_cleanly_on(signal.SIGTERM, signal.SIGHUP, signal.SIGINT)
     # The output file is created before the kernel compiles: an unwritable path fails at once. It appears
     # at its path only when every block is written (a failed run leaves nothing behind).
-    with Writer(args.output, scene.imu_names, args.truth) as writer:
-        sim = Simulation(scene, attitude=False, truth=args.truth)
+    with open_writer(args.output, scene.imu_names, args.truth) as writer:
+        # a ROS Imu message has an orientation field: fill it from the sensor frame's attitude
+        sim = Simulation(scene, attitude=args.output.lower().endswith(".mcap"), truth=args.truth)
         progress = Progress(args.quiet)
         total = sim.n_samples
         try:

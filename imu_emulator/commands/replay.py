@@ -1,0 +1,159 @@
+"""`imu-emulator replay LOG`: a flight log's motion through the emulator, and a fidelity report against the
+IMU the vehicle itself recorded (PX4 `sensor_combined`, ArduPilot `IMU`, a ROS 2 `sensor_msgs/msg/Imu`)."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+AXES = "xyz"
+
+
+def register(subparsers) -> None:
+    rep = subparsers.add_parser("replay", help="replay a flight log (.ulg, .bin, .mcap) and compare with its own IMU")
+    rep.add_argument("log", help="flight log: PX4 ULog .ulg, ArduPilot DataFlash .bin, ROS 2 bag .mcap")
+    rep.add_argument("--scene", help="TOML with overrides: [scene] rate_hz/t0_s/duration_s, [trajectory] "
+                                     "derivative/position_source/attitude_source/max_gap_s/..., [[imu]], [effects]")
+    rep.add_argument("--report", metavar="DIR", help="write report.md, report.json and PNG plots here")
+    rep.add_argument("-o", "--output", help="emulated IMU file (.csv, .npz or .mcap; default DIR/emulated.csv with --report)")
+    rep.add_argument("--imu-source", help="the recorded IMU to compare with (topic[:instance], message[:instance])")
+    rep.add_argument("--lowpass-hz", type=float, help="cut-off of the low-passed figures (default: 0.4 x the "
+                                                     "slower of the log's position and attitude rates)")
+    rep.add_argument("--quiet", action="store_true", help="no summary on stderr")
+    rep.set_defaults(func=cmd_replay)
+
+
+def _merge(base: dict, extra: dict) -> dict:
+    out = dict(base)
+    for key, value in extra.items():
+        out[key] = _merge(out[key], value) if isinstance(value, dict) and isinstance(out.get(key), dict) else value
+    return out
+
+
+def build_scene(log: Path, overrides: dict, recorded_rate_hz: float | None):
+    """The replay scene: the log as trajectory and attitude, gravity on, one IMU at the reference point, output
+    at the recorded IMU's rate (or 100 Hz); anything in `overrides` wins, except the log file itself."""
+    from imu_emulator.scene import from_dict
+    base = {"scene": {"rate_hz": round(recorded_rate_hz or 100.0, 6)},
+            "trajectory": {}, "imu": [{"name": "imu0"}], "effects": {"gravity": True}}
+    raw = _merge(base, overrides)
+    raw["trajectory"] = dict(raw["trajectory"], file=str(log.resolve()))
+    return from_dict(raw, base_dir=log.parent, path=str(log))
+
+
+def _read_overrides(path: str | None) -> dict:
+    if path is None:
+        return {}
+    import tomllib
+
+    from imu_emulator.errors import SceneError
+    try:
+        return tomllib.loads(Path(path).read_text())
+    except OSError as exc:
+        raise SceneError(f"{path}: cannot read: {exc.strerror}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{path}: not valid TOML: {exc}") from None
+
+
+def cmd_replay(args) -> int:
+    import numpy as np
+
+    from imu_emulator import logs
+    from imu_emulator.errors import ImuEmulatorError
+    from imu_emulator.fidelity import compare
+    from imu_emulator.output import check_path, open_writer
+    from imu_emulator.simulation import Simulation
+
+    log = Path(args.log)
+    if not log.exists():
+        raise ImuEmulatorError(f"{log}: no such file")
+    if logs.log_kind(log) is None:
+        raise ImuEmulatorError(f"{log}: not a flight log (expected {', '.join(logs.SUFFIXES)})")
+    if args.report is None and args.output is None:
+        raise ImuEmulatorError("replay: give --report DIR, -o FILE or both")
+    report = Path(args.report) if args.report else None
+    if report is not None:
+        report.mkdir(parents=True, exist_ok=True)
+    output = check_path(args.output or report / "emulated.csv")
+
+    recorded = logs.load_recorded_imu(log, args.imu_source)
+    rate = 1.0 / float(np.median(np.diff(recorded.t))) if recorded is not None else None
+    scene = build_scene(log, _read_overrides(args.scene), rate)
+    for warning in scene.warnings:
+        print(f"warning: {warning}", file=sys.stderr)
+    out = Simulation(scene).run()
+    writer = open_writer(output, scene.imu_names, truth=False)
+    writer.write(out)
+    writer.close()
+    if not args.quiet:
+        print(f"wrote {out.t_s.size} samples x {len(scene.imus)} IMU(s) to {output}", file=sys.stderr)
+    if report is None:
+        return 0
+    if recorded is None:
+        (report / "report.md").write_text(f"# Replay of {log.name}\n\nThe log holds no recorded IMU to compare "
+                                          "with; only the emulated IMU was written.\n")
+        print(f"note: {log.name} holds no recorded IMU; no fidelity figures", file=sys.stderr)
+        return 0
+    lowpass_hz = args.lowpass_hz or 0.4 * min(_rate(scene.trajectory.t), _rate(scene.attitude.t))
+    results = [compare(q, out.t_s, getattr(out, q)[0], recorded.t, getattr(recorded, q), scene.rate_hz, lowpass_hz)
+               for q in ("gyro", "accel")]
+    figures = {"log": str(log), "recorded_imu": recorded.name, "emulated_imu": scene.imu_names[0],
+               "position_source": scene.trajectory.source, "attitude_source": scene.attitude.source,
+               "derivative": scene.trajectory.derivative, "rate_hz": scene.rate_hz, "frame": scene.frame,
+               "comparisons": [r.figures() for r in results]}
+    (report / "report.json").write_text(json.dumps(figures, indent=2) + "\n")
+    (report / "report.md").write_text(_markdown(figures))
+    _plots(results, report)
+    if not args.quiet:
+        print(_markdown(figures), file=sys.stderr)
+    return 0
+
+
+def _rate(t) -> float:
+    import numpy as np
+    return 1.0 / float(np.median(np.diff(t)))
+
+
+def _markdown(figures: dict) -> str:
+    lines = [f"# Replay of {Path(figures['log']).name}", "",
+             f"Recorded IMU `{figures['recorded_imu']}` against the emulated `{figures['emulated_imu']}` "
+             f"({figures['rate_hz']:g} Hz, {figures['frame']}, derivative `{figures['derivative']}`; position from "
+             f"`{figures['position_source']}`, attitude from `{figures['attitude_source']}`).", ""]
+    for c in figures["comparisons"]:
+        unit = "rad/s" if c["quantity"] == "gyro" else "m/s²"
+        lines += [f"## {c['quantity']} ({unit}), {c['samples']} samples; time offset {c['time_offset_s'] * 1e3:+.1f} ms "
+                  f"(recorded lags emulated when positive); low-pass {c['lowpass_hz']:.2g} Hz", "",
+                  "| axis | correlation | correlation low-passed | RMS difference | RMS difference low-passed | bias |",
+                  "|---|---|---|---|---|---|"]
+        for axis, a in zip(AXES, c["axes"]):
+            lines.append(f"| {axis} | {a['correlation']:.3f} | {a['correlation_lowpassed']:.3f} | "
+                         f"{a['rms_difference']:.3g} | {a['rms_difference_lowpassed']:.3g} | {a['bias']:+.3g} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _plots(results, report: Path) -> None:
+    try:
+        import matplotlib
+    except ImportError:
+        print("note: matplotlib is not installed (pip install 'imu-emulator[plot]'); no plots", file=sys.stderr)
+        return
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    for r in results:
+        unit = "rad/s" if r.quantity == "gyro" else "m/s²"
+        fig, axes = plt.subplots(3, 2, figsize=(12, 8), sharex=True)
+        t = r.t - r.t[0]
+        for i in range(3):
+            axes[i, 0].plot(t, r.recorded[:, i], lw=0.6, label="recorded")
+            axes[i, 0].plot(t, r.emulated[:, i], lw=0.8, label="emulated")
+            axes[i, 0].set_ylabel(f"{r.quantity} {AXES[i]} ({unit})")
+            axes[i, 1].plot(t, r.recorded[:, i] - r.emulated[:, i], lw=0.6, color="C3")
+            axes[i, 1].set_ylabel("recorded - emulated")
+        axes[0, 0].legend(loc="upper right")
+        axes[2, 0].set_xlabel("s from start")
+        axes[2, 1].set_xlabel("s from start")
+        fig.tight_layout()
+        fig.savefig(report / f"{r.quantity}.png", dpi=110)
+        plt.close(fig)
