@@ -474,9 +474,10 @@ class Streamer:
             self._check_budgets()
             for stream in self.streams:
                 stream.open()
+            self._warm_up()
+            # Announced once warm: a driver that opens the port at once finds a device that answers.
             for stream in self.streams:
                 print(f"{stream.config.imu} {stream.config.format} -> {stream.transport.describe()}", flush=True)
-            self._warm_up()
             paced = self.options.speed > 0
             start = time.monotonic_ns() + _LEAD_NS
             if self.options.epoch_time:
