@@ -23,6 +23,16 @@ CONSTANTS = {"pi": math.pi, "e": math.e}
 TIME = "t"
 
 _BINOPS = {ast.Add: "+", ast.Sub: "-", ast.Mult: "*", ast.Div: "/", ast.Pow: "**"}
+
+# Bounds on one expression. Python's parser and sympy recurse, and the third derivative of a product of
+# n time-dependent factors has ~n^3/6 terms (10 sine factors: 1.4 s in sympy, 20: 46 s), so size is capped
+# well above any motion written by hand, below what takes more than a few seconds to differentiate.
+MAX_LENGTH = 1000          # characters
+MAX_DEPTH = 64             # nesting of operators and calls
+MAX_CALL_DEPTH = 8         # functions of functions (sin(sin(...)))
+MAX_NODES = 256            # operators, calls, names and numbers
+MAX_TIME_USES = 16         # occurrences of t
+MAX_EXPONENT = 1000        # |p| in (expression of t)**p
 _UNARY = {ast.USub: "-", ast.UAdd: "+"}
 
 
@@ -33,20 +43,28 @@ def _describe(node: ast.AST) -> str:
         return type(node).__name__
 
 
-def check(text: str, where: str, names: set[str]) -> ast.Expression:
-    """Parse `text` and verify it uses only numbers, the given names, t, pi, e and whitelisted functions.
+def check(text: str, where: str, names: Mapping[str, float] | set[str]) -> ast.Expression:
+    """Parse `text` and verify it uses only numbers, the given names, t, pi, e and whitelisted functions,
+    within the size bounds above.
 
-    `where` names the scene key (e.g. "trajectory.x") so the error points at it.
+    `where` names the scene key (e.g. "trajectory.x") so the error points at it. With the params' values
+    (a mapping), every time-free part is also evaluated once: complex, undefined or overflowing constants
+    are refused here, by key and part, instead of reaching sympy or the kernel.
     """
     if not isinstance(text, (str, int, float)) or isinstance(text, bool):
         raise SceneError(f"{where}: expected an expression string or a number, got {type(text).__name__}")
     source = str(text)
     if "^" in source:
         raise SceneError(f"{where}: '^' is not a power operator here; write '**' (in {source!r})")
+    if len(source) > MAX_LENGTH:
+        raise SceneError(f"{where}: expression is {len(source)} characters long; the limit is {MAX_LENGTH}")
     try:
         tree = ast.parse(source.strip(), mode="eval")
     except SyntaxError as exc:
         raise SceneError(f"{where}: syntax error in {source!r} at column {exc.offset}: {exc.msg}") from None
+    except (RecursionError, MemoryError, ValueError):
+        raise SceneError(f"{where}: expression nested too deeply to parse (limit: depth {MAX_DEPTH})") from None
+    _check_size(tree, where)
     called = {id(n.func) for n in ast.walk(tree) if isinstance(n, ast.Call)}
     for node in ast.walk(tree):
         if isinstance(node, (ast.Expression, ast.Load)) or type(node) in _BINOPS or type(node) in _UNARY:
@@ -77,7 +95,91 @@ def check(text: str, where: str, names: set[str]) -> ast.Expression:
                 raise SceneError(f"{where}: {node.func.id} takes {wanted} argument(s), got {len(node.args)}")
         else:
             raise SceneError(f"{where}: not allowed in an expression: {_describe(node)!r} in {source!r}")
+    if isinstance(names, Mapping):
+        _constant_parts(tree.body, names, where, source)
     return tree
+
+
+def _check_size(tree: ast.Expression, where: str) -> None:
+    """Depth, call nesting, node and t counts within the MAX_* bounds (iteratively: nothing recurses
+    before the depth is known to be small)."""
+    nodes = uses = 0
+    stack = [(tree.body, 1, 0)]
+    while stack:
+        node, depth, calls = stack.pop()
+        nodes += 1
+        calls += isinstance(node, ast.Call)
+        uses += isinstance(node, ast.Name) and node.id == TIME
+        for limit, value, what in ((MAX_DEPTH, depth, "nested"), (MAX_CALL_DEPTH, calls, "function calls nested"),
+                                   (MAX_NODES, nodes, "terms"), (MAX_TIME_USES, uses, "uses of t")):
+            if value > limit:
+                raise SceneError(f"{where}: expression too large: more than {limit} {what} "
+                                 f"(limit {limit}; split it with [params] or simplify it)")
+        stack.extend((child, depth + 1, calls) for child in ast.iter_child_nodes(node)
+                     if not isinstance(child, (ast.expr_context, ast.operator, ast.unaryop)))
+
+
+def _float_call(fn: str, args):
+    return ({"abs": abs}.get(fn) or getattr(math, fn))(*args)
+
+
+def _constant_parts(node: ast.AST, values: Mapping[str, float], where: str, source: str):
+    """The float value of a time-free subtree, None where it depends on t; SceneError for a part that is
+    complex, outside a function's domain, a division by zero or beyond float range. Floats only: an exact
+    power such as 10**10**10 is refused in microseconds instead of being computed by sympy for ever."""
+    def fail(part, reason):
+        raise SceneError(f"{where}: {_describe(part)} {reason} (in {source!r})")
+
+    if isinstance(node, ast.Constant):
+        try:
+            value = float(node.value)
+        except OverflowError:
+            fail(node, "is beyond the float range")
+        if not math.isfinite(value):
+            fail(node, "is beyond the float range")
+        return value
+    if isinstance(node, ast.Name):
+        if node.id == TIME:
+            return None
+        return values[node.id] if node.id in values else CONSTANTS.get(node.id)
+    if isinstance(node, ast.UnaryOp):
+        operand = _constant_parts(node.operand, values, where, source)
+        return None if operand is None else (-operand if isinstance(node.op, ast.USub) else operand)
+    if isinstance(node, ast.BinOp):
+        a = _constant_parts(node.left, values, where, source)
+        b = _constant_parts(node.right, values, where, source)
+        if isinstance(node.op, ast.Pow):
+            if a is not None and a < 0 and b is None:
+                fail(node, "is complex for most t (a negative base to a power that depends on t)")
+            if a is None and b is not None and abs(b) > MAX_EXPONENT:
+                fail(node, f"has an exponent beyond +-{MAX_EXPONENT}")
+        if a is None or b is None:
+            return None
+        op = type(node.op)
+        try:
+            value = a + b if op is ast.Add else a - b if op is ast.Sub else a * b if op is ast.Mult \
+                else a / b if op is ast.Div else a ** b
+        except ZeroDivisionError:
+            fail(node, "divides by zero")
+        except OverflowError:
+            fail(node, "is beyond the float range")
+    elif isinstance(node, ast.Call):
+        args = [_constant_parts(arg, values, where, source) for arg in node.args]
+        if any(arg is None for arg in args):
+            return None
+        try:
+            value = _float_call(node.func.id, args)
+        except ValueError:
+            fail(node, f"is outside the domain of {node.func.id} (no real value)")
+        except OverflowError:
+            fail(node, "is beyond the float range")
+    else:  # pragma: no cover - check() admits no other node
+        raise AssertionError(f"unchecked node {node!r}")
+    if isinstance(value, complex):
+        fail(node, "is complex (a negative number to a fractional power)")
+    if not math.isfinite(value):
+        fail(node, "is beyond the float range")
+    return value
 
 
 def uses_time(tree: ast.Expression) -> bool:
@@ -111,12 +213,12 @@ def _fold(tree: ast.Expression, constant, name, call):
 
 def evaluate_constant(tree: ast.Expression, values: Mapping[str, float], where: str) -> float:
     """Evaluate a time-free expression numerically (for params defined from other params)."""
-    def call(fn, args):
-        return ({"abs": abs}.get(fn) or getattr(math, fn))(*args)
     try:
-        value = float(_fold(tree, float, lambda n: values[n] if n in values else CONSTANTS[n], call))
+        value = _fold(tree, float, lambda n: values[n] if n in values else CONSTANTS[n], _float_call)
     except (ArithmeticError, ValueError) as exc:
         raise SceneError(f"{where}: {exc}") from None
+    if isinstance(value, complex):
+        raise SceneError(f"{where}: evaluates to the complex number {value}")
     if not math.isfinite(value):
         raise SceneError(f"{where}: evaluates to {value}")
     return value
@@ -137,3 +239,14 @@ def to_sympy(tree: ast.Expression, params: Mapping[str, float], t_symbol):
         return sympy.pi if n == "pi" else sympy.E
 
     return _fold(tree, constant, name, lambda fn, args: getattr(sympy, FUNCTIONS[fn][0])(*args))
+
+
+def check_symbolic(expr, where: str, source: str, what: str = "its value") -> None:
+    """SceneError when sympy's form of an expression (or a derivative: `what`) is not a real finite
+    function of t: complex (I), undefined (nan) or infinite (oo, zoo) -- e.g. tan(pi/2) = zoo, or t/(t - t).
+    Such a value would otherwise be printed into the kernel as a name numba does not know."""
+    import sympy
+    for atom, reason in ((sympy.zoo, "is infinite"), (sympy.oo, "is infinite"), (sympy.nan, "is undefined"),
+                         (sympy.I, "is complex")):
+        if expr.has(atom) or expr.has(-atom):
+            raise SceneError(f"{where}: {what} {reason} for every t (in {source!r})")

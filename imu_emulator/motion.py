@@ -23,6 +23,7 @@ from imu_emulator import expressions
 from imu_emulator.scene import Expressions, SampledData, Scene
 
 AXES = "xyz"
+DERIVATIVE_NAMES = ("its value", "its first derivative", "its second derivative", "its third derivative")
 ANGLES = ("r", "p", "y")       # roll, pitch, yaw suffixes
 
 
@@ -97,10 +98,24 @@ def _reduce_phases(exprs, t, scene: Scene):
     return out, constants, len(slots)
 
 
+def _kernel_printer_class():
+    from sympy.printing.pycode import PythonCodePrinter
+
+    class KernelPrinter(PythonCodePrinter):
+        def _print_Pow(self, expr, rational=False):
+            # numba raises ZeroDivisionError for 0.0**-n whatever the error model; a float division gives
+            # inf, which the finite check then reports by key, expression and time.
+            if expr.exp.is_Integer and expr.exp < 0:
+                n = -int(expr.exp)
+                return f"(1.0/({self._print(expr.base)}){'' if n == 1 else f'**{n}'})"
+            return super()._print_Pow(expr, rational)
+
+    return KernelPrinter
+
+
 def _symbolic(parts: list[tuple[str, object]], scene: Scene) -> MotionCode:
     """parts: (variable name, sympy expression in t). Returns CSE'd code assigning every name."""
     import sympy
-    from sympy.printing.pycode import PythonCodePrinter
 
     t = sympy.Symbol("t", real=True)
     names = [name for name, _ in parts]
@@ -109,7 +124,7 @@ def _symbolic(parts: list[tuple[str, object]], scene: Scene) -> MotionCode:
     # Fold numeric constants (pi**3 etc.) to 30 digits now, not per sample in the kernel.
     exprs = [sympy.N(e, 30) for e in exprs]
     replacements, reduced = sympy.cse(exprs, symbols=sympy.numbered_symbols("_x"), optimizations="basic")
-    printer = PythonCodePrinter({"fully_qualified_modules": True, "standard": "python3"})
+    printer = _kernel_printer_class()({"fully_qualified_modules": True, "standard": "python3"})
     phase_lines = []
     if n_phases:
         # Split k once for Dekker's product; every phase slot shares it.
@@ -132,9 +147,10 @@ def translational_parts(exprs: Expressions, scene: Scene, order: int):
     t = sympy.Symbol("t", real=True)
     parts = []
     for axis, text in zip(AXES, exprs.texts):
-        tree = expressions.check(text, f"trajectory.{axis}", set(scene.params))
-        e = expressions.to_sympy(tree, scene.params, t)
-        for prefix in "pva" + ("j" if order >= 3 else ""):
+        where = f"trajectory.{axis}"
+        e = expressions.to_sympy(expressions.check(text, where, scene.params), scene.params, t)
+        for d, prefix in enumerate("pva" + ("j" if order >= 3 else "")):
+            expressions.check_symbolic(e, where, text, DERIVATIVE_NAMES[d])
             parts.append((f"{prefix}{axis}", e))
             e = sympy.diff(e, t)
     return parts
@@ -146,9 +162,11 @@ def attitude_parts(exprs: Expressions, scene: Scene, angles: bool):
     t = sympy.Symbol("t", real=True)
     parts = []
     for suffix, key, text in zip(ANGLES, ("roll", "pitch", "yaw"), exprs.texts):
-        tree = expressions.check(text, f"attitude.{key}", set(scene.params))
-        e = expressions.to_sympy(tree, scene.params, t)
+        where = f"attitude.{key}"
+        e = expressions.to_sympy(expressions.check(text, where, scene.params), scene.params, t)
         d1 = sympy.diff(e, t)
+        for d, part in enumerate((e, d1, sympy.diff(d1, t))):
+            expressions.check_symbolic(part, where, text, DERIVATIVE_NAMES[d])
         parts += [(f"c{suffix}", sympy.cos(e)), (f"s{suffix}", sympy.sin(e)),
                   (f"d{suffix}", d1), (f"dd{suffix}", sympy.diff(d1, t))]
         if angles:
@@ -288,5 +306,55 @@ def motion_code(scene: Scene, angles: bool) -> MotionCode:
         return MotionCode(lines=lines + attitude_lines, constants={}, needs_jerk=tangent,
                           rotation_given=rotation_given)
     sym = _symbolic(symbolic_parts, scene)
+    if isinstance(scene.trajectory, Expressions):
+        # Position and velocity feed no output in euler mode, yet an undefined position (log(400.0001 - t)
+        # past t = 400) must stop the run: x - x is 0 for a finite x and NaN otherwise, so a non-finite p
+        # or v makes a non-finite and the finite check names the expression.
+        sym.lines += [f"a{axis} += (p{axis} - p{axis}) + (v{axis} - v{axis})" for axis in AXES]
     return MotionCode(lines=sym.lines + lines + attitude_lines, constants=sym.constants, needs_jerk=tangent,
                       phase_lines=sym.phase_lines, phase_vars=sym.phase_vars, rotation_given=rotation_given)
+
+
+def _keyed_expressions(scene: Scene):
+    """(key, text, highest derivative the kernel uses) for every expression of the scene."""
+    out = []
+    if isinstance(scene.trajectory, Expressions):
+        order = 3 if scene.attitude_mode == "tangent" else 2
+        out += [(f"trajectory.{axis}", text, order) for axis, text in zip(AXES, scene.trajectory.texts)]
+    if isinstance(scene.attitude, Expressions):
+        out += [(f"attitude.{key}", text, 2) for key, text in zip(("roll", "pitch", "yaw"), scene.attitude.texts)]
+    return out
+
+
+def explain_nonfinite(scene: Scene, k: int) -> str | None:
+    """Which expression, or which of its derivatives, is not finite at sample k, as a message naming key,
+    text and time; None if every one is finite there (then the sum of finite terms overflowed).
+
+    Numerically first (numpy at t0 + k/rate); where that is finite but the kernel was not (1/sin(2*pi*t)
+    at t = 1: numpy's sin(2*pi*1.0) is 2.4e-16, the kernel's exactly reduced phase gives 0), exactly with
+    sympy at the rational time. Runs only on the error path, so sympy's cost does not matter."""
+    import numpy as np
+    import sympy
+
+    t = sympy.Symbol("t", real=True)
+    t_exact = sympy.Rational(scene.t0_s) + sympy.Integer(k) / sympy.Rational(scene.rate_hz)
+    t_float = scene.t0_s + k / scene.rate_hz
+    for exact in (False, True):
+        for key, text, order in _keyed_expressions(scene):
+            e = expressions.to_sympy(expressions.check(text, key, scene.params), scene.params, t)
+            for d in range(order + 1):
+                e = e.replace(sympy.DiracDelta, lambda *a: sympy.Integer(0))   # as the kernel has it
+                if exact:
+                    value = e.subs(t, t_exact)
+                    # None (undecided) is not evidence: only a definite infinite, undefined or complex value
+                    bad = (value.has(sympy.zoo, sympy.nan, sympy.oo, -sympy.oo) or value.is_finite is False
+                           or value.is_extended_real is False)
+                else:
+                    with np.errstate(all="ignore"):
+                        value = sympy.lambdify(t, e, "numpy")(np.float64(t_float))
+                    bad = not np.isfinite(value)
+                if bad:
+                    return (f"{key} = {text!r}: {DERIVATIVE_NAMES[d]} is not finite at t = {t_float!r} s "
+                            f"(sample {k}); keep t inside the expression's domain")
+                e = sympy.diff(e, t)
+    return None

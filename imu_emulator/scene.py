@@ -33,6 +33,23 @@ EFFECTS = {
 }
 
 
+# Ranges of the scene's numbers; errors state the bound. Wide enough for any vehicle, narrow enough that no
+# product the kernel forms (w x (w x r), R * g) overflows and no inf or nan reaches generated code.
+RATE_RANGE_HZ = (1e-3, 1e7)
+MAX_DURATION_S = 1e9           # 32 years
+MAX_GRAVITY_MPS2 = 1e3
+MAX_POSITION_M = 1e8           # positions, radii, centres, heights (ECEF is 6.4e6 m)
+MAX_LEVER_ARM_M = 1e3
+MAX_ANGLE_DEG = 1e4            # mounting angles, initial heading
+MAX_TRACK_ANGLE_RAD = 1e9      # track angles may be unwrapped over long runs
+MAX_FREQUENCY_HZ = 1e6         # circle shape
+MAX_IMUS = 64                  # each IMU adds its lines to the kernel; compile time grows with them
+# Time stamps t0 + k/rate are float64: the spacing of floats at the latest stamp must stay below this
+# fraction of the sample period, or stamps collide (t0_s = 1e16 s: spacing 2 s, every stamp equal).
+TIME_RESOLUTION = 1e-3
+_INF_HINT = " (TOML reads numbers beyond 1.8e308 as inf)"
+
+
 @dataclass(frozen=True)
 class Expressions:
     """Three expressions as validated text (x, y, z or roll, pitch, yaw)."""
@@ -91,6 +108,12 @@ class Scene:
 
 # --- helpers that name the key in their errors ------------------------------------------------
 
+def shown_key(key) -> str:
+    """A key as an error message shows it: as written when it is a plain word, else repr'd, so that a key
+    holding a newline cannot break the one-line message."""
+    return key if isinstance(key, str) and key.isprintable() and key and key.strip() == key else repr(key)
+
+
 def _table(raw: Mapping, key: str, where: str = "") -> dict:
     value = raw.get(key, {})
     if not isinstance(value, Mapping):
@@ -101,10 +124,11 @@ def _table(raw: Mapping, key: str, where: str = "") -> dict:
 def _no_unknown(table: Mapping, allowed: set[str], where: str) -> None:
     unknown = sorted(set(table) - allowed)
     if unknown:
-        raise SceneError(f"{where}.{unknown[0]}: unknown key (allowed: {', '.join(sorted(allowed))})")
+        raise SceneError(f"{where}.{shown_key(unknown[0])}: unknown key (allowed: {', '.join(sorted(allowed))})")
 
 
-def _number(table: Mapping, key: str, where: str, default=None, positive=False, required=False) -> float:
+def _number(table: Mapping, key: str, where: str, default=None, positive=False, required=False,
+            bound: float | None = None, unit: str = "") -> float:
     if key not in table:
         if required:
             raise SceneError(f"{where}.{key}: missing (a number is required)")
@@ -114,20 +138,36 @@ def _number(table: Mapping, key: str, where: str, default=None, positive=False, 
         raise SceneError(f"{where}.{key}: expected a number, got {value!r}")
     value = float(value)
     if not math.isfinite(value):
-        raise SceneError(f"{where}.{key}: must be finite, got {value}")
+        raise SceneError(f"{where}.{key}: must be a finite number, got {value}{_INF_HINT}")
     if positive and value <= 0:
         raise SceneError(f"{where}.{key}: must be positive, got {value}")
+    if bound is not None and abs(value) > bound:
+        raise SceneError(f"{where}.{key}: {value!r} is out of range (|value| <= {bound:g}{unit})")
     return value
 
 
-def _vector3(table: Mapping, key: str, where: str) -> tuple[float, float, float]:
+def _vector3(table: Mapping, key: str, where: str, bound: float, unit: str) -> tuple[float, float, float]:
     value = table.get(key, [0.0, 0.0, 0.0])
     if (not isinstance(value, (list, tuple, np.ndarray)) or len(value) != 3
             or any(isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) for v in value)):
         raise SceneError(f"{where}.{key}: expected a list of three numbers, got {value!r}")
     if not all(math.isfinite(float(v)) for v in value):
-        raise SceneError(f"{where}.{key}: values must be finite, got {value!r}")
+        raise SceneError(f"{where}.{key}: values must be finite numbers (each |value| <= {bound:g}{unit}), "
+                         f"got {value!r}{_INF_HINT}")
+    if any(abs(float(v)) > bound for v in value):
+        raise SceneError(f"{where}.{key}: {list(value)!r} is out of range (each |value| <= {bound:g}{unit})")
     return tuple(float(v) for v in value)
+
+
+def _check_time_resolution(t0: float, duration: float, rate: float) -> None:
+    latest = max(abs(t0), abs(t0 + duration))
+    dt = 1.0 / rate
+    if float(np.spacing(latest)) > TIME_RESOLUTION * dt:
+        # floats below 2**(e+1) are spaced 2**(e-52) apart at most
+        limit = 2.0 ** (math.floor(52 + math.log2(TIME_RESOLUTION * dt)) + 1)
+        raise SceneError(f"scene.t0_s: time stamps reach {latest:g} s, where float64 time stamps are "
+                         f"{float(np.spacing(latest)):g} s apart, more than {TIME_RESOLUTION:g} of the sample "
+                         f"period ({dt:g} s); at {rate:g} Hz keep |t0_s| + duration_s below {limit:g} s")
 
 
 def _choice(table: Mapping, key: str, where: str, choices, default):
@@ -144,12 +184,12 @@ def _params(raw: Mapping) -> dict[str, float]:
     values: dict[str, float] = {}
     reserved = {"t", *expressions.CONSTANTS, *expressions.FUNCTIONS}
     for name, value in table.items():
-        where = f"params.{name}"
+        where = f"params.{shown_key(name)}"
         if not name.isidentifier() or name in reserved:
             raise SceneError(f"{where}: not a usable name (reserved or not an identifier)")
         if isinstance(value, bool) or not isinstance(value, (int, float, str)):
             raise SceneError(f"{where}: expected a number or an expression of earlier params, got {value!r}")
-        tree = expressions.check(value, where, set(values))
+        tree = expressions.check(value, where, values)
         if expressions.uses_time(tree):
             raise SceneError(f"{where}: params are constants; 't' is not allowed here")
         values[name] = expressions.evaluate_constant(tree, values, where)
@@ -160,7 +200,7 @@ def _expressions(table: Mapping, keys, where: str, params: Mapping[str, float]) 
     texts = []
     for key in keys:
         text = table.get(key, 0)
-        expressions.check(text, f"{where}.{key}", set(params))
+        expressions.check(text, f"{where}.{key}", params)
         texts.append(str(text))
     return Expressions(tuple(texts))
 
@@ -170,13 +210,13 @@ def _shape(table: Mapping, where: str) -> Expressions:
     shape = _choice(table, "shape", where, SHAPES, None)
     if shape == "static":
         _no_unknown(table, {"shape", "position_m"}, where)
-        x, y, z = _vector3(table, "position_m", where)
+        x, y, z = _vector3(table, "position_m", where, MAX_POSITION_M, " m")
         return Expressions((repr(x), repr(y), repr(z)))
     _no_unknown(table, {"shape", "radius_m", "frequency_hz", "height_m", "center_m"}, where)
-    r = _number(table, "radius_m", where, required=True, positive=True)
-    f = _number(table, "frequency_hz", where, required=True)
-    h = _number(table, "height_m", where, default=0.0)
-    cx, cy, cz = _vector3(table, "center_m", where)
+    r = _number(table, "radius_m", where, required=True, positive=True, bound=MAX_POSITION_M, unit=" m")
+    f = _number(table, "frequency_hz", where, required=True, bound=MAX_FREQUENCY_HZ, unit=" Hz")
+    h = _number(table, "height_m", where, default=0.0, bound=MAX_POSITION_M, unit=" m")
+    cx, cy, cz = _vector3(table, "center_m", where, MAX_POSITION_M, " m")
     return Expressions((f"{cx!r} + {r!r}*cos(2*pi*{f!r}*t)", f"{cy!r} + {r!r}*sin(2*pi*{f!r}*t)", repr(cz + h)))
 
 
@@ -185,6 +225,13 @@ def _sampled_from_track(track, columns: str, derivative: str, noise: float = 0.0
         return SampledData(t=track.t, values=track.quat, derivative=derivative, source=str(track.source),
                            kind="quaternion", noise=noise)
     values = track.position if columns == "position" else track.euler
+    bound, unit, names = ((MAX_POSITION_M, "m", "xyz") if columns == "position"
+                          else (MAX_TRACK_ANGLE_RAD, "rad", ("roll", "pitch", "yaw")))
+    big = np.abs(values) > bound
+    if big.any():
+        i, j = np.argwhere(big)[0]
+        raise SceneError(f"trajectory.file: {track.source.name}: {track.row_label(int(i))}, column '{names[j]}': "
+                         f"{float(values[i, j])!r} is out of range (|value| <= {bound:g} {unit})")
     return SampledData(t=track.t, values=values, derivative=derivative, source=str(track.source), noise=noise)
 
 
@@ -247,9 +294,18 @@ def _log_window(motion, trajectory: SampledData, attitude: SampledData | None, t
 
 def _check_derivative(name: str, where: str) -> str:
     from imu_emulator.derivatives import METHODS
-    if name not in METHODS:
+    if not isinstance(name, str) or name not in METHODS:
         raise SceneError(f"{where}: unknown derivative method {name!r} (known: {', '.join(METHODS)})")
     return name
+
+
+def _check_sample_count(part: SampledData, order: int, where: str) -> None:
+    """Before any compile: enough samples for the derivative method (a 2-row track used to fail after 8 s)."""
+    from imu_emulator.derivatives import min_samples
+    need = min_samples(part.derivative, order)
+    if part.t.size < need:
+        raise SceneError(f"{where}: method {part.derivative!r} needs at least {need} samples for derivatives up "
+                         f"to order {order} ({part.source}), got {part.t.size}")
 
 
 def _load_track(table: Mapping, where: str, base_dir: Path):
@@ -286,8 +342,10 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
     head = _table(raw, "scene")
     _no_unknown(head, {"rate_hz", "duration_s", "frame", "gravity_mps2", "t0_s", "name"}, "scene")
     rate = _number(head, "rate_hz", "scene", required=True, positive=True)
+    if not RATE_RANGE_HZ[0] <= rate <= RATE_RANGE_HZ[1]:
+        raise SceneError(f"scene.rate_hz: {rate!r} is out of range ({RATE_RANGE_HZ[0]:g} to {RATE_RANGE_HZ[1]:g} Hz)")
     frame = _choice(head, "frame", "scene", FRAMES, "ENU")
-    gravity = _number(head, "gravity_mps2", "scene", default=9.80665)
+    gravity = _number(head, "gravity_mps2", "scene", default=9.80665, bound=MAX_GRAVITY_MPS2, unit=" m/s^2")
 
     params = _params(raw)
 
@@ -320,9 +378,17 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
     att_table = _table(raw, "attitude")
     # a log's attitude is what a replay is for: it is the default there
     mode = _choice(att_table, "mode", "attitude", ATTITUDE_MODES, "file" if log is not None else "euler")
-    heading = math.radians(_number(att_table, "initial_heading_deg", "attitude", default=0.0))
+    heading = math.radians(_number(att_table, "initial_heading_deg", "attitude", default=0.0,
+                                   bound=MAX_ANGLE_DEG, unit=" deg"))
     if mode == "euler":
         _no_unknown(att_table, {"mode", "roll", "pitch", "yaw"}, "attitude")
+        if track is not None and (track.euler is not None or track.quat is not None) \
+                and not {"roll", "pitch", "yaw"} & set(att_table):
+            # Zero rotation while the file holds angles is what the user least expects: say how to use them.
+            columns = "roll, pitch, yaw" if track.euler is not None else "qw, qx, qy, qz"
+            raise SceneError(f"attitude: {track.source.name} has {columns} columns, but attitude.mode is "
+                             "'euler' without expressions (zero rotation); set mode = \"file\" to use the "
+                             "columns, or give roll/pitch/yaw expressions")
         attitude = _expressions(att_table, ("roll", "pitch", "yaw"), "attitude", params)
     elif mode == "tangent":
         _no_unknown(att_table, {"mode", "initial_heading_deg"}, "attitude")
@@ -339,6 +405,10 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
                                    source=f"{log.source}:{log.attitude.name}", kind="quaternion", noise=noise)
         else:
             attitude = _sampled_from_track(track, "attitude", derivative, noise)
+
+    for part, key, order in ((trajectory, "trajectory", 3 if mode == "tangent" else 2), (attitude, "attitude", 2)):
+        if isinstance(part, SampledData):
+            _check_sample_count(part, order, f"{key}.derivative")
 
     # Sampled input sets the time span unless the scene says otherwise.
     if log is not None:
@@ -361,18 +431,20 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
     elif isinstance(trajectory, SampledData):
         span = float(trajectory.t[-1] - trajectory.t[0])
         t0 = _number(head, "t0_s", "scene", default=float(trajectory.t[0]))
-        duration = _number(head, "duration_s", "scene", default=span, positive=True)
+        duration = _number(head, "duration_s", "scene", default=span, positive=True, bound=MAX_DURATION_S, unit=" s")
         if t0 < trajectory.t[0] or t0 + duration - 1.0 / rate > trajectory.t[-1] + 1e-9:
             raise SceneError(f"scene.duration_s: {t0}..{t0 + duration} s reaches beyond the data "
                              f"({trajectory.t[0]}..{trajectory.t[-1]} s in {trajectory.source})")
     else:
         t0 = _number(head, "t0_s", "scene", default=0.0)
-        duration = _number(head, "duration_s", "scene", required=True, positive=True)
+        duration = _number(head, "duration_s", "scene", required=True, positive=True, bound=MAX_DURATION_S,
+                           unit=" s")
+    _check_time_resolution(t0, duration, rate)
 
     effects_table = _table(raw, "effects")
     for name, value in effects_table.items():
         if name not in EFFECTS:
-            raise SceneError(f"effects.{name}: unknown effect (known: {', '.join(EFFECTS)})")
+            raise SceneError(f"effects.{shown_key(name)}: unknown effect (known: {', '.join(EFFECTS)})")
         if not isinstance(value, bool):
             raise SceneError(f"effects.{name}: expected true or false, got {value!r}")
     effects = frozenset(name for name, on in effects_table.items() if on)
@@ -382,6 +454,8 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
         imu_list = [imu_list]
     if not isinstance(imu_list, list) or not imu_list:
         raise SceneError("imu: at least one [[imu]] table is required")
+    if len(imu_list) > MAX_IMUS:
+        raise SceneError(f"imu: {len(imu_list)} [[imu]] tables; the limit is {MAX_IMUS} per scene")
     imus = []
     for i, table in enumerate(imu_list):
         where = f"imu[{i}]"
@@ -389,11 +463,14 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
             raise SceneError(f"{where}: expected a table")
         _no_unknown(table, {"name", "lever_arm_m", "mounting_rpy_deg"}, where)
         name = table.get("name", f"imu{i}")
-        if not isinstance(name, str) or not name or "," in name:
-            raise SceneError(f"{where}.name: expected a non-empty name without commas, got {name!r}")
+        # names become CSV cells and labels on the wire: one printable line, no comma
+        if not isinstance(name, str) or not name or "," in name or not name.isprintable() or len(name) > 64:
+            raise SceneError(f"{where}.name: expected a printable name of 1 to 64 characters without commas, "
+                             f"got {name!r}")
         if name in {imu.name for imu in imus}:
             raise SceneError(f"{where}.name: {name!r} is used twice")
-        imu = ImuSpec(name, _vector3(table, "lever_arm_m", where), _vector3(table, "mounting_rpy_deg", where))
+        imu = ImuSpec(name, _vector3(table, "lever_arm_m", where, MAX_LEVER_ARM_M, " m"),
+                      _vector3(table, "mounting_rpy_deg", where, MAX_ANGLE_DEG, " deg"))
         for key, effect in (("lever_arm_m", "lever_arm"), ("mounting_rpy_deg", "mounting")):
             if any(getattr(imu, key)) and effect not in effects:
                 warnings.append(f"{where}.{key} is ignored because effects.{effect} is not true")
@@ -415,9 +492,12 @@ def load_scene(path: str | Path) -> Scene:
     """Read and validate a TOML scene file."""
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_bytes().decode("utf-8")
     except OSError as exc:
         raise SceneError(f"{path}: cannot read scene file: {exc.strerror}") from None
+    except UnicodeDecodeError as exc:
+        raise SceneError(f"{path}: not UTF-8 text (byte {exc.start} is {exc.object[exc.start]:#04x}); "
+                         "TOML scene files are UTF-8") from None
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -6,6 +6,7 @@ import numpy as np
 
 from imu_emulator.errors import DataError
 from imu_emulator.kernel import compile_kernel
+from imu_emulator.run_size import check_memory
 from imu_emulator.samples import SampleBlock
 from imu_emulator.scene import SampledData, Scene
 
@@ -21,9 +22,10 @@ class Simulation:
         self.scene = scene
         self.attitude = attitude
         self.truth = truth
-        self.kernel = compile_kernel(scene, attitude=attitude, truth=truth)
+        # Sampled input is fitted before the kernel compiles: bad data is reported in a second, not after it.
         self._position = self._series(scene.trajectory, 3 if scene.attitude_mode == "tangent" else 2, "trajectory")
         self._euler = self._series(scene.attitude, 2, "attitude")
+        self.kernel = compile_kernel(scene, attitude=attitude, truth=truth)
         # Tangent attitude holds the last defined heading (cos, sin) and pitch (cos, sin) across blocks.
         h = scene.initial_heading_rad
         self._hold = np.array([np.cos(h), np.sin(h), 1.0, 0.0])
@@ -72,7 +74,7 @@ class Simulation:
         quat = out.quat if self.attitude else _EMPTY3
         tr = [out.truth[k] for k in TRUTH_KEYS] if self.truth else [_EMPTY2] * 5
         self.kernel(np.int64(k0), np.int64(n), mot, att, self._hold, out.accel, out.gyro, quat, *tr)
-        self._check_finite(out.accel, out.gyro, t)
+        self._check_finite(out.accel, out.gyro, k0)
         return out
 
     def _evaluate(self, series, k0: int, n: int):
@@ -83,20 +85,29 @@ class Simulation:
         tau = (self.scene.t0_s - fitted.t_start) + (k0 + np.arange(n, dtype=np.float64)) / self.scene.rate_hz
         return np.ascontiguousarray(fitted.evaluate_relative(tau, order))
 
-    def _check_finite(self, acc, gyro, t) -> None:
+    def _check_finite(self, acc, gyro, k0: int) -> None:
         # A NaN must never reach a wire or a file. A sum is non-finite iff some term is (or the sum
         # overflows, which values this large deserve a look at too); only then search for the first.
-        if np.isfinite(np.sum(acc) + np.sum(gyro)):
-            return
+        with np.errstate(all="ignore"):
+            if np.isfinite(np.sum(acc) + np.sum(gyro)):
+                return
         bad = ~(np.isfinite(acc).all(axis=(0, 2)) & np.isfinite(gyro).all(axis=(0, 2)))
-        i = int(np.argmax(bad))
-        raise DataError(f"the motion gives a non-finite value at t = {float(t[i])!r} s (sample {int(i)} of the block); "
-                        f"check the expressions' domains (log, sqrt, asin, division by zero)")
+        if not bad.any():
+            return    # finite values whose sum overflowed
+        k = k0 + int(np.argmax(bad))
+        from imu_emulator.motion import explain_nonfinite
+        message = explain_nonfinite(self.scene, k)
+        if message is None:
+            message = (f"the motion gives a non-finite value at t = {self.scene.t0_s + k / self.scene.rate_hz!r} s "
+                       f"(sample {k}) although every expression and derivative is finite there: products of "
+                       "large terms overflowed; reduce the motion's magnitudes or rates")
+        raise DataError(message)
 
     def run(self, block_size: int = 65536, progress=None) -> SampleBlock:
         """The whole scene in one SampleBlock; the kernel writes straight into the full arrays."""
         n_total = self.n_samples
         n_imu = len(self.scene.imus)
+        check_memory(n_total, n_imu, self.attitude, self.truth, "simulate")
         whole = SampleBlock(k0=0, t_s=np.empty(n_total), accel=np.empty((n_imu, n_total, 3)),
                             gyro=np.empty((n_imu, n_total, 3)),
                             quat=np.empty((n_imu, n_total, 4)) if self.attitude else None,

@@ -150,9 +150,12 @@ def _all_or_none(where: str, names, group: tuple[str, ...]) -> bool:
 
 def read_csv_rows(path: Path, expected_header: str) -> tuple[int, str, list[str], list[tuple[int, str]]]:
     """The header's line number and text, its column names (stripped, lower case) and the data rows as
-    (line number, text), blank lines and '#' comments skipped; DataError for an empty file. Shared with
-    imulog, so that every CSV we read follows the same rules."""
-    text = path.read_text(encoding="utf-8-sig")
+    (line number, text), blank lines and '#' comments skipped; DataError for an empty file or one that is
+    not UTF-8. Shared with imulog, so that every CSV we read follows the same rules."""
+    try:
+        text = path.read_bytes().decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise DataError(f"{path.name}: not UTF-8 text (byte {exc.start} is {exc.object[exc.start]:#04x})") from None
     rows = [(number, line) for number, line in enumerate(text.splitlines(), start=1)
             if line.strip() and not line.lstrip().startswith("#")]
     if not rows:

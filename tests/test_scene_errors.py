@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import imu_emulator as imu
 from imu_emulator import DataError, SceneError, load_scene, scene_from_dict
 from imu_emulator.simulation import Simulation
 
@@ -27,7 +28,50 @@ name = "imu0"
 gravity = true
 """
 
+X = 'x = "cos(2*pi*f*t)"'
+TRACKT = '[trajectory]\nx = "cos(2*pi*f*t)"\ny = "sin(2*pi*f*t)"\nz = "0"'
+
 CASES = [
+    # complex, undefined or overflowing constant parts are refused with the key and the part (issue 8 items 4, 8, 9)
+    (X, 'x = "1/0"', ["trajectory.x", "1 / 0 divides by zero", "'1/0'"]),
+    (X, 'x = "0**-1"', ["trajectory.x", "divides by zero"]),
+    (X, 'x = "exp(1000)*t"', ["trajectory.x", "exp(1000) is beyond the float range"]),
+    (X, 'x = "asin(2)*t"', ["trajectory.x", "asin(2) is outside the domain of asin"]),
+    (X, 'x = "sqrt(-1)"', ["trajectory.x", "sqrt(-1) is outside the domain of sqrt"]),
+    (X, 'x = "acos(-2)"', ["trajectory.x", "outside the domain of acos"]),
+    (X, 'x = "log(0)"', ["trajectory.x", "outside the domain of log"]),
+    (X, 'x = "(-1)**t"', ["trajectory.x", "(-1) ** t is complex"]),
+    (X, 'x = "1e999*t"', ["trajectory.x", "1e309 is beyond the float range"]),
+    ('f = 1.0', 'f = "(-8)**(1/3)"', ["params.f", "is complex", "'(-8)**(1/3)'"]),
+    ('f = 1.0', 'f = "1e200"\ng = "f*f"', ["params.g", "beyond the float range"]),
+    ('z = "0"', 'z = "0"\n[attitude]\nyaw = "exp(1000)*t"', ["attitude.yaw", "exp(1000) is beyond the float range"]),
+    # size bounds and exact powers (item 11): no RecursionError, no sympy hang
+    (X, 'x = "' + "sin(" * 200 + "t" + ")" * 200 + '"', ["trajectory.x", "characters long; the limit is 1000"]),
+    (X, 'x = "' + "t*" * 2000 + 't"', ["trajectory.x", "the limit is 1000"]),
+    (X, 'x = "' + "-" * 5000 + 't"', ["trajectory.x", "the limit is 1000"]),
+    (X, 'x = "' + "-" * 900 + 't"', ["trajectory.x", "too large", "nested"]),
+    (X, 'x = "' + "sin(" * 9 + "t" + ")" * 9 + '"', ["trajectory.x", "function calls nested", "limit 8"]),
+    (X, 'x = "' + "+".join(["t"] * 17) + '"', ["trajectory.x", "uses of t", "limit 16"]),
+    (X, 'x = "' + "*".join(["(" + "+".join(["1"] * 40) + ")"] * 8) + '"', ["trajectory.x", "terms", "limit 256"]),
+    (X, 'x = "10**10**10"', ["trajectory.x", "10 ** 10 ** 10 is beyond the float range"]),
+    (X, 'x = "t**(10**5)"', ["trajectory.x", "exponent beyond +-1000"]),
+    # every number in range, the bound in the message (item 9, 21)
+    ('rate_hz = 100', 'rate_hz = 5e-324', ["scene.rate_hz", "out of range", "0.001 to 1e+07 Hz"]),
+    ('rate_hz = 100', 'rate_hz = 1.8e308', ["scene.rate_hz", "finite", "beyond 1.8e308 as inf"]),
+    ('rate_hz = 100', 'rate_hz = 123456789', ["scene.rate_hz", "out of range"]),
+    ('duration_s = 1.0', 'duration_s = 1e300', ["scene.duration_s", "out of range", "1e+09 s"]),
+    ('duration_s = 1.0', 'duration_s = 1.0\ngravity_mps2 = 1e6', ["scene.gravity_mps2", "1000 m/s^2"]),
+    ('name = "imu0"', 'name = "imu0"\nlever_arm_m = [1.8e308, 0, 0]', ["imu[0].lever_arm_m", "finite", "1000 m"]),
+    ('name = "imu0"', 'name = "imu0"\nlever_arm_m = [1e5, 0, 0]', ["imu[0].lever_arm_m", "out of range", "1000 m"]),
+    ('name = "imu0"', 'name = "imu0"\nmounting_rpy_deg = [0, 1e300, 0]', ["imu[0].mounting_rpy_deg", "10000 deg"]),
+    (TRACKT, '[trajectory]\nshape = "circle"\nradius_m = 1.0\nfrequency_hz = 1.8e308',
+     ["trajectory.frequency_hz", "finite"]),
+    (TRACKT, '[trajectory]\nshape = "circle"\nradius_m = 1.0\nfrequency_hz = 1e300',
+     ["trajectory.frequency_hz", "1e+06 Hz"]),
+    (TRACKT, '[trajectory]\nshape = "static"\nposition_m = [0, 1e300, 0]', ["trajectory.position_m", "1e+08 m"]),
+    ('[[imu]]\nname = "imu0"', "[[imu]]\n" * 65, ["imu", "65", "limit is 64"]),
+    # time stamps must stay distinct and exact (item 7)
+    ('duration_s = 1.0', 'duration_s = 1.0\nt0_s = 1e16', ["scene.t0_s", "2 s apart", "keep |t0_s| + duration_s below"]),
     # (what to replace in GOOD, by what, expected words in the message)
     ('x = "cos(2*pi*f*t)"', 'x = "foo(t)"', ["trajectory.x", "unknown function 'foo'"]),
     ('x = "cos(2*pi*f*t)"', 'x = "__import__(\'os\').system(\'true\')"', ["trajectory.x", "__import__"]),
@@ -120,7 +164,7 @@ def test_too_few_samples_for_the_method_is_an_error(tmp_path):
 def test_expression_outside_its_domain_is_a_clear_error_not_nan():
     scene = scene_from_dict({"scene": {"rate_hz": 10, "duration_s": 1.0, "t0_s": -0.5},
                              "trajectory": {"x": "sqrt(t)", "y": "0", "z": "0"}, "imu": [{"name": "a"}]})
-    with pytest.raises(DataError, match="non-finite value at t = -0.5"):
+    with pytest.raises(DataError, match=r"trajectory.x = .sqrt\(t\).: its value is not finite at t = -0.5 s"):
         Simulation(scene).run()
 
 
@@ -193,3 +237,132 @@ def test_second_run_uses_the_cached_kernel_without_sympy(tmp_path):
     second = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
     assert first.stdout.strip() == "True", first.stderr
     assert second.stdout.strip() == "False", second.stderr
+
+
+# --- expressions that are not finite at some sample (issue 8 items 4, 10) ---------------------------------
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")   # no numpy warning printed before the clean error
+@pytest.mark.parametrize("traj, attitude, head, message", [
+    # only the position is undefined past t = 400.0001: no output uses it without --truth, yet it must stop
+    ({"x": "log(400.0001 - t)"}, {}, {"rate_hz": 1, "duration_s": 402},
+     "trajectory.x = 'log(400.0001 - t)': its value is not finite at t = 401.0 s"),
+    # was ZeroDivisionError from inside numba (0.0**-2); the value itself is infinite at t = 0
+    ({"y": "sin(t)**-2"}, {}, {"rate_hz": 10, "duration_s": 1.0},
+     "trajectory.y = 'sin(t)**-2': its value is not finite at t = 0.0 s"),
+    # sin(2*pi*0.5) is exactly 0 in the kernel's reduced phase but 1.2e-16 in numpy: found exactly
+    ({"x": "1/sin(2*pi*t)"}, {}, {"rate_hz": 4, "duration_s": 1.0, "t0_s": 0.25},
+     "trajectory.x = '1/sin(2*pi*t)': its value is not finite at t = 0.5 s"),
+    # d2/dt2 t**1.5 = 0.75/sqrt(t): the value is fine at t = 0, the acceleration is not
+    ({"x": "t**1.5"}, {}, {"rate_hz": 10, "duration_s": 1.0},
+     "trajectory.x = 't**1.5': its second derivative is not finite at t = 0.0 s"),
+    # the second derivative holds DiracDelta(t - 0.5), which the kernel (and the diagnosis) take as 0
+    ({"x": "abs(t-0.5)**1.5"}, {}, {"rate_hz": 10, "duration_s": 1.0},
+     "trajectory.x = 'abs(t-0.5)**1.5': its second derivative is not finite at t = 0.5 s"),
+    ({"x": "t"}, {"roll": "sqrt(t - 0.5)"}, {"rate_hz": 10, "duration_s": 1.0},
+     "attitude.roll = 'sqrt(t - 0.5)': its value is not finite at t = 0.0 s"),
+])
+def test_nonfinite_expression_names_key_expression_derivative_and_first_bad_time(traj, attitude, head, message):
+    scene = scene_from_dict({"scene": head, "trajectory": {"x": "0", "y": "0", "z": "0", **traj},
+                             "attitude": attitude, "imu": [{"name": "a"}]})
+    with pytest.raises(DataError) as info:
+        Simulation(scene).run()
+    assert str(info.value).startswith(message), str(info.value)
+
+
+@pytest.mark.parametrize("text, words", [
+    ("tan(pi/2)*t", ["trajectory.x", "infinite", "'tan(pi/2)*t'"]),     # sympy: zoo; math.tan: 1.6e16
+    ("t/(t - t)", ["trajectory.x", "infinite"]),
+])
+def test_symbolically_infinite_expression_is_refused_before_numba(text, words):
+    scene = scene_from_dict({"scene": {"rate_hz": 10, "duration_s": 1.0},
+                             "trajectory": {"x": text, "y": "0", "z": "0"}, "imu": [{"name": "a"}]})
+    with pytest.raises(SceneError) as info:
+        Simulation(scene)
+    assert all(w in str(info.value) for w in words), str(info.value)
+
+
+# --- tracks (items 5, 12, 20) -----------------------------------------------------------------------------
+
+def _euler_track_scene(tmp_path, attitude):
+    rows = [f"{i * 0.01},{i * 0.01},0,0,0,0,{0.1 * i}" for i in range(30)]
+    (tmp_path / "track.csv").write_text("t,x,y,z,roll,pitch,yaw\n" + "\n".join(rows) + "\n")
+    return _write(tmp_path, f'[scene]\nrate_hz = 100\n[trajectory]\nfile = "track.csv"\n{attitude}'
+                            '[[imu]]\nname = "a"\n')
+
+
+@pytest.mark.parametrize("attitude", ["", '[attitude]\nmode = "euler"\n'])
+def test_track_angles_with_euler_mode_and_no_expressions_is_refused(tmp_path, attitude):
+    with pytest.raises(SceneError) as info:
+        load_scene(_euler_track_scene(tmp_path, attitude))
+    assert 'mode = "file"' in str(info.value) and "track.csv" in str(info.value)
+
+
+def test_track_angles_used_with_file_mode(tmp_path):
+    scene = load_scene(_euler_track_scene(tmp_path, '[attitude]\nmode = "file"\n'))
+    assert scene.attitude_mode == "file"
+
+
+def test_non_utf8_scene_file_is_one_line_naming_the_file(tmp_path):
+    path = tmp_path / "scene.toml"
+    path.write_bytes(GOOD.encode().replace(b'name = "imu0"', b'name = "imu\xff"'))
+    result = _cli("generate", str(path), "-o", str(tmp_path / "out.csv"))
+    assert result.returncode == 2 and result.stderr.count("\n") == 1, result.stderr
+    assert str(path) in result.stderr and "not UTF-8" in result.stderr
+
+
+def test_non_utf8_track_file_names_the_file(tmp_path):
+    text = _track(tmp_path, [(i * 0.01, i, 0, 0) for i in range(20)])
+    (tmp_path / "track.csv").write_bytes(b"t,x,y,z\n0,0,0,0\n1,\xe9,0,0\n")
+    with pytest.raises(SceneError, match=r"track.csv: not UTF-8 text \(byte 18 is 0xe9\)"):
+        load_scene(_write(tmp_path, text))
+
+
+# --- the run's size, before it starts (item 15) -----------------------------------------------------------
+
+HUGE = GOOD.replace("rate_hz = 100", "rate_hz = 1e7").replace("duration_s = 1.0", "duration_s = 1e5")
+
+
+def test_csv_beyond_the_free_disk_is_refused_with_the_figure(tmp_path):
+    result = _cli("generate", str(_write(tmp_path, HUGE)), "-o", str(tmp_path / "out.csv"))
+    assert result.returncode == 2 and result.stderr.count("\n") == 1, result.stderr
+    # 1e12 samples x (7 values x 25 B + "imu0" + 2) = 181e12 B
+    assert "1000000000000 samples x 1 IMU(s)" in result.stderr and f"{181e12 / 2 ** 30:.3g} GiB" in result.stderr
+    assert "--allow-large" in result.stderr and not (tmp_path / "out.csv").exists()
+
+
+def test_npz_beyond_memory_is_refused_and_allow_large_overrides_only_a_csv(tmp_path):
+    from imu_emulator.run_size import RunSizeError, check_output
+    scene = load_scene(_write(tmp_path, HUGE))
+    check_output(scene, tmp_path / "out.csv", truth=True, allow_large=True)
+    with pytest.raises(RunSizeError, match="in memory.*write a .csv"):
+        check_output(scene, tmp_path / "out.npz", truth=False, allow_large=True)
+
+
+def test_simulate_refuses_a_run_beyond_memory_before_allocating(tmp_path):
+    from imu_emulator.run_size import RunSizeError
+    with pytest.raises(RunSizeError, match=r"simulate: 1000000000000 samples x 1 IMU\(s\) take"):
+        imu.simulate(load_scene(_write(tmp_path, HUGE)))
+
+
+@pytest.mark.parametrize("column, value, words", [
+    (1, "1e300", ["column 'x'", "1e+300 is out of range", "1e+08 m"]),
+    (6, "-2e9", ["column 'yaw'", "out of range", "1e+09 rad"]),
+])
+def test_track_magnitudes_are_checked_with_the_bound(tmp_path, column, value, words):
+    rows = [[i * 0.01, 0, 0, 0, 0, 0, 0] for i in range(20)]
+    rows[3][column] = value
+    (tmp_path / "track.csv").write_text("t,x,y,z,roll,pitch,yaw\n" + "\n".join(",".join(map(str, r)) for r in rows))
+    path = _write(tmp_path, '[scene]\nrate_hz = 100\n[trajectory]\nfile = "track.csv"\n[attitude]\nmode = "file"\n'
+                            '[[imu]]\nname = "a"\n')
+    with pytest.raises(SceneError) as info:
+        load_scene(path)
+    assert all(w in str(info.value) for w in ["track.csv", "row 5", *words]), str(info.value)
+
+
+def test_overflow_of_finite_terms_is_reported_as_such():
+    # yaw rate 1e160 rad/s is finite, w x (w x r) = 1e320 * 0.1 m is not: no expression to blame
+    scene = scene_from_dict({"scene": {"rate_hz": 10, "duration_s": 0.5}, "trajectory": {"x": "0", "y": "0", "z": "0"},
+                             "attitude": {"yaw": "1e160*t"}, "imu": [{"name": "a", "lever_arm_m": [0.1, 0, 0]}],
+                             "effects": {"lever_arm": True}})
+    with pytest.raises(DataError, match=r"non-finite value at t = 0.0 s \(sample 0\) although every expression"):
+        Simulation(scene).run()

@@ -16,12 +16,14 @@ def register(subparsers) -> None:
     gen.add_argument("-o", "--output", required=True, help="output file, .csv, .npz or .mcap (ROS 2 bag)")
     gen.add_argument("--truth", action="store_true", help="add position, velocity, attitude and body rates")
     gen.add_argument("--quiet", action="store_true", help="no progress bar or summary (warnings still show)")
+    gen.add_argument("--allow-large", action="store_true", help="write a CSV larger than the free disk space")
     gen.add_argument("--block", type=number(1, 10_000_000, integer=True), default=65536, help=argparse.SUPPRESS)
     gen.set_defaults(func=cmd_generate)
 
 
 def cmd_generate(args) -> int:
     from imu_emulator.output import check_path, open_writer
+    from imu_emulator.run_size import check_output
     from imu_emulator.simulation import Simulation
 
     check_path(args.output)
@@ -30,6 +32,7 @@ def cmd_generate(args) -> int:
     # The output file is created before the kernel compiles: an unwritable path fails at once. It appears
     # at its path only when every block is written (a failed run leaves nothing behind).
     with open_writer(args.output, scene.imu_names, args.truth) as writer:
+        check_output(scene, args.output, args.truth, args.allow_large)
         # a ROS Imu message has an orientation field: fill it from the sensor frame's attitude
         sim = Simulation(scene, attitude=args.output.lower().endswith(".mcap"), truth=args.truth)
         progress = Progress(args.quiet)
