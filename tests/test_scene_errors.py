@@ -366,3 +366,11 @@ def test_overflow_of_finite_terms_is_reported_as_such():
                              "effects": {"lever_arm": True}})
     with pytest.raises(DataError, match=r"non-finite value at t = 0.0 s \(sample 0\) although every expression"):
         Simulation(scene).run()
+
+
+def test_track_quaternions_with_euler_mode_and_no_expressions_is_refused(tmp_path):
+    rows = [f"{i * 0.01},{i * 0.01},0,0,1,0,0,0" for i in range(30)]
+    (tmp_path / "track.csv").write_text("t,x,y,z,qw,qx,qy,qz\n" + "\n".join(rows) + "\n")
+    path = _write(tmp_path, '[scene]\nrate_hz = 100\n[trajectory]\nfile = "track.csv"\n[[imu]]\nname = "a"\n')
+    with pytest.raises(SceneError, match=r'track.csv has qw, qx, qy, qz columns.*mode = "file"'):
+        load_scene(path)
