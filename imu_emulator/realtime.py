@@ -1,7 +1,23 @@
-"""Pacing to absolute deadlines on the monotonic clock, and statistics of how late we were.
+"""Pacing to absolute deadlines on the monotonic clock, how the sender is scheduled, and statistics of how
+late we were.
 
 Deadlines are computed from the sample index (start + k * period), never by adding periods or
 sleeping fixed intervals, so lateness never accumulates into drift.
+
+Scheduling modes (`--realtime`), chosen so that a consumer on the same machine (firmware in the loop, candump)
+is never starved of CPU by the emulator:
+
+    spin  wake under SCHED_FIFO shortly before the deadline and spin the rest: the most precise, costs up to
+          _SPIN_SHARE of one core; only for a machine where a core is left for the consumer
+    fifo  sleep to the deadline under SCHED_FIFO, no spin: prompt wake-ups, a few us of CPU per sample
+    off   normal scheduling, plain sleep: the kernel shares the CPU fairly with everything else
+
+Spinning at normal priority (SCHED_FIFO for the wake-up only) was measured and dropped: giving up SCHED_FIFO
+makes the kernel reschedule at once, and on a loaded machine the spin then loses the CPU for milliseconds
+(tools/bench_coexist.py: hundreds of deadlines a period late per 4000, against tens for a SCHED_FIFO spin).
+SCHED_FIFO is held only while the sender keeps up: one that is _BEHIND_NS late (it will not sleep before
+catching up) drops to normal priority until it sleeps again, and competes fairly instead of starving the reader. The priority is the lowest SCHED_FIFO
+level, below any real-time thread of a flight stack (ArduPilot's Linux HAL uses 10-20).
 """
 from __future__ import annotations
 
@@ -14,33 +30,71 @@ from dataclasses import dataclass
 import numpy as np
 
 _PR_SET_TIMERSLACK = 29
-# We sleep to shortly before each deadline and spin the rest: a plain sleep wakes 25-75 us late on
-# these machines, even under SCHED_FIFO (measured p50 48 us, p99 114 us at 1 kHz).
+# A plain sleep wakes 25-75 us late on these machines (measured p50 48 us, p99 114 us at 1 kHz under
+# SCHED_FIFO), so `spin` sleeps to this far before each deadline and spins the rest.
 _SPIN_NS = 200_000
-# Under SCHED_FIFO the spin is bounded to a share of each period. An unbounded busy loop would hit RT
-# throttling (95 % of each second) and stall for tens of milliseconds; this uses at most 40 %.
-_FIFO_SPIN_NS = 100_000
-_FIFO_SPIN_SHARE = 0.4
+# ... but never more than this share of a period: at 10 kHz a spin of 200 us would be the whole period, and
+# RT throttling (95 % of each second) would stall an unbounded SCHED_FIFO spin for tens of milliseconds.
+_SPIN_SHARE = 0.4
 # Answering a command costs tens to hundreds of microseconds in Python: none is started this close to a
 # deadline (a command then waits at most one sample period).
 _SERVE_MARGIN_NS = 300_000
+FIFO_PRIORITY = 1
+# A sender this late (or a period, if longer) gives up SCHED_FIFO until it next sleeps: it cannot keep up, and
+# catching up under SCHED_FIFO would take the CPU from the reader. Shorter stalls (the shared host takes the
+# vCPU away for 0.2-5 ms, on a loaded day for tens of ms) are caught up under SCHED_FIFO: at 20 ms, a demoted
+# sender beside two busy loops ended up 100 ms late (tools/bench_coexist.py). 100 ms is half of what a pty
+# holds at 1 kHz.
+_BEHIND_NS = 100_000_000
+MODES = ("auto", "spin", "fifo", "off")
+
+
+def usable_cpus() -> int:
+    """CPUs this process may run on (affinity, cgroup cpusets), not the machine's count."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def default_mode(cpus: int) -> str:
+    """`auto`: spin only when a core is left for the consumer. With one CPU, spinning or even a
+    SCHED_FIFO sender takes the CPU from the program it feeds (issue 16: candump at normal priority
+    in a one-CPU guest lost 22-47 % of the frames); tools/bench_coexist.py prints the figures behind this."""
+    return "spin" if cpus >= 2 else "off"
 
 
 @dataclass(frozen=True)
 class RealtimeSetup:
-    fifo: bool          # SCHED_FIFO granted
+    mode: str           # spin, fifo or off: what runs
+    requested: str      # what was asked (auto or one of the modes)
+    fifo: bool          # SCHED_FIFO granted for the wake-ups
     timer_slack: bool   # 1 ns timer slack set
     note: str           # why not, when not
 
+    @property
+    def spin(self) -> bool:
+        return self.mode == "spin"
+
     def describe(self) -> str:
-        parts = ["SCHED_FIFO" if self.fifo else "normal scheduling",
+        chosen = self.mode if self.requested == self.mode else f"{self.mode} ({self.requested})"
+        parts = [f"realtime {chosen}",
+                 f"SCHED_FIFO priority {FIFO_PRIORITY}" if self.fifo else "normal scheduling",
+                 "sleep then spin" if self.spin else "sleep, no spin",
                  "timer slack 1 ns" if self.timer_slack else "default timer slack"]
         return ", ".join(parts) + (f" ({self.note})" if self.note else "")
 
 
-def enable_realtime(want_fifo: bool = True, priority: int = 20) -> RealtimeSetup:
-    """Ask for SCHED_FIFO (calling thread only) and 1 ns timer slack; fall back quietly when refused."""
+def enable_realtime(mode: str = "auto", cpus: int | None = None) -> RealtimeSetup:
+    """Set up the calling thread for `mode` (auto: see default_mode); falls back quietly to normal
+    scheduling when SCHED_FIFO is refused (not root, no CAP_SYS_NICE, RT budget exhausted)."""
+    if mode not in MODES:
+        raise ValueError(f"realtime mode {mode!r} (known: {', '.join(MODES)})")
+    cpus = usable_cpus() if cpus is None else cpus
+    chosen = default_mode(cpus) if mode == "auto" else mode
     notes = []
+    if chosen == "spin" and cpus < 2:
+        notes.append(f"spinning on {cpus} usable CPU takes it from the consumer")
     slack = False
     try:
         libc = ctypes.CDLL(None, use_errno=True)
@@ -48,37 +102,61 @@ def enable_realtime(want_fifo: bool = True, priority: int = 20) -> RealtimeSetup
     except (OSError, AttributeError):
         notes.append("prctl unavailable")
     fifo = False
-    if want_fifo and hasattr(os, "sched_setscheduler"):
-        try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-            fifo = True
-        except (PermissionError, OSError) as exc:
-            notes.append(f"SCHED_FIFO refused: {exc.strerror or exc}")
-    return RealtimeSetup(fifo, slack, "; ".join(notes))
+    if chosen in ("spin", "fifo"):
+        fifo, why = _set_fifo(True)
+        if not fifo:
+            notes.append(f"SCHED_FIFO refused: {why}")
+    return RealtimeSetup(chosen, mode, fifo, slack, "; ".join(notes))
+
+
+def _set_fifo(on: bool) -> tuple[bool, str]:
+    if not hasattr(os, "sched_setscheduler"):
+        return False, "not on this system"
+    try:
+        if on:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(FIFO_PRIORITY))
+        else:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    except OSError as exc:
+        return False, exc.strerror or str(exc)
+    return True, ""
 
 
 def drop_realtime() -> None:
     """Back to normal scheduling for the calling thread (helpers that compute must never run RT)."""
-    if hasattr(os, "sched_setscheduler"):
-        try:
-            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
-        except OSError:
-            pass
+    _set_fifo(False)
 
 
 class Pacer:
-    """Wait until an absolute monotonic deadline: sleep to `spin_ns` before it, then spin.
+    """Wait until an absolute monotonic deadline: sleep (watching the links' descriptors), then with
+    `spin` busy-wait the last stretch.
 
-    Under SCHED_FIFO the spin is short and a bounded share of the period (see _FIFO_SPIN_SHARE), so
-    the thread never runs long enough for RT throttling to stall it.
+    fifo: the thread was granted SCHED_FIFO. The pacer gives it up while the sender is behind and takes it
+    back before sleeping.
     """
 
-    def __init__(self, fifo: bool, period_ns: float = 1e6):
-        self.spin_ns = int(min(_FIFO_SPIN_NS, _FIFO_SPIN_SHARE * period_ns)) if fifo else _SPIN_NS
+    def __init__(self, fifo: bool = False, period_ns: float = 1e6, spin: bool = True):
+        self.fifo = fifo
+        self.period_ns = period_ns
+        self.spin_ns = int(min(_SPIN_NS, _SPIN_SHARE * period_ns)) if spin else 0
+        self._normal = False        # fifo granted but given up for now
+        self._behind_ns = max(period_ns, _BEHIND_NS)
+        self.fifo_given_up = 0      # times the sender fell _BEHIND_NS behind and gave SCHED_FIFO up
+        self._sent_ns = 0            # when the last wait ended
         self.serve_margin_ns = _SERVE_MARGIN_NS
         # When the descriptors were last looked at: at high rates the whole period may be spin and margin,
         # and the caller then polls them itself after a send (see streaming).
         self.watched_ns = 0
+
+    def _normal_priority(self) -> None:
+        if self.fifo and not self._normal:
+            self._normal = True
+            _set_fifo(False)
+
+    def _wake_priority(self) -> None:
+        if self._normal:
+            self._normal = False
+            self.fifo = _set_fifo(True)[0]   # refused now (RT budget): stay normal for good
 
     def sleep_until(self, wake_ns: int, fds=(), on_ready=None) -> None:
         """Sleep until `wake_ns` (monotonic) or a little after, but while any of `fds` is readable call
@@ -86,10 +164,11 @@ class Pacer:
         Input arriving within _SERVE_MARGIN_NS of the wake time waits in the kernel until after the
         deadline's send, so answering never makes a sample late. select() rather than poll/epoll because its
         timeout has microsecond resolution (theirs is ms)."""
-        while True:
-            early = wake_ns - time.monotonic_ns()
-            if early <= 0:
-                return
+        early = wake_ns - time.monotonic_ns()
+        if early <= 0:
+            return
+        self._wake_priority()
+        while early > 0:
             if not fds or early <= self.serve_margin_ns:
                 time.sleep(early / 1e9)
                 return
@@ -99,6 +178,7 @@ class Pacer:
                 # Readable but nothing to read: a hang-up (a pty whose reader has gone away stays readable).
                 # Stop watching until this deadline instead of spinning on select.
                 fds = ()
+            early = wake_ns - time.monotonic_ns()
 
     def wait_until(self, deadline_ns: int, fds=(), on_ready=None) -> int:
         """Returns the time we woke (ns, monotonic), at or after the deadline; input on `fds` is handed to
@@ -107,6 +187,17 @@ class Pacer:
         now = time.monotonic_ns()
         while now < deadline_ns:
             now = time.monotonic_ns()
+        if now - deadline_ns > self._behind_ns and self.fifo and not self._normal:
+            self.fifo_given_up += 1
+            self._normal_priority()
+        if now - deadline_ns > self.period_ns and (self._normal or not self.fifo):
+            # Behind at normal priority: catch up at twice the rate, not in one burst, so that a reader sharing
+            # the CPU runs between samples (in the one-CPU guest a burst overflowed candump's receive buffer).
+            gap = self._sent_ns + self.period_ns // 2 - now
+            if gap > 0:
+                time.sleep(gap / 1e9)
+                now = time.monotonic_ns()
+        self._sent_ns = now
         return now
 
 

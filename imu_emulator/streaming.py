@@ -81,7 +81,7 @@ class RunOptions:
     count: int | None = None
     quiet: bool = False
     allow_overload: bool = False
-    realtime: bool = True
+    realtime: str = "auto"           # imu_emulator.realtime.MODES
     stats_json: "str | AtomicOutput | None" = None   # a path, or an output the caller created early
 
 
@@ -174,12 +174,7 @@ class Stream:
             else:
                 self.encoder = firmware_protocols.create_encoder(config.format, **config.options)
         except TypeError as exc:
-            talking = self.device is not None or (config.device and self.spec.kind not in _ONE_WAY_TARGETS)
-            device_only = sorted(set(config.options) & set(self.info.device_options) - set(self.info.options))
-            if device_only and not talking:
-                raise StreamError(f"{config.format}: option {device_only[0]!r} belongs to the device, which "
-                                  f"{'--device off' if not config.device else 'a one-way target'} leaves out") from None
-            known = {**self.info.options, **(self.info.device_options if talking else {})}
+            known = {**self.info.options, **(self.info.device_options if self.device or config.device else {})}
             raise StreamError(f"{config.format}: bad option ({exc}); known options: "
                               f"{', '.join(known) or 'none'}") from None
         except ValueError as exc:
@@ -192,6 +187,8 @@ class Stream:
         self.replies_sent = 0
         self.replies_dropped = 0
         self.ignored_input = 0      # bytes or frames that arrived on a link without a device
+        self.queue_max = None       # most bytes seen waiting in the link's queue (sampled twice a second)
+        self.link = {}              # what the link itself reported, read just before closing it
 
     def open(self) -> None:
         self.transport = open_target(self.spec, self.info.kind, self.config.target_options)
@@ -227,8 +224,18 @@ class Stream:
             items = [prepare(encoded[bounds[j]:bounds[j + 1]], time_ns[j]) for j in range(len(time_ns))]
         return items, _saturation_total(self.encoder)
 
+    def sample_queue(self) -> None:
+        queued = self.transport.queued()
+        if queued is not None:
+            self.queue_max = max(queued, self.queue_max or 0)
+
     def close(self) -> None:
         if self.transport is not None:
+            self.transport.finish()
+            self.sample_queue()
+            self.link = self.transport.link_report()
+            if self.queue_max is not None:
+                self.link["queue_max_bytes"] = self.queue_max
             self.transport.close()
             self.transport = None
 
@@ -249,6 +256,7 @@ class Stream:
                              "replies_dropped": self.replies_dropped, "idle": self.idle}
         if self.ignored_input:
             out["ignored_input"] = self.ignored_input
+        out["link"] = self.link
         return out
 
 
@@ -405,6 +413,9 @@ class Streamer:
         self._time_offset_ns = 0
         self._first_ns = 0
         self._last_ns = 0
+        self.scheduling = None
+        self.pacer = None
+        self._sender_cpu_ns = 0
 
     # - producer -
     def _loop_period_ns(self) -> int:
@@ -485,7 +496,7 @@ class Streamer:
                 self._time_offset_ns = time.time_ns() + (start - time.monotonic_ns()) - int(round(self.t0_s * 1e9))
             producer, blocks = self._start_producer()
             # RT only for paced runs: speed 0 never sleeps, and a busy SCHED_FIFO loop starves the machine.
-            rt = enable_realtime(want_fifo=paced and self.options.realtime)
+            rt = self.scheduling = enable_realtime(self.options.realtime if paced else "off")
             self._note(f"scheduling: {rt.describe()}")
             try:
                 period_ns = 1e9 / (self.rate_hz * self.options.speed) if paced else 0.0
@@ -493,7 +504,12 @@ class Streamer:
                 # second; the send loop makes no reference cycles, so refcounting alone frees its garbage.
                 gc.freeze()
                 gc.disable()
-                self._send_loop(blocks, Pacer(rt.fifo, period_ns) if paced else None, start)
+                self.pacer = Pacer(rt.fifo, period_ns, spin=rt.spin) if paced else None
+                cpu_before = time.thread_time_ns()
+                try:
+                    self._send_loop(blocks, self.pacer, start)
+                finally:
+                    self._sender_cpu_ns = time.thread_time_ns() - cpu_before
             except (KeyboardInterrupt, _Stop):
                 pass
             except ImuEmulatorError as exc:
@@ -542,6 +558,7 @@ class Streamer:
                       f"input bytes ignored, {d['idle']} samples with nothing due", file=sys.stderr, flush=True)
             if s.get("ignored_input"):
                 print(f"    input ignored (no device): {s['ignored_input']}", file=sys.stderr, flush=True)
+            print(f"    link: {_link_text(s['link'])}", file=sys.stderr, flush=True)
 
     def _check_budgets(self) -> None:
         if self.options.speed == 0:
@@ -612,12 +629,15 @@ class Streamer:
                 self.samples_done = done
                 if done == 1:
                     self._first_ns = time.monotonic_ns()
-                if show_status and (not pacer or j % 64 == 0):
+                if not pacer or j % 64 == 0:
                     now = time.monotonic_ns()
                     if now >= next_status:
                         next_status = now + _STATUS_INTERVAL_NS
-                        print(self._status_text("streaming"), end="\r" if sys.stderr.isatty() else "\n",
-                              file=sys.stderr, flush=True)
+                        for stream in streams:
+                            stream.sample_queue()
+                        if show_status:
+                            print(self._status_text("streaming"), end="\r" if sys.stderr.isatty() else "\n",
+                                  file=sys.stderr, flush=True)
             for stream, saturated in zip(streams, block.saturated):
                 stream.saturated = saturated if stream.device is None else stream.device.saturated
             self._last_ns = time.monotonic_ns()
@@ -631,7 +651,11 @@ class Streamer:
         elapsed = ((self._last_ns or time.monotonic_ns()) - self._first_ns) / 1e9
         return {"samples": self.samples_done, "rate_hz": self.rate_hz, "speed": self.options.speed,
                 "achieved_hz": (self.samples_done - 1) / elapsed if self.samples_done > 1 and elapsed > 0 else 0.0,
+                "scheduling": self.scheduling.mode if self.scheduling else None,
+                # CPU the send loop used per second of streaming: what the scheduling mode costs.
+                "sender_cpu_ratio": self._sender_cpu_ns / 1e9 / elapsed if elapsed > 0 else 0.0,
                 "lateness": self.stats.summary(),
+                "fifo_given_up": self.pacer.fifo_given_up if self.pacer else 0,
                 "dropped": sum(s.dropped for s in self.streams),
                 "saturated": sum(s.saturated for s in self.streams),
                 "streams": [s.summary() for s in self.streams]}
@@ -642,6 +666,20 @@ class Streamer:
         return (f"{state}: {s['samples']} samples, {s['achieved_hz']:.1f} Hz, late p50 {late['p50_us']:.0f} us "
                 f"p99 {late['p99_us']:.0f} us max {late['max_us']:.0f} us, dropped {s['dropped']}, "
                 f"saturated {s['saturated']}")
+
+
+def _link_text(link: dict) -> str:
+    """One line of what the link reported: refusals by cause, interface counters that moved, queue."""
+    parts = [f"{n} {cause}" for cause, n in sorted(link.get("send_errors", {}).items())]
+    parts = ["send refused: " + ", ".join(parts)] if parts else ["no send refused"]
+    moved = {name: n for name, n in link.get("interface", {}).items() if n}
+    if "interface" in link:
+        parts.append("interface " + (", ".join(f"{name} +{n}" for name, n in moved.items()) or "counters unchanged"))
+    if "queue_max_bytes" in link:
+        parts.append(f"queue up to {link['queue_max_bytes']} B")
+    if link.get("unread_at_close_bytes"):
+        parts.append(f"{link['unread_at_close_bytes']} B or more unread by the reader when the link closed")
+    return "; ".join(parts)
 
 
 def _reap(pid: int) -> None:

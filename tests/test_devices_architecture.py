@@ -137,13 +137,3 @@ def test_single_row_equals_samples_slice():
         for name in ("time_ns", "accel", "gyro", "mag", "quat", "temperature_c", "position_llh"):
             a, b = getattr(one, name), getattr(ref, name)
             assert (a is None and b is None) or (np.array_equal(a, b) and a.flags.c_contiguous and a.shape == b.shape)
-
-
-def test_device_option_without_the_device_says_so(tmp_path):
-    from test_stream_support import run_emulator, write_scene
-    scene_path = write_scene(tmp_path, rate=50, duration=1.0)
-    done = run_emulator(scene_path, "--format", "vectornav-binary", "--to", "pty", "--device", "off",
-                        "--option", "preset=ardupilot", "--count", "2")
-    assert done.returncode == 2
-    assert done.stderr.strip().splitlines()[-1] == ("error: vectornav-binary: option 'preset' belongs to the device, "
-                                                    "which --device off leaves out")

@@ -1,10 +1,24 @@
-"""The pacer and its statistics. Timing checks use medians with wide margins: the machine is shared."""
+"""The pacer, its scheduling modes and statistics, what links report, and completeness at a reader that runs at
+normal priority beside a CPU-bound competitor. Timing checks use medians with wide margins: the machine is
+shared; figures come from tools/bench_stream.py and tools/bench_coexist.py."""
+import json
+import os
+import shutil
+import socket
+import subprocess
+import sys
 import threading
 import time
 
 import numpy as np
+import pytest
 
-from imu_emulator.realtime import LatenessStats, Pacer, enable_realtime, drop_realtime
+from imu_emulator import realtime
+from imu_emulator.realtime import LatenessStats, Pacer, drop_realtime, enable_realtime
+from imu_emulator.transport import TargetOptions
+from imu_emulator.transport.pty import PtyTransport
+from imu_emulator.transport.udp import UdpTransport
+from test_stream_support import Emulator, mavlink_parse, open_pty_reader, read_for, write_scene
 
 
 def test_lateness_quantiles_from_histogram():
@@ -36,7 +50,68 @@ def test_pacer_sleep_then_spin_median_under_2ms_at_200hz():
 
 
 def test_pacer_sleep_only_median_under_2ms_at_200hz():
-    assert _median_lateness(Pacer(fifo=True), count=60) < 2_000_000
+    assert _median_lateness(Pacer(fifo=False, spin=False), count=60) < 2_000_000
+
+
+@pytest.fixture
+def scheduler_calls(monkeypatch):
+    """sched_setscheduler recorded and granted, without changing this thread's scheduling."""
+    calls = []
+    monkeypatch.setattr("os.sched_setscheduler", lambda pid, policy, param: calls.append(policy))
+    return calls
+
+
+@pytest.mark.parametrize("cpus, mode, policies", [
+    (1, "off", []),                      # one CPU: neither spin nor SCHED_FIFO by default
+    (2, "spin", [os.SCHED_FIFO]),
+    (8, "spin", [os.SCHED_FIFO]),
+])
+def test_default_mode_spins_only_when_a_core_is_left(scheduler_calls, cpus, mode, policies):
+    setup = enable_realtime("auto", cpus=cpus)
+    assert (setup.mode, setup.requested) == (mode, "auto")
+    assert scheduler_calls == policies
+
+
+@pytest.mark.parametrize("mode, fifo, spin", [("spin", True, True), ("fifo", True, False), ("off", False, False)])
+def test_explicit_modes(scheduler_calls, mode, fifo, spin):
+    setup = enable_realtime(mode, cpus=1)
+    assert (setup.mode, setup.fifo, setup.spin) == (mode, fifo, spin)
+    assert scheduler_calls == ([os.SCHED_FIFO] if fifo else [])
+    assert ("takes it from the consumer" in setup.note) == (mode == "spin")   # spin on one CPU is warned about
+
+
+def test_usable_cpus_follows_affinity():
+    # taskset (util-linux) restricts the child to one CPU: the count is the affinity's, not the machine's.
+    if shutil.which("taskset") is None:
+        pytest.skip("taskset not installed")
+    out = subprocess.run(["taskset", "-c", "0", sys.executable, "-c",
+                          "from imu_emulator.realtime import usable_cpus; print(usable_cpus())"],
+                         capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "1"
+
+
+def test_sender_that_falls_behind_gives_up_fifo_until_it_sleeps_again(scheduler_calls):
+    period = 1_000_000
+    pacer = Pacer(fifo=True, period_ns=period, spin=False)
+    now = time.monotonic_ns()
+    pacer.wait_until(now - 5 * period)              # a short stall (the vCPU taken away): caught up under FIFO
+    assert scheduler_calls == []
+    pacer.wait_until(now - 150 * period)            # 150 ms behind: it cannot keep up
+    assert pacer.fifo_given_up == 1 and scheduler_calls == [os.SCHED_OTHER]
+    pacer.wait_until(now - 149 * period)            # still behind: no further system call
+    assert pacer.fifo_given_up == 1 and scheduler_calls == [os.SCHED_OTHER]
+    pacer.wait_until(time.monotonic_ns() + 2 * period)   # on time again: SCHED_FIFO back for the sleep
+    assert scheduler_calls == [os.SCHED_OTHER, os.SCHED_FIFO]
+
+
+def test_sender_behind_at_normal_priority_catches_up_at_twice_the_rate_not_in_a_burst():
+    # Deadlines long past: a burst would return at once; spaced, consecutive returns are at least half a period
+    # apart (a lower bound time.sleep guarantees, so this holds however loaded the machine is).
+    period = 2_000_000
+    pacer = Pacer(fifo=False, period_ns=period, spin=False)
+    past = time.monotonic_ns() - 1_000 * period
+    woke = [pacer.wait_until(past + k * period) for k in range(10)]
+    assert min(np.diff(woke)) >= period // 2
 
 
 def test_realtime_request_falls_back_gracefully(monkeypatch):
@@ -44,7 +119,7 @@ def test_realtime_request_falls_back_gracefully(monkeypatch):
         raise PermissionError(1, "Operation not permitted")
 
     monkeypatch.setattr("os.sched_setscheduler", refuse)
-    setup = enable_realtime()
+    setup = enable_realtime("fifo")
     assert not setup.fifo
     assert "SCHED_FIFO refused: Operation not permitted" in setup.describe()
 
@@ -53,7 +128,8 @@ def test_realtime_granted_or_refused_without_error():
     result = {}
 
     def ask():   # in a thread: SCHED_FIFO applies to the calling thread only
-        result["setup"] = enable_realtime()
+        result["setup"] = enable_realtime("fifo")
+        result["policy"] = os.sched_getscheduler(0)
         drop_realtime()
 
     thread = threading.Thread(target=ask)
@@ -61,3 +137,107 @@ def test_realtime_granted_or_refused_without_error():
     thread.join()
     setup = result["setup"]
     assert setup.fifo or "refused" in setup.note
+    if setup.fifo:
+        assert result["policy"] == os.SCHED_FIFO
+        assert os.sched_getparam(0).sched_priority == 0   # this (main) thread untouched
+    assert realtime.FIFO_PRIORITY < 10   # below ArduPilot's Linux HAL threads (SCHED_FIFO 10-20)
+
+
+# --- what the link reports ---------------------------------------------------------------------
+
+def test_pty_refusals_counted_by_cause_and_unread_bytes_reported_at_close():
+    transport = PtyTransport(TargetOptions())
+    try:
+        packet = b"x" * 60
+        refused = sum(not transport.send(packet) for _ in range(1000))   # 60 kB: the pty holds ~16 kB
+        assert refused > 0
+        assert transport.link_report()["send_errors"] == {"EAGAIN": refused}
+        # The bytes reach the reader's side through a kernel work queue: allow it a moment.
+        end = time.monotonic() + 2
+        while not transport.queued() and time.monotonic() < end:
+            time.sleep(0.005)
+        assert transport.queued() > 0
+        transport.finish()      # nobody reads: gives up after a short wait
+        assert transport.link_report()["unread_at_close_bytes"] > 0
+    finally:
+        transport.close()
+
+
+def test_pty_reader_that_took_everything_leaves_nothing_unread():
+    transport = PtyTransport(TargetOptions())
+    try:
+        fd = open_pty_reader(transport.pty.path)
+        assert transport.send(b"y" * 500)
+        got = read_for(fd, 2.0, stop_after=500)
+        os.close(fd)
+        assert got == b"y" * 500
+        transport.finish()
+        assert transport.queued() == 0
+        assert transport.link_report() == {}
+    finally:
+        transport.close()
+
+
+def test_udp_refusal_carries_the_kernels_errno():
+    closed = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    closed.bind(("127.0.0.1", 0))
+    port = closed.getsockname()[1]
+    closed.close()   # nobody listens: the kernel answers ICMP port unreachable, the next send gets ECONNREFUSED
+    transport = UdpTransport("127.0.0.1", port, TargetOptions())
+    try:
+        results = [transport.send(b"z") for _ in range(3)]
+        time.sleep(0.05)
+        results += [transport.send(b"z") for _ in range(3)]
+        assert transport.link_report()["send_errors"] == {"ECONNREFUSED": results.count(False)}
+        assert results.count(False) >= 1
+        assert transport.queued() == 0
+    finally:
+        transport.close()
+
+
+# --- completeness at a reader beside a CPU-bound competitor ---------------------------------------
+
+def test_pty_reader_at_normal_priority_beside_a_busy_loop_receives_every_sample(tmp_path):
+    """Default settings, mavlink-highres at 1 kHz; this process reads at normal priority while a busy loop
+    runs. Every sample must arrive: each HIGHRES_IMU time stamp once, the MAVLink sequence (HEARTBEATs
+    included) without a gap."""
+    rate, seconds = 1000, 3
+    scene_path = write_scene(tmp_path, rate=rate, duration=seconds + 1)
+    stats = tmp_path / "stats.json"
+    busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        with Emulator(scene_path, "--format", "mavlink-highres", "--to", "pty", "--duration", seconds,
+                      "--stats-json", stats) as emu:
+            fd = open_pty_reader(emu.targets[0])
+            data = _read_until_closed(fd)
+            code, err = emu.wait()
+    finally:
+        busy.kill()
+        busy.wait()
+    assert code == 0, err
+    summary = json.loads(stats.read_text())
+    assert summary["dropped"] == 0 and not summary["streams"][0]["link"].get("unread_at_close_bytes")
+    every, bad = mavlink_parse(data, types=None)
+    assert not bad
+    assert set(np.diff([m.get_seq() for m in every]) % 256) == {1}
+    k = sorted(round(m.time_usec * 1e-6 * rate) for m in every if m.get_type() == "HIGHRES_IMU")
+    assert k == list(range(rate * seconds))
+
+
+def _read_until_closed(fd, timeout=60.0) -> bytes:
+    """Everything until the emulator closes its side (EIO), as a driver reading a port would."""
+    import select
+    chunks = []
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        ready, _, _ = select.select([fd], [], [], 1.0)
+        if ready:
+            try:
+                data = os.read(fd, 65536)
+            except OSError:
+                break
+            if not data:
+                break
+            chunks.append(data)
+    os.close(fd)
+    return b"".join(chunks)

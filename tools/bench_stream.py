@@ -111,7 +111,7 @@ rate, seconds = float(sys.argv[1]), float(sys.argv[2])
 rt = enable_realtime()
 gc.freeze(); gc.disable()
 period = 1e9 / rate
-pacer, stats = Pacer(rt.fifo, period), LatenessStats(period)
+pacer, stats = Pacer(rt.fifo, period, spin=rt.spin), LatenessStats(period)
 start = time.monotonic_ns() + 10_000_000
 for k in range(int(rate * seconds)):
     deadline = start + int(k * period)

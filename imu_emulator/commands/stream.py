@@ -42,7 +42,13 @@ def register(subparsers) -> None:
                    help="stop after this much scene time")
     p.add_argument("--count", type=number(1, 10**15, integer=True), help="stop after this many samples")
     p.add_argument("--allow-overload", action="store_true", help="stream even when the link budget does not fit")
-    p.add_argument("--no-realtime", action="store_true", help="do not ask for SCHED_FIFO")
+    p.add_argument("--realtime", choices=("auto", "spin", "fifo", "off"), default="auto",
+                   help="how the sender waits for deadlines: spin = sleep under SCHED_FIFO priority 1 to 200 us "
+                        "before the deadline and spin the rest (most precise, costs up to 40 %% of a core); "
+                        "fifo = sleep to the deadline under SCHED_FIFO priority 1; off = normal scheduling, plain "
+                        "sleep; auto (default) = spin when 2 or more CPUs are usable, off with one (a consumer on "
+                        "the only CPU must never be starved)")
+    p.add_argument("--no-realtime", dest="realtime", action="store_const", const="off", help="same as --realtime off")
     p.add_argument("--quiet", action="store_true", help="no status line or summary (warnings still show)")
     p.add_argument("--stats-json", metavar="PATH", help="write the final statistics as JSON")
     p.set_defaults(func=cmd_stream)
@@ -114,5 +120,5 @@ def _stream(args, stats) -> None:
                 raise StreamError(f"--imu: no [[stream]] for IMU {args.imu!r}")
     options = RunOptions(speed=args.speed, loop=args.loop, epoch_time=args.epoch_time, duration_s=args.duration,
                          count=args.count, quiet=args.quiet, allow_overload=args.allow_overload,
-                         realtime=not args.no_realtime, stats_json=stats)
+                         realtime=args.realtime, stats_json=stats)
     run_streams(scene, Simulation(scene, truth=needs_truth(configs)), configs, options)

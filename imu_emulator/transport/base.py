@@ -1,6 +1,11 @@
 """What every target offers the streaming loop, and the options a target spec cannot carry."""
 from __future__ import annotations
 
+import errno
+import fcntl
+import struct
+import termios
+from collections import Counter
 from dataclasses import dataclass
 
 
@@ -58,5 +63,45 @@ class Transport:
     def describe(self) -> str:  # pragma: no cover - interface
         raise NotImplementedError
 
+    # What a `send` returning False met, by cause (errno names such as EAGAIN or ENOBUFS, or what the link
+    # says): a subclass counts into it with count_refusal. Class-level empty default for links that never refuse.
+    send_errors: Counter = Counter()
+
+    def count_refusal(self, cause: str) -> None:
+        if "send_errors" not in self.__dict__:
+            self.send_errors = Counter()
+        self.send_errors[cause] += 1
+
+    def queued(self) -> int | None:
+        """Bytes the link holds that the other end has not taken yet, when the kernel says (None otherwise)."""
+        return None
+
+    def finish(self) -> None:
+        """At the end of a run, before link_report and close: let the other end take what was sent (bounded)."""
+
+    def link_report(self) -> dict:
+        """What the link itself reports, beside the emulator's own sent/dropped counts: refusals by cause
+        and what a subclass can read from the kernel (queues, interface counters)."""
+        return {"send_errors": dict(self.send_errors)} if self.send_errors else {}
+
     def close(self) -> None:
         pass
+
+
+def error_name(exc: BaseException) -> str:
+    """ENOBUFS, EAGAIN, ... for an OSError or a python-can error carrying an errno; the type otherwise."""
+    code = getattr(exc, "errno", None)
+    if not isinstance(code, int):
+        code = getattr(exc, "error_code", None)
+    if isinstance(code, int):
+        return errno.errorcode.get(code, f"errno {code}")
+    return type(exc).__name__
+
+
+def output_queue(fd: int, request: int = termios.TIOCOUTQ) -> int | None:
+    """SIOCOUTQ (= TIOCOUTQ): bytes a socket has not sent yet, or a tty has not transmitted (FIONREAD: bytes
+    waiting to be read); None if refused."""
+    try:
+        return struct.unpack("i", fcntl.ioctl(fd, request, b"\0" * 4))[0]
+    except OSError:
+        return None

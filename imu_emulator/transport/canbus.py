@@ -2,13 +2,18 @@
 from __future__ import annotations
 
 import errno
+from pathlib import Path
 
 import can
 
 from imu_emulator.errors import TargetError
-from imu_emulator.transport.base import TargetOptions, Transport
+from imu_emulator.transport.base import TargetOptions, Transport, error_name, output_queue
 from imu_emulator.transport.frames import to_messages
 
+# Interface counters of a SocketCAN device that tell of frames lost after `send` returned (vcan loops frames
+# back through the receive path, so a full backlog shows as rx_dropped). A receiving socket's own full
+# buffer shows in none of them: only its owner can see that (SO_RXQ_OVFL).
+_INTERFACE_COUNTERS = ("tx_dropped", "tx_errors", "tx_fifo_errors", "rx_dropped", "rx_errors", "rx_over_errors")
 # How long a blocking send (--speed 0) waits for room on the bus before calling the frame dropped.
 _BLOCKING_TIMEOUT_S = 1.0
 
@@ -38,6 +43,7 @@ class CanBusTransport(Transport):
         self.interface, self.channel = interface, channel
         self._brs = bool(options.data_bitrate)
         self._timeout = _BLOCKING_TIMEOUT_S if options.blocking else 0.0
+        self._counters_at_open = self._interface_counters()
 
     def prepare(self, payload, time_ns: int):
         return to_messages(payload, bitrate_switch=self._brs)
@@ -46,9 +52,12 @@ class CanBusTransport(Transport):
         for message in messages:
             try:
                 self.bus.send(message, timeout=self._timeout)
-            except can.CanError:
+            except can.CanError as exc:
                 # The rest of this sample's frames go too: a receiver gets an incomplete transfer at
                 # worst, which it discards, never frames from two different samples interleaved.
+                # python-can's "Transmit buffer full" (select said not writable) carries no errno.
+                self.count_refusal("would-block" if getattr(exc, "error_code", None) is None
+                                   and "buffer full" in str(exc) else error_name(exc))
                 return False
         return True
 
@@ -72,6 +81,27 @@ class CanBusTransport(Transport):
 
     def describe(self) -> str:
         return f"can:{self.interface}:{self.channel}"
+
+    def _interface_counters(self) -> dict | None:
+        if self.interface != "socketcan":
+            return None
+        folder = Path("/sys/class/net") / self.channel / "statistics"
+        try:
+            return {name: int((folder / name).read_text()) for name in _INTERFACE_COUNTERS}
+        except (OSError, ValueError):
+            return None
+
+    def queued(self) -> int | None:
+        sock = getattr(self.bus, "socket", None)
+        return output_queue(sock.fileno()) if sock is not None else None
+
+    def link_report(self) -> dict:
+        report = super().link_report()
+        now = self._interface_counters()
+        if now is not None and self._counters_at_open is not None:
+            # Interface-wide: other senders on the same interface count here too.
+            report["interface"] = {name: now[name] - self._counters_at_open[name] for name in now}
+        return report
 
     def close(self) -> None:
         self.bus.shutdown()

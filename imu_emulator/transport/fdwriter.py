@@ -5,6 +5,7 @@ import errno
 import os
 import select
 import time
+from collections import Counter
 
 
 def read_available(fd: int, limit: int = 65536) -> bytes:
@@ -41,6 +42,8 @@ class FdPacketWriter:
         self._line_free_ns = 0
         self._poll = select.poll()
         self._poll.register(fd, select.POLLOUT)
+        self.refusals = Counter()      # why send returned False: EAGAIN (kernel buffer full), EIO, uart-fifo-full
+        self._cause = ""
 
     @property
     def paced(self) -> bool:
@@ -53,8 +56,10 @@ class FdPacketWriter:
 
     def send(self, packet: bytes) -> bool:
         if self._tail and not self._write_tail():
+            self.refusals[self._cause] += 1
             return False
         if self._ns_per_byte and not self._line_takes(len(packet)):
+            self.refusals["uart-fifo-full"] += 1
             return False
         self._tail = packet
         self._write_tail()
@@ -82,11 +87,13 @@ class FdPacketWriter:
                 n = os.write(self.fd, self._tail)
             except BlockingIOError:
                 n = 0
+                self._cause = "EAGAIN"
             except OSError as exc:
                 # EIO: pty slave side closed by everyone. The stream goes on, as with a cable pulled.
                 if exc.errno != errno.EIO:
                     raise
                 n = 0
+                self._cause = "EIO"
             self._tail = self._tail[n:]
             if self._tail:
                 if not self.blocking:

@@ -8,7 +8,7 @@ import time
 import tty
 
 from imu_emulator.errors import TargetError
-from imu_emulator.transport.base import TargetOptions, Transport
+from imu_emulator.transport.base import TargetOptions, Transport, output_queue
 from imu_emulator.transport.fdwriter import FdPacketWriter, read_available
 
 _OPEN_FLAGS = os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK
@@ -67,6 +67,12 @@ class PtyPair:
             pass
 
 
+# Closing the master discards what the reader has not read yet: at the end of a run we wait for it, until it
+# has taken nothing for this long (so a run with nobody reading ends at once, or nearly).
+_DRAIN_IDLE_S = 0.2
+_SETTLE_S = 0.02
+
+
 class PtyTransport(Transport):
     """Packets go out only while a reader has the port open; the others are dropped and counted (with
     --speed 0, sending waits for a reader instead). What the reader writes (a driver's commands) comes back
@@ -103,6 +109,36 @@ class PtyTransport(Transport):
 
     def fileno(self) -> int:
         return self.pty.master
+
+    def queued(self) -> int | None:
+        """Bytes waiting for the reader: FIONREAD on our own slave fd sees the line discipline's buffer, so it
+        reads at most 4095 however much more waits behind it; 0 means the reader took everything."""
+        return output_queue(self.pty._slave, termios.FIONREAD)
+
+    def finish(self) -> None:
+        # The last writes reach the line discipline through a kernel work queue, so an empty reading right after
+        # them proves nothing: empty must hold for _SETTLE_S.
+        last, changed = self.queued(), time.monotonic()
+        while True:
+            time.sleep(0.002)
+            now, queued = time.monotonic(), self.queued()
+            if queued != last:
+                last, changed = queued, now
+            if now - changed >= (_DRAIN_IDLE_S if queued else _SETTLE_S):
+                break
+        self.unread_at_close = last or 0
+
+    def link_report(self) -> dict:
+        report = super().link_report()
+        if getattr(self, "unread_at_close", 0):
+            report["unread_at_close_bytes"] = self.unread_at_close   # lost when the master closes
+        return report
+
+    @property
+    def send_errors(self):
+        # Nothing is lost after a pty accepts bytes (a full buffer refuses the write instead): refusals
+        # are the whole story.
+        return self.writer.refusals
 
     def set_baud(self, baud: int) -> bool:
         """A pty has no baud rate; with --pace-baud the pacing follows the new rate, as the UART would."""

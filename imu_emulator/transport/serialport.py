@@ -6,7 +6,7 @@ import os
 import serial
 
 from imu_emulator.errors import TargetError
-from imu_emulator.transport.base import TargetOptions, Transport
+from imu_emulator.transport.base import TargetOptions, Transport, output_queue
 from imu_emulator.transport.fdwriter import FdPacketWriter, read_available
 
 
@@ -31,6 +31,14 @@ class SerialTransport(Transport):
 
     def fileno(self) -> int:
         return self.port.fileno()
+
+    @property
+    def send_errors(self):
+        return self.writer.refusals
+
+    def queued(self) -> int | None:
+        """TIOCOUTQ: bytes the UART has not transmitted yet."""
+        return output_queue(self.port.fileno())
 
     def set_baud(self, baud: int) -> bool:
         """Follow a baud-rate change the device echoed: the echo leaves at the old rate first."""

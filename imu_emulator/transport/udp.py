@@ -1,10 +1,11 @@
 """Serial-format packets as UDP datagrams, one datagram per sample (e.g. MAVLink to a ground station)."""
 from __future__ import annotations
 
+import errno
 import socket
 
 from imu_emulator.errors import TargetError
-from imu_emulator.transport.base import TargetOptions, Transport
+from imu_emulator.transport.base import TargetOptions, Transport, error_name, output_queue
 
 
 class UdpTransport(Transport):
@@ -22,10 +23,20 @@ class UdpTransport(Transport):
     def send(self, payload: bytes) -> bool:
         try:
             self.sock.send(payload)
-        except (BlockingIOError, ConnectionRefusedError):
+        except (BlockingIOError, ConnectionRefusedError) as exc:
             # Refused = an earlier datagram met a closed port; UDP senders keep going regardless.
+            self.count_refusal(error_name(exc))
+            return False
+        except OSError as exc:
+            if exc.errno != errno.ENOBUFS:   # the interface's queue is full: a drop like any other
+                raise
+            self.count_refusal("ENOBUFS")
             return False
         return True
+
+    def queued(self) -> int | None:
+        """SIOCOUTQ: bytes in the socket's send queue (a receiver's own buffer is out of our sight)."""
+        return output_queue(self.sock.fileno())
 
     def recv(self) -> bytes:
         """Datagrams from the peer (a connected socket receives from that address only)."""

@@ -1,6 +1,6 @@
 #!/bin/sh
 # init (PID 1) of a User Mode Linux guest whose root is the host's / (hostfs): the host kernel has no
-# SocketCAN, this one does. Runs the socketcan tests, leaves their output and exit code in UML_RESULT_DIR
+# SocketCAN, this one does. Runs the socketcan tests (or the script UML_SCRIPT names), leaves their output and exit code in UML_RESULT_DIR
 # on the shared filesystem, and powers off. Unknown kernel parameters (UML_*) arrive here as environment.
 export PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin
 mount -t proc proc /proc
@@ -15,8 +15,13 @@ done
 ip link add dev vcan0 type vcan 2>>"$UML_RESULT_DIR/output.txt"
 ip link set vcan0 up 2>>"$UML_RESULT_DIR/output.txt"
 cd "$UML_REPO" || echo "no repo at $UML_REPO" >>"$UML_RESULT_DIR/output.txt"
-HOME=/root IMU_EMULATOR_IN_UML=1 TMPDIR=/dev/shm "$UML_PYTHON" -m pytest -m socketcan tests/socketcan -q \
-    -p no:cacheprovider -o addopts="" >>"$UML_RESULT_DIR/output.txt" 2>&1
+export HOME=/root IMU_EMULATOR_IN_UML=1 TMPDIR=/dev/shm
+if [ -n "$UML_SCRIPT" ]; then   # e.g. tools/bench_coexist.py's guest half
+    sh "$UML_SCRIPT" >>"$UML_RESULT_DIR/output.txt" 2>&1
+else
+    "$UML_PYTHON" -m pytest -m socketcan tests/socketcan -q -p no:cacheprovider -o addopts="" \
+        >>"$UML_RESULT_DIR/output.txt" 2>&1
+fi
 echo $? > "$UML_RESULT_DIR/exit_code"
 sync
 # Power-off is asynchronous: if init exited first the kernel would panic.
