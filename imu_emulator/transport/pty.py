@@ -101,6 +101,7 @@ class PtyTransport(Transport):
 
     def send(self, payload: bytes) -> bool:
         if not self._reader_present():
+            self.writer.refusals["no-reader"] += 1
             return False
         return self.writer.send(payload)
 
@@ -110,22 +111,29 @@ class PtyTransport(Transport):
     def fileno(self) -> int:
         return self.pty.master
 
-    def queued(self) -> int | None:
-        """Bytes waiting for the reader: FIONREAD on our own slave fd sees the line discipline's buffer, so it
-        reads at most 4095 however much more waits behind it; 0 means the reader took everything."""
-        return output_queue(self.pty._slave, termios.FIONREAD)
-
     def finish(self) -> None:
-        # The last writes reach the line discipline through a kernel work queue, so an empty reading right after
-        # them proves nothing: empty must hold for _SETTLE_S.
-        last, changed = self.queued(), time.monotonic()
-        while True:
-            time.sleep(0.002)
-            now, queued = time.monotonic(), self.queued()
-            if queued != last:
-                last, changed = queued, now
-            if now - changed >= (_DRAIN_IDLE_S if queued else _SETTLE_S):
-                break
+        """Wait for a reader to take what was sent. Only the slave side tells (FIONREAD: the line discipline's
+        buffer, so at most 4095 however much more waits behind it; 0 when the reader took everything), so we
+        open it for the while: during the run that would count as a reader."""
+        if not self.pty.reader_present():
+            return
+        try:
+            slave = os.open(self.pty.path, _OPEN_FLAGS)
+        except OSError:
+            return
+        try:
+            # The last writes reach the line discipline through a kernel work queue, so an empty reading right
+            # after them proves nothing: empty must hold for _SETTLE_S.
+            last, changed = output_queue(slave, termios.FIONREAD), time.monotonic()
+            while True:
+                time.sleep(0.002)
+                now, queued = time.monotonic(), output_queue(slave, termios.FIONREAD)
+                if queued != last:
+                    last, changed = queued, now
+                if now - changed >= (_DRAIN_IDLE_S if queued else _SETTLE_S):
+                    break
+        finally:
+            os.close(slave)
         self.unread_at_close = last or 0
 
     def link_report(self) -> dict:
