@@ -143,6 +143,7 @@ class Pacer:
         self._behind_ns = max(period_ns, _BEHIND_NS)
         self.fifo_given_up = 0      # times the sender fell _BEHIND_NS behind and gave SCHED_FIFO up
         self._sent_ns = 0            # when the last wait ended
+        self._spaced = not fifo      # catch up spaced out (normal scheduling from the start)
         self.serve_margin_ns = _SERVE_MARGIN_NS
         # When the descriptors were last looked at: at high rates the whole period may be spin and margin,
         # and the caller then polls them itself after a send (see streaming).
@@ -190,9 +191,11 @@ class Pacer:
         if now - deadline_ns > self._behind_ns and self.fifo and not self._normal:
             self.fifo_given_up += 1
             self._normal_priority()
-        if now - deadline_ns > self.period_ns and (self._normal or not self.fifo):
-            # Behind at normal priority: catch up at twice the rate, not in one burst, so that a reader sharing
-            # the CPU runs between samples (in the one-CPU guest a burst overflowed candump's receive buffer).
+        if now - deadline_ns > self.period_ns and self._spaced:
+            # Behind in `off` mode: catch up at twice the rate, not in one burst, so that a reader sharing the
+            # CPU runs between samples (in the one-CPU guest a burst overflowed candump's receive buffer).
+            # Not for a sender that gave SCHED_FIFO up: it had a core of its own, and a long catch-up after
+            # answering a flood of commands would miss hundreds of deadlines.
             gap = self._sent_ns + self.period_ns // 2 - now
             if gap > 0:
                 time.sleep(gap / 1e9)
