@@ -31,11 +31,13 @@ def _scene(effects=None, imu=None, **scene):
 
 
 def _sample_value(param, scale: float):
-    """A valid, nonzero value of the parameter's shape in its own unit."""
+    """A valid, nonzero value of the parameter's shape in its own unit (the record's example if it has one)."""
+    if param.example is not None:
+        return param.example * scale
     if param.shape == "scalar":
         return 0.3 * scale
     if param.shape in ("vector3", "triple"):
-        return [0.1 * scale, -0.2 * scale, 0.3 * scale]
+        return [0.1 * scale, 0.2 * scale, 0.3 * scale]
     return [[0.01 * scale * (1 + i + 3 * j) for j in range(3)] for i in range(3)]
 
 
@@ -56,7 +58,7 @@ def test_every_parameter_of_every_effect_changes_key_and_source():
     ref_key, ref_source = scene_key(reference, True, False), generate_source(reference, True, False)
     assert all_params(), "the effects declare parameters"
     for effect, param in all_params():
-        changed = _scene(everything, _imu_with({**base, param: _sample_value(param, 1.7)}))
+        changed = _scene(everything, _imu_with({**base, param: _sample_value(param, 11.0)}))   # x11 crosses a decade (the flicker band)
         assert scene_key(changed, True, False) != ref_key, param.path
         assert generate_source(changed, True, False) != ref_source, f"{effect.name}: {param.path}"
 
@@ -85,7 +87,7 @@ def test_imu_keys_and_warnings_come_from_the_records():
         scene = _scene({}, _imu_with({param: _sample_value(param, 1.0)}))
         expected = f"imu[0].{param.path.split('.', 1)[1]} is ignored because effects.{effect.name} is not true"
         assert expected in scene.warnings
-        on = _scene({effect.name: True}, _imu_with({param: _sample_value(param, 1.0)}))
+        on = _scene({effect.name: True}, _imu_with({p: _sample_value(p, 1.0) for p in effect.params}))
         assert not any("is ignored" in w for w in on.warnings)
 
 

@@ -261,4 +261,63 @@ def test_truth_reports_the_realized_bias():
     g2, a2, _ = errors(no_noise)
     # the bias streams do not depend on whether noise is on, and truth is exactly the output without noise
     np.testing.assert_allclose(out.truth["gyro_bias"][0], g2[0], rtol=0, atol=1e-15)
-    np.testing.assert_allclose(out.truth["accel_bias"][0], a2[0], rtol=0, atol=1e-15)
+    # accel z carries g: (g + b) - g is exact only to an ulp of 9.8 (1.8e-15)
+    np.testing.assert_allclose(out.truth["accel_bias"][0], a2[0], rtol=0, atol=4e-15)
+
+
+def test_stream_to_file_gives_generate_bytes_and_a_loop_continues_the_noise(tmp_path):
+    """`stream --loop` to a capture file (pymavlink decodes it) carries, for run sample j, exactly the float32
+    of the sample j of one longer unlooped run: the noise follows the run, the motion the scene."""
+    from test_stream_support import mavlink_parse, run_emulator
+    from imu_emulator import load_scene
+    scene_text = """
+[scene]
+rate_hz = 200
+duration_s = 0.5
+seed = 3
+[trajectory]
+shape = "static"
+[[imu]]
+name = "imu0"
+[imu.gyro]
+noise_density = 0.01
+bias_instability = 0.002
+random_walk = 0.001
+[imu.accel]
+noise_density = 0.02
+[effects]
+gravity = true
+noise = true
+bias_instability = true
+random_walk = true
+"""
+    path = tmp_path / "s.toml"
+    path.write_text(scene_text)
+    longer = tmp_path / "long.toml"
+    longer.write_text(scene_text.replace("duration_s = 0.5", "duration_s = 1.25"))
+    out = tmp_path / "out.bin"
+    result = run_emulator(str(path), "--format", "mavlink-highres", "--to", f"file:{out}", "--loop", "--count", "250",
+                          "--speed", "0", "--quiet")
+    assert result.returncode == 0, result.stderr
+    messages, bad = mavlink_parse(out.read_bytes())
+    assert len(messages) == 250 and not bad
+    reference = Simulation(load_scene(longer), attitude=False).run()
+    got = np.array([[m.xgyro, m.ygyro, m.zgyro] for m in messages])
+    np.testing.assert_array_equal(got, reference.gyro[0].astype(np.float32))
+    got = np.array([[m.xacc, m.yacc, m.zacc] for m in messages])
+    np.testing.assert_array_equal(got, reference.accel[0].astype(np.float32))
+
+
+@pytest.mark.parametrize("table, key, value", [("gyro", "noise_density", "5 m/s"), ("accel", "bias", "3 deg/s"),
+                                               ("gyro", "random_walk", "0.5 deg/h")])
+def test_wrong_dimension_in_a_scene_is_one_line_naming_the_key(table, key, value):
+    from imu_emulator.errors import SceneError
+    with pytest.raises(SceneError, match=rf"^imu\[0\]\.{table}\.{key}: .*wrong dimension") as info:
+        static_scene(100, 1.0, ["noise", "bias", "random_walk"], **{table: {key: value}})
+    assert "\n" not in str(info.value)
+
+
+def test_gauss_markov_needs_its_correlation_time():
+    from imu_emulator.errors import SceneError
+    with pytest.raises(SceneError, match=r"imu\[0\]\.gyro\.gauss_markov_tau_s"):
+        static_scene(100, 1.0, ["bias_instability"], {"gauss_markov_sigma": 0.1})

@@ -66,6 +66,7 @@ class Param:
     default: Any = 0.0
     aliases: tuple[str, ...] = ()
     datasheet: str = ""          # how datasheets print it, for the documentation table
+    example: Any = None          # a valid nonzero value (docs, and the tests that vary every parameter)
 
     @property
     def path(self) -> str:

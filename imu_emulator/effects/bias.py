@@ -12,7 +12,9 @@ def emit(ctx) -> list[str]:
             terms = [repr(constant[axis])] if constant[axis] else []
             if spread[axis]:
                 name = f"{triad}.{AXES[axis]}"
-                terms.append(ctx.state(f"turn_on[{name}]", lambda draw, sd=spread[axis], name=name: sd * draw(name, 0)))
+                # the state holds the standard normal drawn for this run; its scale is in the source
+                z = ctx.state(f"turn_on[{name}]", lambda draw, name=name: draw(name, 0))
+                terms.append(f"{spread[axis]!r} * {z}")
             if terms:
                 lines += ctx.add_bias(triad, axis, " + ".join(terms))
     return lines

@@ -5,9 +5,9 @@ within -5.4 % / +0.9 % of 0.664 B from 3 tau_min to tau_max / 3). Also the plain
 correlation time) of Kalibr / RotorS.
 
 Exact discretization x' = a x + sigma sqrt(1 - a^2) w, a = exp(-h / tau), x_0 drawn from N(0, sigma^2) (a
-stationary start, neither 0 nor +sigma). A slow pole steps every m samples (h = m dt, m = tau / (STEPS_PER_TAU
-dt) rounded down) and is interpolated linearly between its knots: what that changes is at cluster times below
-h = tau / STEPS_PER_TAU, where the faster poles dominate the sum; the Allan-recovery tests measure the result."""
+stationary start, neither 0 nor +sigma). Slow poles step on a grid of m samples (h = m dt at most the fastest slow
+tau / STEPS_PER_TAU) and are interpolated linearly between knots: what that changes is at cluster times below
+h, where the faster poles dominate the sum; the Allan-recovery tests measure the result."""
 import math
 
 from imu_emulator.effects._record import AXES, TRIADS, Effect, Param, Stage, triad_params
@@ -25,24 +25,13 @@ def poles(tau_min: float, tau_max: float) -> list[float]:
     return out
 
 
-def _process(ctx, name: str, sigma: float, tau: float) -> tuple[list[str], str, list[str]]:
-    """One Gauss-Markov process at run sample s: lines before its value is read, its value, lines after."""
-    m = max(1, int(tau / (STEPS_PER_TAU * ctx.dt)))
-    h = m * ctx.dt
-    a = math.exp(-h / tau)
-    q = sigma * math.sqrt(-math.expm1(-2.0 * h / tau))
-    if m == 1:   # x_s is read, then x_{s+1} = a x_s + q w
-        x = ctx.state(f"gm[{name}]", lambda draw: sigma * draw(name, 0))
-        return [], x, [f"{x} = {a!r} * {x} + {q!r} * {ctx.normal(name, '(s + 1)')}"]
-    # knots i and i + 1 around sample s (i = s // m); crossing a knot steps them before the value is read
-    xa = ctx.state(f"gm[{name}.a]", lambda draw: sigma * draw(name, 0))
-    xb = ctx.state(f"gm[{name}.b]", lambda draw: a * sigma * draw(name, 0) + q * draw(name, 1))
-    r = ctx.var(f"r_{name.replace('.', '_')}")
-    before = [f"{r} = s % {m}",
-              f"if {r} == 0 and s > 0:",
-              f"    {xa} = {xb}",
-              f"    {xb} = {a!r} * {xb} + {q!r} * {ctx.normal(name, f'(s // {m} + 1)')}"]
-    return before, f"({xa} + ({xb} - {xa}) * ({r} * {1.0 / m!r}))", []
+def _steps(tau: float, dt: float) -> int:
+    return max(1, int(tau / (STEPS_PER_TAU * dt)))
+
+
+def _coefficients(sigma: float, tau: float, h: float) -> tuple[float, float]:
+    """x' = a x + q w over a step h: a = exp(-h / tau), q = sigma sqrt(1 - a^2)."""
+    return math.exp(-h / tau), sigma * math.sqrt(-math.expm1(-2.0 * h / tau))
 
 
 def _processes(values: dict, triad: str, axis: int) -> list[tuple[str, float, float]]:
@@ -56,17 +45,48 @@ def _processes(values: dict, triad: str, axis: int) -> list[tuple[str, float, fl
 
 
 def emit(ctx) -> list[str]:
-    before, adds, after = [], [], []
-    for triad in TRIADS:
-        for axis in range(3):
-            terms = []
-            for name, sigma, tau in _processes(ctx.imu.values, triad, axis):
-                pre, value, post = _process(ctx, name, sigma, tau)
-                before += pre
-                after += post
-                terms.append(value)
-            if terms:
-                adds += ctx.add_bias(triad, axis, " + ".join(terms))
+    """Fast processes (tau < 2 * STEPS_PER_TAU * dt) step every sample. The slow ones of this IMU all step on one
+    common grid of m samples (the fastest slow pole's tau / STEPS_PER_TAU, so at least every 100th of any
+    slow tau), exactly for h = m dt, and each axis interpolates linearly between the sums of its slow
+    processes at two knots: one interpolation per axis and sample, whatever the number of poles."""
+    every = {(triad, axis): _processes(ctx.imu.values, triad, axis) for triad in TRIADS for axis in range(3)}
+    slow_steps = [_steps(tau, ctx.dt) for procs in every.values() for _, _, tau in procs if _steps(tau, ctx.dt) > 1]
+    m = min(slow_steps) if slow_steps else 1
+    step, adds, after = [], [], []
+    r = ctx.var("r")
+    for (triad, axis), procs in every.items():
+        terms = []
+        slow = []
+        for name, sigma, tau in procs:
+            if _steps(tau, ctx.dt) == 1:   # x_s is read, then x_{s+1} = a x_s + q w
+                a, q = _coefficients(sigma, tau, ctx.dt)
+                x = ctx.state(f"gm[{name}]", lambda draw, sigma=sigma, name=name: sigma * draw(name, 0))
+                terms.append(x)
+                after.append(f"{x} = {a!r} * {x} + {q!r} * {ctx.normal(name, '(s + 1)')}")
+            else:
+                slow.append((name, sigma, *_coefficients(sigma, tau, m * ctx.dt)))
+        if slow:
+            # knots i = s // m and i + 1: sums sa, sb of the slow processes; each process keeps its value at i + 1
+            def start(draw, slow=slow):
+                return sum(sigma * draw(name, 0) for name, sigma, _, _ in slow)
+
+            def start_next(draw, slow=slow):
+                return sum(a * sigma * draw(name, 0) + q * draw(name, 1) for name, sigma, a, q in slow)
+            label = f"{triad}.{AXES[axis]}"
+            sa = ctx.state(f"gm[{label}.sa]", start)
+            sb = ctx.state(f"gm[{label}.sb]", start_next)
+            step.append(f"    {sa} = {sb}")
+            nexts = []
+            for name, sigma, a, q in slow:
+                xb = ctx.state(f"gm[{name}.b]", lambda draw, name=name, sigma=sigma, a=a, q=q:
+                               a * sigma * draw(name, 0) + q * draw(name, 1))
+                step.append(f"    {xb} = {a!r} * {xb} + {q!r} * {ctx.normal(name, f'(s // {m} + 1)')}")
+                nexts.append(xb)
+            step.append(f"    {sb} = {' + '.join(nexts)}")
+            terms.append(f"({sa} + ({sb} - {sa}) * ({r} * {1.0 / m!r}))")
+        if terms:
+            adds += ctx.add_bias(triad, axis, " + ".join(terms))
+    before = [f"{r} = s % {m}", f"if {r} == 0 and s > 0:", *step] if step else []
     return before + adds + after
 
 
@@ -90,8 +110,8 @@ EFFECT = Effect(
     params=(*triad_params("bias_instability", "rad/s", "m/s^2", "bias instability B (Allan floor 0.664 B)",
                           gyro_datasheet="`10 deg/h`", accel_datasheet="`30 ug`, `0.03 mg`"),
             *(Param("bias_instability_tau_min_s", f"imu.{t}", "s", f"{t}: fastest pole of the flicker band",
-                    shape="scalar", default=0.1) for t in TRIADS),
+                    shape="scalar", default=0.1, example=0.2) for t in TRIADS),
             *(Param("bias_instability_tau_max_s", f"imu.{t}", "s", f"{t}: slowest pole of the flicker band",
-                    shape="scalar", default=1e4) for t in TRIADS),
+                    shape="scalar", default=1e4, example=2000.0) for t in TRIADS),
             *triad_params("gauss_markov_sigma", "rad/s", "m/s^2", "first-order Gauss-Markov bias, stationary sigma"),
             *triad_params("gauss_markov_tau_s", "s", "s", "first-order Gauss-Markov bias, correlation time")))
