@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import ast
 import dataclasses
+import functools
 import hashlib
 import importlib.util
 import json
@@ -307,7 +308,9 @@ def generator_modules() -> list[Path]:
     return [seen[name] for name in sorted(seen)]
 
 
+@functools.lru_cache(maxsize=1)
 def _code_fingerprint() -> str:
+    """Read once per process: keying a scene costs microseconds (Monte Carlo builds many Simulations)."""
     h = hashlib.sha256(CODEGEN_VERSION.encode())
     for path in generator_modules():
         h.update(path.name.encode())
