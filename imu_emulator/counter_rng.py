@@ -62,14 +62,14 @@ KI, WI, FI, _X = _tables()
 _INV_R = 1.0 / _R
 
 
-@numba.njit(inline="always")
+@numba.njit
 def mix64(z):
     z = (z ^ (z >> _S30)) * _M1
     z = (z ^ (z >> _S27)) * _M2
     return z ^ (z >> _S31)
 
 
-@numba.njit(inline="always")
+@numba.njit
 def _unit(z, i):
     """A double in [0, 1) from the i-th extra draw of state z."""
     return float(mix64(z + np.uint64(i) * _EXTRA) >> _S11) * (1.0 / 9007199254740992.0)
@@ -102,7 +102,7 @@ def _slow_path(z, idx, rabs, x):
             return x
 
 
-@numba.njit(inline="always")
+@numba.njit
 def normal(key, counter):
     """The standard normal number `counter` of stream `key` (both uint64-compatible integers)."""
     z = key + (np.uint64(counter) + _ONE) * _GAMMA
