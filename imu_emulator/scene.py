@@ -396,13 +396,14 @@ def _imu(table, where: str, effects: frozenset[str], taken: set[str], warnings: 
         given = [key for key in (param.key, *param.aliases) if key in source]
         if len(given) > 1:
             raise SceneError(f"{prefix}.{given[1]}: give either {given[0]} or {given[1]}, not both")
+        default = units.parse(param.default, param.unit, param.shape, f"{prefix}.{param.key}")
+        values[param.path] = default
         if given:
             values[param.path] = units.parse(source[given[0]], param.unit, param.shape, f"{prefix}.{given[0]}")
             _check_bound(values[param.path], BOUNDS.get(param.path), f"{prefix}.{given[0]}")
-            if effect.name not in effects:
+            # a value that changes nothing (the default, e.g. a zero lever arm) is not worth a warning
+            if effect.name not in effects and values[param.path] != default:
                 warnings.append(f"{prefix}.{given[0]} is ignored because effects.{effect.name} is not true")
-        else:
-            values[param.path] = units.parse(param.default, param.unit, param.shape, f"{prefix}.{param.key}")
     from imu_emulator.effects import EFFECTS
     for effect in EFFECTS.values():
         if effect.name in effects and effect.validate is not None:
