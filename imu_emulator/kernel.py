@@ -1,81 +1,140 @@
 """The numba kernel, generated as source for exactly the effects a scene names.
 
-An effect is a small set of code snippets attached to hooks in the per-sample loop. A switched-off
-effect contributes no line, so it is absent from the machine code rather than multiplied by zero.
-Scene constants (lever arms, mounting matrices, g, phase constants) are baked in as literals so LLVM
-folds them. The generated module is written to a cache directory named by a hash of everything that
-shapes it, and compiled with numba's cache=True beside it: a second run with the same scene imports
-it without sympy and without compiling.
+The source is KERNEL_TEMPLATE with its slots filled: the motion (imu_emulator.motion), then the effects of
+each stage (imu_emulator.effects: navigation frame, body frame at the IMU, sensor frame, sensor output), in
+their declared order. A switched-off effect contributes no line, so it is absent from the machine code rather
+than multiplied by zero. Scene constants are literals that LLVM folds; the seed is not: it arrives at run time
+as stream keys, so a Monte Carlo over seeds compiles once. Variables each stage may read and update:
+imu_emulator.effects.STAGE_CONTRACT.
 
-Hooks, in loop order (variables available to each):
-    nav:    fnx fny fnz        specific-force input in the navigation frame (starts as a)
-    body:   fax fay faz, gwx gwy gwz   per IMU, body frame, at the IMU's position
-    sensor: ox oy oz, gx gy gz  per IMU, sensor frame (what the sensor measures)
-Adding an effect = adding an entry to EFFECT_CODE (and its name to scene.EFFECTS).
+The cache (cache_dir()/<key>/kernel.py and numba's __pycache__ beside it) is keyed on the whole validated
+scene and the bytes of every module of the generator; an entry is published (directory rename) only after it
+compiled, and an entry that fails its checksum or its compile is removed and regenerated.
 """
 from __future__ import annotations
 
+import ast
+import dataclasses
+import functools
 import hashlib
 import importlib.util
 import json
 import os
+import shutil
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from imu_emulator.scene import Expressions, ImuSpec, Scene
+from imu_emulator.effects import EFFECTS, FRAME_ORDERS, AXES, EmitContext, Stage, TRIADS
+from imu_emulator.effects.mounting import mounting_matrix, rotation as mounting_rotation  # noqa: F401 (API)
+from imu_emulator.scene import Scene
 
-CODEGEN_VERSION = "1"
+CODEGEN_VERSION = "2"
 EPS_SPEED = 1e-6     # m/s: below this the body is standing still for tangent attitude
-
-
-def _lever_arm(scene: Scene, imu: ImuSpec, m: int) -> list[str]:
-    rx, ry, rz = imu.lever_arm_m
-    if not any(imu.lever_arm_m):
-        return []
-    # f_I = f_S + w x (w x r) + alpha x r, body frame
-    return [
-        f"ux = wy * {rz!r} - wz * {ry!r}", f"uy = wz * {rx!r} - wx * {rz!r}", f"uz = wx * {ry!r} - wy * {rx!r}",
-        f"fax += wy * uz - wz * uy + (aly * {rz!r} - alz * {ry!r})",
-        f"fay += wz * ux - wx * uz + (alz * {rx!r} - alx * {rz!r})",
-        f"faz += wx * uy - wy * ux + (alx * {ry!r} - aly * {rx!r})",
-    ]
-
-
-def mounting_matrix(imu: ImuSpec) -> np.ndarray:
-    """M maps sensor coordinates to body coordinates (sensor frame = body frame rotated by M)."""
-    from imu_emulator.rotations import euler_to_matrix
-    return euler_to_matrix(np.radians(imu.mounting_rpy_deg))
-
-
-def _mounting(scene: Scene, imu: ImuSpec, m: int) -> list[str]:
-    if not any(imu.mounting_rpy_deg):
-        return []
-    M = mounting_matrix(imu)
-    lines = []
-    for src, dst in (("fa", "o"), ("gw", "g")):
-        for row, axis in enumerate("xyz"):
-            # sensor = M^T body
-            lines.append(f"{dst}{axis} = " + " + ".join(f"{float(M[col, row])!r} * {src}{'xyz'[col]}" for col in range(3)))
-    return lines
-
-
-def _gravity(scene: Scene) -> list[str]:
-    # f = a - g; g = (0, 0, -g0) in ENU, (0, 0, +g0) in NED
-    sign = "+" if scene.frame == "ENU" else "-"
-    return [f"fnz = fnz {sign} {scene.gravity_mps2!r}"]
-
-
-EFFECT_CODE = {
-    "gravity": {"nav": _gravity},
-    "lever_arm": {"body": _lever_arm},
-    "mounting": {"sensor_frame": _mounting},
+CHUNK = 256
+#: Modules the generated source imports at run time (part of the generator for the cache key).
+RUNTIME_IMPORTS = {
+    "imu_emulator.phase": ("sincos_cycles",),
+    "imu_emulator.rotations": ("matrix_to_quat_scalar", "quat_multiply_scalar"),
+    "imu_emulator.counter_rng": ("normal",),
 }
+#: The kernel's arguments; SIGNATURE is also how simulation.py calls it.
+ARGS = ("k0", "n", "s0", "mot", "att", "hold", "keys", "state", "out_acc", "out_gyro", "out_quat",
+        "tr_pos", "tr_vel", "tr_euler", "tr_omega", "tr_alpha", "tr_bias_acc", "tr_bias_gyro")
+TRUTH_OUTPUTS = (("tr_pos", ("px", "py", "pz")), ("tr_vel", ("vx", "vy", "vz")),
+                 ("tr_euler", ("roll", "pitch", "yaw")), ("tr_omega", ("wx", "wy", "wz")),
+                 ("tr_alpha", ("alx", "aly", "alz")))
+
+# The skeleton. $name lines are slots, replaced by lines indented like the slot. Samples go in chunks: first
+# every periodic phase of the chunk (short independent chains the CPU overlaps across samples: 50 -> 35
+# ns/sample on the circle scene), then the per-sample body. k = scene sample (motion), s = run sample (noise).
+KERNEL_TEMPLATE = '''\
+# Generated by imu_emulator.kernel; do not edit.
+import math
+import numba
+import numpy as np
+$imports
+EPS_V2 = $eps_v2
+CHUNK = $chunk
+$constants
+
+@numba.njit(cache=True, nogil=True, error_model='numpy')
+def kernel($args):
+    hcy, hsy, hcp, hsp = hold[0], hold[1], hold[2], hold[3]
+    $load_state
+    phases = np.empty((CHUNK, $n_phase))
+    for c0 in range(0, n, CHUNK):
+        mc = min(CHUNK, n - c0)
+        $phase_stage
+        for jj in range(mc):
+            j = c0 + jj
+            k = k0 + j
+            s = s0 + j
+            t = $t0 + k * $dt
+            $motion
+            # -- stage 1: navigation frame
+            fnx = ax
+            fny = ay
+            fnz = az
+            $navigation
+            # specific force at S in body axes: R^T (a - g)
+            fbx = r00 * fnx + r10 * fny + r20 * fnz
+            fby = r01 * fnx + r11 * fny + r21 * fnz
+            fbz = r02 * fnx + r12 * fny + r22 * fnz
+            $attitude
+            $per_imu
+            $truth
+    $store_state
+    hold[0], hold[1], hold[2], hold[3] = hcy, hsy, hcp, hsp
+'''
+
+PER_IMU_TEMPLATE = '''\
+# -- IMU $m, stage 2: body frame at the IMU
+fax = fbx
+fay = fby
+faz = fbz
+gwx = $gwx
+gwy = $gwy
+gwz = $gwz
+$body
+# -- stage 3: sensor frame
+ox = fax
+oy = fay
+oz = faz
+gx = gwx
+gy = gwy
+gz = gwz
+$frame
+$sensor
+# -- stage 4: sensor output
+$output
+out_acc[$m, j, 0] = ox
+out_acc[$m, j, 1] = oy
+out_acc[$m, j, 2] = oz
+out_gyro[$m, j, 0] = gx
+out_gyro[$m, j, 1] = gy
+out_gyro[$m, j, 2] = gz
+$quat
+$bias_truth
+'''
 
 
-def _indent(lines, level):
-    return [("    " * level) + line for line in lines]
+def fill(template: str, **slots) -> str:
+    """Replace each `$name` in the template; a slot alone on its line takes a list of lines, indented like it."""
+    out = []
+    for line in template.splitlines():
+        stripped = line.strip()
+        if stripped.startswith("$") and stripped[1:] in slots and isinstance(slots[stripped[1:]], list):
+            indent = line[: len(line) - len(line.lstrip())]
+            out += [indent + x for x in slots[stripped[1:]]]
+            continue
+        for name, value in slots.items():
+            if not isinstance(value, list):
+                line = line.replace(f"${name}", str(value))
+        out.append(line)
+    return "\n".join(out) + "\n"
 
 
 def _rotation_and_rates() -> list[str]:
@@ -93,92 +152,129 @@ def _rotation_and_rates() -> list[str]:
     ]
 
 
+# --- the effect plan: lines per stage, state slots and random streams ----------------------------------
+
+class EffectPlan:
+    """What the scene's effects contribute, built without sympy: the Simulation builds it too, to lay out the
+    state array and the stream keys the same way the source does."""
+
+    def __init__(self, scene: Scene):
+        self.scene = scene
+        self.active = [e for e in EFFECTS.values() if e.name in scene.effects]
+        self.slots: list[tuple[str, int, object]] = []    # (variable, imu, initial(draw))
+        self.streams: list[tuple[int, str]] = []          # (imu, name)
+        self.navigation = self._lines(Stage.NAVIGATION, None, None)
+        self.nav_rate = any(e.nav_rate for e in self.active if e.stage == Stage.NAVIGATION)
+        self.per_imu = []
+        for m, imu in enumerate(scene.imus):
+            sensor = [e for e in self.active if e.stage == Stage.SENSOR]
+            self.per_imu.append({
+                "body": self._lines(Stage.BODY, imu, m),
+                "frame": self._emit([e for e in sensor if e.order < FRAME_ORDERS], imu, m),
+                "sensor": self._emit([e for e in sensor if e.order >= FRAME_ORDERS], imu, m),
+                "output": self._lines(Stage.OUTPUT, imu, m),
+            })
+        self.bias_truth = any("bgx +=" in line or "bax +=" in line
+                              for stages in self.per_imu for line in stages["sensor"])
+
+    def _lines(self, stage: Stage, imu, m) -> list[str]:
+        return self._emit([e for e in self.active if e.stage == stage], imu, m)
+
+    def _emit(self, effects, imu, m) -> list[str]:
+        lines = []
+        for effect in effects:
+            lines += effect.emit(EmitContext(self, effect, self.scene, imu, m))
+        return lines
+
+    def add_state(self, var: str, m: int, initial) -> str:
+        self.slots.append((var, m, initial))
+        return var
+
+    def add_stream(self, m: int, name: str) -> int:
+        if (m, name) not in self.streams:
+            self.streams.append((m, name))
+        return self.streams.index((m, name))
+
+    def keys(self, seed: int) -> np.ndarray:
+        from imu_emulator.counter_rng import stream_key
+        return np.array([stream_key(seed, m, name) for m, name in self.streams] or [0], dtype=np.uint64)
+
+    def initial_state(self, seed: int) -> np.ndarray:
+        """Every state slot's value at the run's start (random draws keyed on the seed, never on the block)."""
+        from imu_emulator.counter_rng import normals, stream_key
+
+        def draw_for(m):
+            return lambda stream, counter: float(normals(np.uint64(stream_key(seed, m, f"init.{stream}")),
+                                                         counter, 1)[0])
+        return np.array([initial(draw_for(m)) for _, m, initial in self.slots] or [0.0])
+
+
+# --- source ------------------------------------------------------------------------------------------
+
 def generate_source(scene: Scene, attitude: bool, truth: bool) -> str:
+    """The kernel module for this scene and outputs. No user text reaches it except validated numbers as repr."""
     from imu_emulator.motion import motion_code
 
     motion = motion_code(scene, angles=truth)
-    effects = [name for name in EFFECT_CODE if name in scene.effects]
-
-    body = ["k = k0 + j", f"t = {scene.t0_s!r} + k * {1.0 / scene.rate_hz!r}"]
-    body += [f"{name} = phases[jj, {i}]" for i, name in enumerate(motion.phase_vars)]
-    body += motion.lines
-    if not motion.rotation_given:
-        body += _rotation_and_rates()
-    body += ["fnx = ax", "fny = ay", "fnz = az"]
-    for name in effects:
-        if "nav" in EFFECT_CODE[name]:
-            body += EFFECT_CODE[name]["nav"](scene)
-    # specific force at S in body coordinates: R^T (a - g)
-    body += ["fbx = r00 * fnx + r10 * fny + r20 * fnz",
-             "fby = r01 * fnx + r11 * fny + r21 * fnz",
-             "fbz = r02 * fnx + r12 * fny + r22 * fnz"]
-    if attitude:
-        body += ["qbw, qbx, qby, qbz = matrix_to_quat_scalar(r00, r01, r02, r10, r11, r12, r20, r21, r22)"]
-    for m, imu in enumerate(scene.imus):
-        body += [f"# IMU {m}", "fax = fbx", "fay = fby", "faz = fbz", "gwx = wx", "gwy = wy", "gwz = wz"]
-        for name in effects:
-            if "body" in EFFECT_CODE[name]:
-                body += EFFECT_CODE[name]["body"](scene, imu, m)
-        frame_lines = []
-        for name in effects:
-            if "sensor_frame" in EFFECT_CODE[name]:
-                frame_lines += EFFECT_CODE[name]["sensor_frame"](scene, imu, m)
-        if not frame_lines:
-            frame_lines = ["ox = fax", "oy = fay", "oz = faz", "gx = gwx", "gy = gwy", "gz = gwz"]
-        body += frame_lines
-        for name in effects:
-            if "sensor" in EFFECT_CODE[name]:
-                body += EFFECT_CODE[name]["sensor"](scene, imu, m)
-        body += [f"out_acc[{m}, j, 0] = ox", f"out_acc[{m}, j, 1] = oy", f"out_acc[{m}, j, 2] = oz",
-                 f"out_gyro[{m}, j, 0] = gx", f"out_gyro[{m}, j, 1] = gy", f"out_gyro[{m}, j, 2] = gz"]
-        if attitude:
-            if "mounting" in effects and any(imu.mounting_rpy_deg):
-                from imu_emulator.rotations import matrix_to_quat
-                qm = matrix_to_quat(mounting_matrix(imu))
-                body += ["qw, qx, qy, qz = quat_multiply_scalar(qbw, qbx, qby, qbz, "
-                         + ", ".join(repr(float(v)) for v in qm) + ")"]
-            else:
-                body += ["qw, qx, qy, qz = qbw, qbx, qby, qbz"]
-            body += [f"out_quat[{m}, j, 0] = qw", f"out_quat[{m}, j, 1] = qx",
-                     f"out_quat[{m}, j, 2] = qy", f"out_quat[{m}, j, 3] = qz"]
-    if truth:
-        for array, names in (("tr_pos", ("px", "py", "pz")), ("tr_vel", ("vx", "vy", "vz")),
-                             ("tr_euler", ("roll", "pitch", "yaw")), ("tr_omega", ("wx", "wy", "wz")),
-                             ("tr_alpha", ("alx", "aly", "alz"))):
-            body += [f"{array}[j, {i}] = {name}" for i, name in enumerate(names)]
-
-    header = [
-        "# Generated by imu_emulator.kernel; do not edit.",
-        "import math",
-        "import numba",
-        "import numpy as np",
-        "from imu_emulator.phase import sincos_cycles",
-        "from imu_emulator.rotations import matrix_to_quat_scalar, quat_multiply_scalar",
-        f"EPS_V2 = {EPS_SPEED ** 2!r}",
-        "CHUNK = 256",
-    ]
-    header += [f"{name} = {value!r}" for name, value in motion.constants.items()]
-    # Samples are processed in chunks: first every periodic phase of the chunk (short, independent
-    # chains the CPU overlaps across samples), then the rest. One long chain per sample would leave the
-    # CPU waiting on latency: measured 50 -> 35 ns/sample on the circle scene.
+    plan = EffectPlan(scene)
     n_phase = len(motion.phase_vars)
-    func = [
-        "",
-        "@numba.njit(cache=True, nogil=True, error_model='numpy')",
-        "def kernel(k0, n, mot, att, hold, out_acc, out_gyro, out_quat, tr_pos, tr_vel, tr_euler, tr_omega, tr_alpha):",
-        "    hcy, hsy, hcp, hsp = hold[0], hold[1], hold[2], hold[3]",
-        f"    phases = np.empty((CHUNK, {max(n_phase, 1)}))",
-        "    for j0 in range(0, n, CHUNK):",
-        "        m = min(CHUNK, n - j0)",
-    ]
+    phase_stage = []
     if n_phase:
-        func += ["        for jj in range(m):", "            k = k0 + j0 + jj"]
-        func += _indent(motion.phase_lines, 3)
-        func += _indent([f"phases[jj, {i}] = {name}" for i, name in enumerate(motion.phase_vars)], 3)
-    func += ["        for jj in range(m):", "            j = j0 + jj"]
-    tail = ["    hold[0], hold[1], hold[2], hold[3] = hcy, hsy, hcp, hsp"]
-    return "\n".join(header + func + _indent(body, 3) + tail) + "\n"
+        phase_stage = ["for jj in range(mc):", "    k = k0 + c0 + jj"]
+        phase_stage += ["    " + line for line in motion.phase_lines]
+        phase_stage += [f"    phases[jj, {i}] = {name}" for i, name in enumerate(motion.phase_vars)]
+    body = [f"{name} = phases[jj, {i}]" for i, name in enumerate(motion.phase_vars)] + motion.lines
+    if not motion.rotation_given:   # attitude given as a rotation matrix (e.g. quaternion logs)
+        body += _rotation_and_rates()
+    navigation = list(plan.navigation)
+    if plan.nav_rate:
+        navigation = ["wnx = 0.0", "wny = 0.0", "wnz = 0.0"] + navigation
 
+    per_imu = []
+    for m, imu in enumerate(scene.imus):
+        stages = plan.per_imu[m]
+        gw = ("wx", "wy", "wz")
+        if plan.nav_rate:   # R^T w_n: the navigation frame's rate in body axes
+            gw = tuple(f"{w} + (r0{c} * wnx + r1{c} * wny + r2{c} * wnz)" for c, w in enumerate(gw))
+        quat = []
+        if attitude:
+            M = mounting_rotation(EmitContext(plan, EFFECTS["mounting"], scene, imu, m))
+            if M is not None:
+                from imu_emulator.rotations import matrix_to_quat
+                quat = ["qw, qx, qy, qz = quat_multiply_scalar(qbw, qbx, qby, qbz, "
+                        + ", ".join(repr(float(v)) for v in matrix_to_quat(M)) + ")"]
+            else:
+                quat = ["qw, qx, qy, qz = qbw, qbx, qby, qbz"]
+            quat += [f"out_quat[{m}, j, {i}] = q{c}" for i, c in enumerate("wxyz")]
+        bias_truth = []
+        if truth and plan.bias_truth:
+            for array, prefix in (("tr_bias_acc", TRIADS["accel"][2]), ("tr_bias_gyro", TRIADS["gyro"][2])):
+                bias_truth += [f"{array}[{m}, j, {i}] = {prefix}{c}" for i, c in enumerate(AXES)]
+        sensor = stages["sensor"]
+        if sensor:   # the true sensor-frame values and the realized bias, for the error effects to use
+            sensor = ["tfx, tfy, tfz, twx, twy, twz = ox, oy, oz, gx, gy, gz",
+                      "bax = bay = baz = bgx = bgy = bgz = 0.0"] + sensor
+        per_imu += fill(PER_IMU_TEMPLATE, m=m, gwx=gw[0], gwy=gw[1], gwz=gw[2], body=stages["body"],
+                        frame=stages["frame"], sensor=sensor, output=stages["output"], quat=quat,
+                        bias_truth=bias_truth).splitlines()
+
+    truth_lines = []
+    if truth:
+        for array, names in TRUTH_OUTPUTS:
+            truth_lines += [f"{array}[j, {i}] = {name}" for i, name in enumerate(names)]
+    attitude_lines = (["qbw, qbx, qby, qbz = matrix_to_quat_scalar(r00, r01, r02, r10, r11, r12, r20, r21, r22)"]
+                      if attitude else [])
+    imports = [f"from {module} import {', '.join(names)}" for module, names in RUNTIME_IMPORTS.items()]
+    return fill(
+        KERNEL_TEMPLATE, imports=imports, eps_v2=repr(EPS_SPEED ** 2), chunk=CHUNK,
+        constants=[f"{name} = {value!r}" for name, value in motion.constants.items()],
+        args=", ".join(ARGS), load_state=[f"{var} = state[{i}]" for i, (var, _, _) in enumerate(plan.slots)],
+        store_state=[f"state[{i}] = {var}" for i, (var, _, _) in enumerate(plan.slots)],
+        n_phase=max(n_phase, 1), phase_stage=phase_stage, t0=repr(float(scene.t0_s)), dt=repr(1.0 / scene.rate_hz),
+        motion=body, navigation=navigation, attitude=attitude_lines, per_imu=per_imu, truth=truth_lines)
+
+
+# --- cache -------------------------------------------------------------------------------------------
 
 def cache_dir() -> Path:
     root = os.environ.get("IMU_EMULATOR_CACHE")
@@ -186,33 +282,121 @@ def cache_dir() -> Path:
     return path / "kernels"
 
 
+def generator_modules() -> list[Path]:
+    """Every module the generated source depends on: found by following the imports (static, within the
+    package) from this module, every effect module, and the modules the generated source imports."""
+    package_root = Path(__file__).resolve().parent.parent
+    start = [__name__, *RUNTIME_IMPORTS, *(f"imu_emulator.effects.{n}" for n in EFFECTS)]
+    start += [f"imu_emulator.effects.{p.stem}" for p in (Path(__file__).parent / "effects").glob("_*.py")]
+    seen: dict[str, Path] = {}
+    todo = list(start)
+    while todo:
+        name = todo.pop()
+        if name in seen:
+            continue
+        path = package_root / Path(*name.split("."))
+        path = path / "__init__.py" if path.is_dir() else path.with_suffix(".py")
+        if not path.exists():
+            continue
+        seen[name] = path
+        for node in ast.walk(ast.parse(path.read_bytes())):
+            if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("imu_emulator"):
+                todo.append(node.module)
+                todo += [f"{node.module}.{a.name}" for a in node.names]
+            elif isinstance(node, ast.Import):
+                todo += [a.name for a in node.names if a.name.startswith("imu_emulator")]
+    return [seen[name] for name in sorted(seen)]
+
+
+@functools.lru_cache(maxsize=1)
 def _code_fingerprint() -> str:
-    """Changes when the code that generates kernels changes, so stale cached kernels are never used."""
-    here = Path(__file__).parent
+    """Read once per process: keying a scene costs microseconds (Monte Carlo builds many Simulations)."""
     h = hashlib.sha256(CODEGEN_VERSION.encode())
-    for name in ("kernel.py", "motion.py", "expressions.py", "rotations.py", "phase.py"):
-        h.update((here / name).read_bytes())
+    for path in generator_modules():
+        h.update(path.name.encode())
+        h.update(path.read_bytes())
     return h.hexdigest()
 
 
+#: Scene fields the key leaves out: none of them shapes the source (streams are the stream command's,
+#: path and warnings are messages, the seed arrives at run time as stream keys).
+KEY_EXCLUDES = ("streams", "path", "warnings", "seed")
+
+
+def _canonical(value):
+    """A JSON-able, exact description of a validated value (floats as hex so no bit is lost)."""
+    if dataclasses.is_dataclass(value):
+        return {"type": type(value).__name__,
+                **{f.name: _canonical(getattr(value, f.name)) for f in dataclasses.fields(value)
+                   if not (type(value) is Scene and f.name in KEY_EXCLUDES)}}
+    if isinstance(value, np.ndarray):
+        return {"array": str(value.dtype), "shape": value.shape, "sha256": hashlib.sha256(
+            np.ascontiguousarray(value).tobytes()).hexdigest()}
+    if isinstance(value, float):
+        return value.hex()
+    if isinstance(value, (str, int, bool)) or value is None:
+        return value
+    if isinstance(value, (frozenset, set)):
+        return sorted(_canonical(v) for v in value)
+    if isinstance(value, (list, tuple)):
+        return [_canonical(v) for v in value]
+    if isinstance(value, dict) or hasattr(value, "items"):
+        return {str(k): _canonical(v) for k, v in sorted(value.items())}
+    raise TypeError(f"cannot key a {type(value).__name__}")
+
+
 def scene_key(scene: Scene, attitude: bool, truth: bool) -> str:
-    """Everything that shapes the generated source, without running sympy."""
-    def describe(part):
-        if isinstance(part, Expressions):
-            return ["expr", list(part.texts)]
-        return ["sampled", part.kind] if part is not None else None
-    spec = {
-        "rate": scene.rate_hz, "t0": scene.t0_s, "frame": scene.frame, "g": scene.gravity_mps2,
-        "params": sorted(scene.params.items()), "trajectory": describe(scene.trajectory),
-        "attitude_mode": scene.attitude_mode, "attitude": describe(scene.attitude),
-        "imus": [[i.lever_arm_m, i.mounting_rpy_deg] for i in scene.imus],
-        "effects": sorted(scene.effects), "outputs": [attitude, truth], "code": _code_fingerprint(),
-        "python": sys.version_info[:2],
-    }
-    return hashlib.sha256(json.dumps(spec, default=repr).encode()).hexdigest()[:24]
+    """The whole validated scene (less KEY_EXCLUDES), the outputs and every generator module, hashed."""
+    spec = {"scene": _canonical(scene), "outputs": [attitude, truth], "code": _code_fingerprint(),
+            "python": list(sys.version_info[:2])}
+    return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:32]
 
 
 _loaded: dict[str, object] = {}
+_CHECK = "# sha256 "
+
+
+def _module_name(key: str) -> str:
+    return f"imu_emulator_kernel_{key}"
+
+
+def _import(path: Path, key: str):
+    # numba's on-disk cache refers to the module by name when it reloads a compiled kernel.
+    spec = importlib.util.spec_from_file_location(_module_name(key), path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        sys.modules.pop(spec.name, None)
+        raise
+    return module.kernel
+
+
+def _trial_call(kernel, scene: Scene, attitude: bool, truth: bool) -> None:
+    """Compile now (numba compiles on the first call) on one sample, with the argument types the Simulation
+    uses, so that an entry is only ever published compiled."""
+    from imu_emulator.simulation import Simulation
+    Simulation.trial(kernel, scene, attitude, truth)
+
+
+def _valid_entry(path: Path) -> bool:
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError):
+        return False
+    first, _, rest = text.partition("\n")
+    return first == _CHECK + hashlib.sha256(rest.encode()).hexdigest()
+
+
+def _discard(directory: Path) -> None:
+    """Move aside, then delete: a reader never sees a half-deleted entry under the key's name."""
+    trash = directory.with_name(f".trash-{directory.name}-{os.getpid()}-{os.urandom(4).hex()}")
+    try:
+        os.rename(directory, trash)
+    except OSError:
+        return
+    shutil.rmtree(trash, ignore_errors=True)
 
 
 def compile_kernel(scene: Scene, attitude: bool = True, truth: bool = False):
@@ -220,19 +404,34 @@ def compile_kernel(scene: Scene, attitude: bool = True, truth: bool = False):
     key = scene_key(scene, attitude, truth)
     if key in _loaded:
         return _loaded[key]
-    directory = cache_dir()
-    directory.mkdir(parents=True, exist_ok=True)
-    path = directory / f"k_{key}.py"
-    if not path.exists():
-        source = generate_source(scene, attitude, truth)
-        tmp = path.with_suffix(f".tmp{os.getpid()}")
-        tmp.write_text(source)
-        os.replace(tmp, path)  # atomic: a concurrent run sees the whole file or none
-    spec = importlib.util.spec_from_file_location(f"imu_emulator_kernel_{key}", path)
-    module = importlib.util.module_from_spec(spec)
-    # numba's on-disk cache refers to the module by name when it reloads a compiled kernel.
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    _loaded[key] = module.kernel
-    return module.kernel
-
+    root = cache_dir()
+    root.mkdir(parents=True, exist_ok=True)
+    entry = root / key
+    if entry.exists():
+        try:
+            if not _valid_entry(entry / "kernel.py"):
+                raise ValueError("checksum")
+            kernel = _import(entry / "kernel.py", key)
+            _trial_call(kernel, scene, attitude, truth)
+            _loaded[key] = kernel
+            return kernel
+        except Exception:   # truncated, garbage or not compiling: regenerate (never trust it again)
+            sys.modules.pop(_module_name(key), None)
+            _discard(entry)
+    source = generate_source(scene, attitude, truth)
+    staging = Path(tempfile.mkdtemp(prefix=f".tmp-{key}-", dir=root))
+    try:
+        (staging / "kernel.py").write_text(_CHECK + hashlib.sha256(source.encode()).hexdigest() + "\n" + source)
+        kernel = _import(staging / "kernel.py", key)
+        _trial_call(kernel, scene, attitude, truth)
+        try:
+            os.rename(staging, entry)    # atomic publish; fails if another process published first
+        except OSError:
+            pass                         # theirs is as good as ours: same key, same source
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+        sys.modules.pop(_module_name(key), None)
+    # Load from the published path, so numba's cache index lives beside the entry, not in the staging dir.
+    kernel = _import(entry / "kernel.py", key)
+    _loaded[key] = kernel
+    return kernel

@@ -12,6 +12,7 @@ from imu_emulator.samples import SampleBlock, concatenate
 
 CSV_COLUMNS = ("t", "imu", "ax", "ay", "az", "gx", "gy", "gz")
 TRUTH_COLUMNS = ("px", "py", "pz", "vx", "vy", "vz", "roll", "pitch", "yaw", "wbx", "wby", "wbz")
+BIAS_COLUMNS = ("bax", "bay", "baz", "bgx", "bgy", "bgz")   # realized bias of each IMU (sensor errors on)
 SUFFIXES = (".csv", ".npz", ".mcap")
 
 
@@ -29,15 +30,17 @@ class Writer(FinishOnExit):
     The output file is created at construction (an unwritable path fails before the run), and appears at
     its path on close(); discard() (or close() after an exception) leaves nothing behind."""
 
-    def __init__(self, path: str | Path, imu_names, truth: bool):
+    def __init__(self, path: str | Path, imu_names, truth: bool, bias_truth: bool = False):
         self.path = check_path(path)
         self.imu_names = list(imu_names)
         self.truth = truth
+        self.bias_truth = truth and bias_truth
         self.blocks: list[SampleBlock] = []
         self.csv = self.path.suffix.lower() == ".csv"
         self._out = AtomicOutput(self.path, "w" if self.csv else "wb")
         if self.csv:
-            self._out.write(",".join(CSV_COLUMNS + (TRUTH_COLUMNS if truth else ())) + "\n")
+            self._out.write(",".join(CSV_COLUMNS + (TRUTH_COLUMNS if truth else ())
+                                      + (BIAS_COLUMNS if self.bias_truth else ())) + "\n")
 
     def write(self, block: SampleBlock) -> None:
         if not self.csv:
@@ -49,7 +52,8 @@ class Writer(FinishOnExit):
             extra = [tr["position"], tr["velocity"], tr["euler"], tr["omega_body"]]
         per_imu = []
         for m, name in enumerate(self.imu_names):
-            numeric = np.column_stack([block.t_s, block.accel[m], block.gyro[m], *extra])
+            bias = [block.truth["accel_bias"][m], block.truth["gyro_bias"][m]] if self.bias_truth else []
+            numeric = np.column_stack([block.t_s, block.accel[m], block.gyro[m], *extra, *bias])
             # %.17g keeps every bit: reading the CSV back gives the same doubles.
             text = np.char.mod("%.17g", numeric).tolist()
             per_imu.append([",".join((r[0], name, *r[1:])) for r in text])
@@ -83,9 +87,9 @@ class Writer(FinishOnExit):
             raise output_error(self.path, exc) from None
 
 
-def open_writer(path: str | Path, imu_names, truth: bool):
+def open_writer(path: str | Path, imu_names, truth: bool, bias_truth: bool = False):
     """The writer for the output file's suffix: .mcap is a ROS 2 bag (imu_emulator.output_mcap)."""
     if Path(path).suffix.lower() == ".mcap":
         from imu_emulator.output_mcap import McapWriter
         return McapWriter(check_path(path), imu_names, truth)
-    return Writer(path, imu_names, truth)
+    return Writer(path, imu_names, truth, bias_truth=bias_truth)

@@ -19,7 +19,9 @@ class SampleBlock:
     quat: np.ndarray | None # (n_imu, n, 4) attitude sensor->navigation frame, scalar first (w, x, y, z);
                             # None when the simulation was built without attitude output
     truth: dict | None = None   # with truth requested: "position", "velocity" (n, 3) nav frame,
-                                # "euler" (n, 3) roll, pitch, yaw of the body, "omega_body", "alpha_body" (n, 3)
+                                # "euler" (n, 3) roll, pitch, yaw of the body, "omega_body", "alpha_body" (n, 3);
+                                # with a bias effect on: "accel_bias", "gyro_bias" (n_imu, n, 3), realized
+                                # bias of each triad (constant + turn-on + instability + random walk)
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
@@ -33,18 +35,24 @@ class SampleBlock:
         return SampleBlock(k0=self.k0 + start, t_s=self.t_s[start:stop], accel=self.accel[:, start:stop],
                            gyro=self.gyro[:, start:stop],
                            quat=None if self.quat is None else self.quat[:, start:stop],
-                           truth=None if self.truth is None else {k: v[start:stop] for k, v in self.truth.items()})
+                           truth=None if self.truth is None else {k: _along_samples(v, start, stop)
+                                                                  for k, v in self.truth.items()})
 
     def time_ns(self, offset_ns: int = 0) -> np.ndarray:
         """Sample times as integer nanoseconds (exact to the ns for any sane t0), plus an offset."""
         return np.rint(self.t_s * 1e9).astype(np.int64) + np.int64(offset_ns)
 
 
+def _along_samples(array: np.ndarray, start: int, stop: int) -> np.ndarray:
+    return array[start:stop] if array.ndim == 2 else array[:, start:stop]
+
+
 def concatenate(blocks: list[SampleBlock]) -> SampleBlock:
     first = blocks[0]
     truth = None
     if first.truth is not None:
-        truth = {k: np.concatenate([b.truth[k] for b in blocks]) for k in first.truth}
+        # (n, 3) body truth, or (n_imu, n, 3) per-IMU truth (realized biases)
+        truth = {k: np.concatenate([b.truth[k] for b in blocks], axis=first.truth[k].ndim - 2) for k in first.truth}
     return SampleBlock(k0=first.k0, t_s=np.concatenate([b.t_s for b in blocks]),
                        accel=np.concatenate([b.accel for b in blocks], axis=1),
                        gyro=np.concatenate([b.gyro for b in blocks], axis=1),

@@ -25,12 +25,7 @@ FRAMES = ("ENU", "NED")
 SHAPES = ("static", "circle")
 ATTITUDE_MODES = ("euler", "tangent", "file")
 DEFAULT_DERIVATIVE = "spline5c"   # see README "What accuracy costs in time"
-#: Effects this kernel can compile in. Only those named true in [effects] are simulated.
-EFFECTS = {
-    "gravity": "specific force includes -g (at rest, level, ENU: f = (0, 0, +g))",
-    "lever_arm": "centripetal and Euler terms w x (w x r) + alpha x r for each IMU's lever arm",
-    "mounting": "each IMU's mounting rotation (sensor frame = body frame rotated by mounting_rpy_deg)",
-}
+SEED_LIMIT = 2 ** 64      # [scene] seed: an integer 0 <= seed < 2**64
 
 
 # Ranges of the scene's numbers; errors state the bound. Wide enough for any vehicle, narrow enough that no
@@ -69,9 +64,19 @@ class SampledData:
 
 @dataclass(frozen=True)
 class ImuSpec:
+    """One IMU: its name (never in generated source) and the value of every parameter every effect declares
+    (imu_emulator.effects), keyed by the parameter's path ("imu.lever_arm_m", "imu.gyro.noise_density"), in
+    the parameter's unit; parameters not given hold their defaults, so the kernel key sees all of them."""
     name: str
-    lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    mounting_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    values: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def lever_arm_m(self) -> tuple[float, float, float]:
+        return self.values["imu.lever_arm_m"]
+
+    @property
+    def mounting_rpy_deg(self) -> tuple[float, float, float]:
+        return self.values["imu.mounting_rpy_deg"]
 
 
 @dataclass(frozen=True)
@@ -91,6 +96,7 @@ class Scene:
     streams: tuple[dict, ...] = ()
     path: str | None = None
     warnings: tuple[str, ...] = ()
+    seed: int = 0                                # root of every random stream (imu_emulator.counter_rng)
 
     @property
     def dt(self) -> float:
@@ -331,6 +337,80 @@ def _load_track(table: Mapping, where: str, base_dir: Path):
         raise SceneError(f"{where}: {exc}") from None
 
 
+def _seed(head: Mapping) -> int:
+    value = head.get("seed", 0)
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 0 <= int(value) < SEED_LIMIT:
+        raise SceneError(f"scene.seed: expected an integer from 0 to 2**64 - 1, got {value!r}")
+    return int(value)
+
+
+def _effects(raw: Mapping) -> frozenset[str]:
+    from imu_emulator.effects import EFFECTS
+    table = _table(raw, "effects")
+    for name, value in table.items():
+        if name not in EFFECTS:
+            raise SceneError(f"effects.{shown_key(name)}: unknown effect (known: {', '.join(EFFECTS)})")
+        if not isinstance(value, bool):
+            raise SceneError(f"effects.{name}: expected true or false, got {value!r}")
+    return frozenset(name for name, on in table.items() if on)
+
+
+#: plain-number limits of IMU parameters (the records' units), so no huge value reaches the kernel's literals
+BOUNDS = {"imu.lever_arm_m": (MAX_LEVER_ARM_M, " m"), "imu.mounting_rpy_deg": (MAX_ANGLE_DEG, " deg")}
+
+
+def _check_bound(value, bound, where: str) -> None:
+    if bound is None:
+        return
+    limit, unit = bound
+    flat = np.ravel(np.asarray(value, dtype=float))
+    if np.any(np.abs(flat) > limit):
+        raise SceneError(f"{where}: values must be within ±{limit:g}{unit}, got {value!r}")
+
+
+def _imu(table, where: str, effects: frozenset[str], taken: set[str], warnings: list[str]) -> ImuSpec:
+    """An [[imu]] table: the keys and sub-tables ([imu.gyro], [imu.accel]) the effects declare, nothing else."""
+    from imu_emulator import units
+    from imu_emulator.effects import all_params
+    if not isinstance(table, Mapping):
+        raise SceneError(f"{where}: expected a table")
+    declared = all_params()
+    subtables = {p.table.split(".", 1)[1] for _, p in declared if p.table != "imu"}
+    _no_unknown(table, {"name", *subtables, *(k for _, p in declared if p.table == "imu" for k in (p.key, *p.aliases))},
+                where)
+    name = table.get("name", where.replace("[", "").replace("]", ""))
+    # names become CSV cells and labels on the wire: one printable line, no comma
+    if not isinstance(name, str) or not name or "," in name or not name.isprintable() or len(name) > 64:
+        raise SceneError(f"{where}.name: expected a printable name of 1 to 64 characters without commas, "
+                         f"got {name!r}")
+    if name in taken:
+        raise SceneError(f"{where}.name: {name!r} is used twice")
+    sources = {"imu": (table, where)}
+    for sub in sorted(subtables):
+        sources[f"imu.{sub}"] = (_table(table, sub, f"{where}."), f"{where}.{sub}")
+        _no_unknown(sources[f"imu.{sub}"][0],
+                    {k for _, p in declared if p.table == f"imu.{sub}" for k in (p.key, *p.aliases)}, f"{where}.{sub}")
+    values = {}
+    for effect, param in declared:
+        source, prefix = sources[param.table]
+        given = [key for key in (param.key, *param.aliases) if key in source]
+        if len(given) > 1:
+            raise SceneError(f"{prefix}.{given[1]}: give either {given[0]} or {given[1]}, not both")
+        default = units.parse(param.default, param.unit, param.shape, f"{prefix}.{param.key}")
+        values[param.path] = default
+        if given:
+            values[param.path] = units.parse(source[given[0]], param.unit, param.shape, f"{prefix}.{given[0]}")
+            _check_bound(values[param.path], BOUNDS.get(param.path), f"{prefix}.{given[0]}")
+            # a value that changes nothing (the default, e.g. a zero lever arm) is not worth a warning
+            if effect.name not in effects and values[param.path] != default:
+                warnings.append(f"{prefix}.{given[0]} is ignored because effects.{effect.name} is not true")
+    from imu_emulator.effects import EFFECTS
+    for effect in EFFECTS.values():
+        if effect.name in effects and effect.validate is not None:
+            effect.validate(values, where)
+    return ImuSpec(name, values)
+
+
 def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | None = None) -> Scene:
     """Validate a scene given as nested dicts (the parsed TOML, or built in code)."""
     if not isinstance(raw, Mapping):
@@ -340,7 +420,8 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
     warnings: list[str] = []
 
     head = _table(raw, "scene")
-    _no_unknown(head, {"rate_hz", "duration_s", "frame", "gravity_mps2", "t0_s", "name"}, "scene")
+    _no_unknown(head, {"rate_hz", "duration_s", "frame", "gravity_mps2", "t0_s", "name", "seed"}, "scene")
+    seed = _seed(head)
     rate = _number(head, "rate_hz", "scene", required=True, positive=True)
     if not RATE_RANGE_HZ[0] <= rate <= RATE_RANGE_HZ[1]:
         raise SceneError(f"scene.rate_hz: {rate!r} is out of range ({RATE_RANGE_HZ[0]:g} to {RATE_RANGE_HZ[1]:g} Hz)")
@@ -441,14 +522,7 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
                            unit=" s")
     _check_time_resolution(t0, duration, rate)
 
-    effects_table = _table(raw, "effects")
-    for name, value in effects_table.items():
-        if name not in EFFECTS:
-            raise SceneError(f"effects.{shown_key(name)}: unknown effect (known: {', '.join(EFFECTS)})")
-        if not isinstance(value, bool):
-            raise SceneError(f"effects.{name}: expected true or false, got {value!r}")
-    effects = frozenset(name for name, on in effects_table.items() if on)
-
+    effects = _effects(raw)
     imu_list = raw.get("imu", [])
     if isinstance(imu_list, Mapping):
         imu_list = [imu_list]
@@ -456,25 +530,9 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
         raise SceneError("imu: at least one [[imu]] table is required")
     if len(imu_list) > MAX_IMUS:
         raise SceneError(f"imu: {len(imu_list)} [[imu]] tables; the limit is {MAX_IMUS} per scene")
-    imus = []
+    imus: list[ImuSpec] = []
     for i, table in enumerate(imu_list):
-        where = f"imu[{i}]"
-        if not isinstance(table, Mapping):
-            raise SceneError(f"{where}: expected a table")
-        _no_unknown(table, {"name", "lever_arm_m", "mounting_rpy_deg"}, where)
-        name = table.get("name", f"imu{i}")
-        # names become CSV cells and labels on the wire: one printable line, no comma
-        if not isinstance(name, str) or not name or "," in name or not name.isprintable() or len(name) > 64:
-            raise SceneError(f"{where}.name: expected a printable name of 1 to 64 characters without commas, "
-                             f"got {name!r}")
-        if name in {imu.name for imu in imus}:
-            raise SceneError(f"{where}.name: {name!r} is used twice")
-        imu = ImuSpec(name, _vector3(table, "lever_arm_m", where, MAX_LEVER_ARM_M, " m"),
-                      _vector3(table, "mounting_rpy_deg", where, MAX_ANGLE_DEG, " deg"))
-        for key, effect in (("lever_arm_m", "lever_arm"), ("mounting_rpy_deg", "mounting")):
-            if any(getattr(imu, key)) and effect not in effects:
-                warnings.append(f"{where}.{key} is ignored because effects.{effect} is not true")
-        imus.append(imu)
+        imus.append(_imu(table, f"imu[{i}]", effects, {imu.name for imu in imus}, warnings))
 
     streams = raw.get("stream", [])
     if isinstance(streams, Mapping):
@@ -485,7 +543,7 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
     return Scene(rate_hz=rate, duration_s=duration, frame=frame, gravity_mps2=gravity, t0_s=t0,
                  params=params, trajectory=trajectory, attitude_mode=mode, attitude=attitude,
                  initial_heading_rad=heading, imus=tuple(imus), effects=effects,
-                 streams=tuple(dict(s) for s in streams), path=path, warnings=tuple(warnings))
+                 streams=tuple(dict(s) for s in streams), path=path, warnings=tuple(warnings), seed=seed)
 
 
 def load_scene(path: str | Path) -> Scene:

@@ -1,18 +1,28 @@
 """Drive the kernel block by block: evaluate sampled motion for the block (if any), call the compiled
-kernel once per block, check the result is finite, hand back a SampleBlock."""
+kernel once per block, check the result is finite, hand back a SampleBlock.
+
+Random numbers are a pure function of (seed, IMU, stream, run sample), so stateless effects give the same
+bytes for any cut into blocks. Stateful effects (Gauss-Markov, random walks) carry per-IMU state in one array
+across blocks, which makes the run sequential: `block(k0, n)` continues the state when k0 is the next run
+sample; any other k0 replays the run from its start (or from the current position, going forward) into
+scratch buffers first, so the answer is always the same as one run from the start, at the cost of the replay.
+"""
 from __future__ import annotations
 
 import numpy as np
 
 from imu_emulator.errors import DataError
-from imu_emulator.kernel import compile_kernel
+from imu_emulator.kernel import EffectPlan, compile_kernel
 from imu_emulator.run_size import check_memory
 from imu_emulator.samples import SampleBlock
 from imu_emulator.scene import SampledData, Scene
 
 TRUTH_KEYS = ("position", "velocity", "euler", "omega_body", "alpha_body")
+#: per-IMU truth (n_imu, n, 3), present when an effect adds a bias: the realized bias of each triad
+BIAS_TRUTH_KEYS = ("accel_bias", "gyro_bias")
 _EMPTY3 = np.zeros((0, 0, 0))
 _EMPTY2 = np.zeros((0, 0))
+_REPLAY_BLOCK = 65536
 
 
 class Simulation:
@@ -23,12 +33,43 @@ class Simulation:
         self.attitude = attitude
         self.truth = truth
         # Sampled input is fitted before the kernel compiles: bad data is reported in a second, not after it.
+        self._plan = EffectPlan(scene)
+        self._keys = self._plan.keys(scene.seed)
+        self._stateful = bool(self._plan.slots)
         self._position = self._series(scene.trajectory, 3 if scene.attitude_mode == "tangent" else 2, "trajectory")
         self._euler = self._series(scene.attitude, 2, "attitude")
         self.kernel = compile_kernel(scene, attitude=attitude, truth=truth)
         # Tangent attitude holds the last defined heading (cos, sin) and pitch (cos, sin) across blocks.
         h = scene.initial_heading_rad
         self._hold = np.array([np.cos(h), np.sin(h), 1.0, 0.0])
+        self._reset_state()
+
+    def fresh(self) -> "Simulation":
+        """A new simulation of the same scene and outputs, at the run's start (the kernel is not recompiled)."""
+        return Simulation(self.scene, attitude=self.attitude, truth=self.truth)
+
+    def _reset_state(self) -> None:
+        self._state = self._plan.initial_state(self.scene.seed)
+        self._next = 0      # the run sample the state is at
+
+    @property
+    def bias_truth(self) -> bool:
+        return self.truth and self._plan.bias_truth
+
+    @staticmethod
+    def trial(kernel, scene: Scene, attitude: bool, truth: bool) -> None:
+        """Call a freshly loaded kernel on no sample with the argument types `block` uses (numba compiles on
+        the first call; the cache publishes only compiled kernels)."""
+        n_imu = len(scene.imus)
+        plan = EffectPlan(scene)
+        sampled = isinstance(scene.trajectory, SampledData)
+        empty = np.zeros((1, 0, 3))
+        kernel(np.int64(0), np.int64(0), np.int64(0), empty if sampled else _EMPTY3,
+               empty if isinstance(scene.attitude, SampledData) else _EMPTY3, np.zeros(4),
+               plan.keys(0), plan.initial_state(0), np.zeros((n_imu, 0, 3)), np.zeros((n_imu, 0, 3)),
+               np.zeros((n_imu, 0, 4)) if attitude else _EMPTY3,
+               *([np.zeros((0, 3))] * 5 if truth else [_EMPTY2] * 5),
+               *([np.zeros((n_imu, 0, 3))] * 2 if truth and plan.bias_truth else [_EMPTY3] * 2))
 
     @staticmethod
     def _series(part, order: int, where: str):
@@ -57,25 +98,58 @@ class Simulation:
     def times(self, k0: int, n: int) -> np.ndarray:
         return self.scene.t0_s + (k0 + np.arange(n, dtype=np.float64)) * (1.0 / self.scene.rate_hz)
 
-    def block(self, k0: int, n: int, out: SampleBlock | None = None) -> SampleBlock:
-        """Samples k0 .. k0+n-1. With `out` (a block of the right shape, e.g. views into larger arrays)
-        the kernel writes there instead of allocating."""
+    def block(self, k0: int, n: int, out: SampleBlock | None = None, run_sample: int | None = None) -> SampleBlock:
+        """Samples k0 .. k0+n-1 of the scene. With `out` (a block of the right shape, e.g. views into larger
+        arrays) the kernel writes there instead of allocating. `run_sample` (default k0) is the run's own
+        sample count, which random numbers and state follow: a looped stream passes it so that its noise does
+        not repeat with the scene."""
+        s0 = k0 if run_sample is None else int(run_sample)
+        if self._stateful and s0 != self._next:
+            self._replay_to(s0)
         n_imu = len(self.scene.imus)
         t = self.times(k0, n)
-        mot = self._evaluate(self._position, k0, n)
-        att = self._evaluate(self._euler, k0, n)
         if out is None:
             out = SampleBlock(k0=k0, t_s=t, accel=np.empty((n_imu, n, 3)), gyro=np.empty((n_imu, n, 3)),
                               quat=np.empty((n_imu, n, 4)) if self.attitude else None,
-                              truth={k: np.empty((n, 3)) for k in TRUTH_KEYS} if self.truth else None)
+                              truth=self._new_truth(n) if self.truth else None)
         else:
             out.k0 = k0
             out.t_s[:] = t
-        quat = out.quat if self.attitude else _EMPTY3
-        tr = [out.truth[k] for k in TRUTH_KEYS] if self.truth else [_EMPTY2] * 5
-        self.kernel(np.int64(k0), np.int64(n), mot, att, self._hold, out.accel, out.gyro, quat, *tr)
+        self._call(k0, n, s0, out)
         self._check_finite(out.accel, out.gyro, k0)
         return out
+
+    def _new_truth(self, n: int) -> dict:
+        truth = {k: np.empty((n, 3)) for k in TRUTH_KEYS}
+        if self.bias_truth:
+            truth.update({k: np.empty((len(self.scene.imus), n, 3)) for k in BIAS_TRUTH_KEYS})
+        return truth
+
+    def _call(self, k0: int, n: int, s0: int, out: SampleBlock) -> None:
+        mot = self._evaluate(self._position, k0, n)
+        att = self._evaluate(self._euler, k0, n)
+        quat = out.quat if self.attitude else _EMPTY3
+        tr = [out.truth[k] for k in TRUTH_KEYS] if self.truth else [_EMPTY2] * 5
+        bias = [out.truth[k] for k in BIAS_TRUTH_KEYS] if self.bias_truth else [_EMPTY3] * 2
+        self.kernel(np.int64(k0), np.int64(n), np.int64(s0), mot, att, self._hold, self._keys, self._state,
+                    out.accel, out.gyro, quat, *tr, *bias)
+        self._next = s0 + n
+
+    def _replay_to(self, s0: int) -> None:
+        """Bring the state to run sample s0 by computing the samples before it (discarded)."""
+        if s0 < self._next:
+            self._reset_state()
+            self._hold[:] = [np.cos(self.scene.initial_heading_rad), np.sin(self.scene.initial_heading_rad), 1.0, 0.0]
+        n_imu = len(self.scene.imus)
+        while self._next < s0:
+            n = min(_REPLAY_BLOCK, s0 - self._next)
+            k = self._next % self.n_samples    # the motion a looped run had at that run sample
+            n = min(n, self.n_samples - k)
+            scratch = SampleBlock(k0=k, t_s=self.times(k, n), accel=np.empty((n_imu, n, 3)),
+                                  gyro=np.empty((n_imu, n, 3)),
+                                  quat=np.empty((n_imu, n, 4)) if self.attitude else None,
+                                  truth=self._new_truth(n) if self.truth else None)
+            self._call(k, n, self._next, scratch)
 
     def _evaluate(self, series, k0: int, n: int):
         if series is None:
@@ -111,7 +185,7 @@ class Simulation:
         whole = SampleBlock(k0=0, t_s=np.empty(n_total), accel=np.empty((n_imu, n_total, 3)),
                             gyro=np.empty((n_imu, n_total, 3)),
                             quat=np.empty((n_imu, n_total, 4)) if self.attitude else None,
-                            truth={k: np.empty((n_total, 3)) for k in TRUTH_KEYS} if self.truth else None)
+                            truth=self._new_truth(n_total) if self.truth else None)
         for k0 in range(0, n_total, block_size):
             self.block(k0, min(block_size, n_total - k0), out=whole.view(k0, min(k0 + block_size, n_total)))
             if progress is not None:

@@ -430,7 +430,7 @@ class Streamer:
             n = min(block_len, self.scene_samples - k) if self.options.loop else block_len
             if self.total is not None:
                 n = min(n, self.total - j)
-            block = self.sim.block(k, n)
+            block = self.sim.block(k, n, run_sample=j)   # noise follows the run, not the looped scene
             offset = self._time_offset_ns
             if self.options.loop:   # each pass is stamped one scene length later: time keeps increasing
                 offset += (j // self.scene_samples) * self._loop_period_ns()
@@ -572,8 +572,9 @@ class Streamer:
 
     def _warm_up(self) -> None:
         """Compile kernels and encoders now rather than inside the first deadlines (throwaway encoders and
-        devices keep the real ones' sequence numbers and counters at zero)."""
-        block = self.sim.block(0, 1)
+        devices keep the real ones' sequence numbers and counters at zero; a throwaway simulation keeps the real one's
+        noise state at the run's start)."""
+        block = self.sim.fresh().block(0, 1)
         for stream in self.streams:
             samples = stream.samples(block, block.time_ns())
             if stream.device is not None:

@@ -14,7 +14,8 @@ def register(subparsers) -> None:
     gen = subparsers.add_parser("generate", help="write the samples of a scene to CSV or NPZ")
     gen.add_argument("scene", help="scene file (TOML)")
     gen.add_argument("-o", "--output", required=True, help="output file, .csv, .npz or .mcap (ROS 2 bag)")
-    gen.add_argument("--truth", action="store_true", help="add position, velocity, attitude and body rates")
+    gen.add_argument("--truth", action="store_true", help="add position, velocity, attitude and body rates "
+                     "(and each IMU's realized bias when a bias effect is on)")
     gen.add_argument("--quiet", action="store_true", help="no progress bar or summary (warnings still show)")
     gen.add_argument("--allow-large", action="store_true", help="write a CSV larger than the free disk space")
     gen.add_argument("--block", type=number(1, 10_000_000, integer=True), default=65536, help=argparse.SUPPRESS)
@@ -31,7 +32,9 @@ def cmd_generate(args) -> int:
     stopped = _exit_cleanly_on(signal.SIGTERM, signal.SIGHUP, signal.SIGINT)
     # The output file is created before the kernel compiles: an unwritable path fails at once. It appears
     # at its path only when every block is written (a failed run leaves nothing behind).
-    with open_writer(args.output, scene.imu_names, args.truth) as writer:
+    from imu_emulator.kernel import EffectPlan
+    bias_truth = EffectPlan(scene).bias_truth    # the realized-bias columns, known before compiling
+    with open_writer(args.output, scene.imu_names, args.truth, bias_truth=bias_truth) as writer:
         check_output(scene, args.output, args.truth, args.allow_large)
         # a ROS Imu message has an orientation field: fill it from the sensor frame's attitude
         sim = Simulation(scene, attitude=args.output.lower().endswith(".mcap"), truth=args.truth)

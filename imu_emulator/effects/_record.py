@@ -1,0 +1,147 @@
+"""The record every effect module declares, and what the code generator hands its emit function.
+
+An effect is one module in this package holding `EFFECT = Effect(...)`. Everything else reads the records:
+scene validation (which [effects] names, which [[imu]] / [imu.gyro] / [imu.accel] keys, their units), the
+"parameter given but effect off" warnings, the kernel's stages, the cache key (the modules' bytes) and the
+documentation table (`imu-emulator kernel --effects`, README). Records import nothing of the scene.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import IntEnum
+from typing import Any, Callable
+
+
+class Stage(IntEnum):
+    """Where in the per-sample code an effect acts; stages run in this order, effects within a stage by
+    their `order`. Every stage carries specific force and angular rate (variables in STAGE_CONTRACT)."""
+    NAVIGATION = 1   # navigation frame, once per sample for the whole body
+    BODY = 2         # body frame at the IMU, per IMU
+    SENSOR = 3       # sensor frame, per IMU (mounting, then the sensor's errors)
+    OUTPUT = 4       # sensor output, per IMU (what leaves the part: range, resolution)
+
+
+STAGE_TITLES = {Stage.NAVIGATION: "navigation frame", Stage.BODY: "body frame at the IMU",
+                Stage.SENSOR: "sensor frame", Stage.OUTPUT: "sensor output"}
+
+#: The variables each stage may read and update (the generated kernel's contract, see kernel.KERNEL_TEMPLATE).
+STAGE_CONTRACT = {
+    Stage.NAVIGATION: (
+        "reads  t (s), k (scene sample), s (run sample), px py pz, vx vy vz, ax ay az (navigation frame), "
+        "r00..r22 (body -> navigation), wx wy wz, alx aly alz (body rate and its derivative, body axes); "
+        "updates fnx fny fnz (specific force, navigation axes; starts as ax ay az) and, for an effect declared "
+        "with nav_rate=True, wnx wny wnz (rate of the navigation frame w.r.t. inertial space, navigation axes; "
+        "starts at 0, added to the gyros in body axes)"),
+    Stage.BODY: (
+        "reads  everything above, fbx fby fbz (specific force at the reference point, body axes); "
+        "updates fax fay faz (specific force at this IMU, body axes; starts as fbx..) and gwx gwy gwz "
+        "(inertial angular rate, body axes; starts as the body rate plus the navigation stage's rate)"),
+    Stage.SENSOR: (
+        "updates ox oy oz (accelerometer triad) and gx gy gz (gyro triad) in sensor axes; they start as the "
+        "body-stage values; effects of order < FRAME_ORDERS (mounting) change axes, after them the kernel keeps "
+        "the true sensor-frame values in tfx tfy tfz, twx twy twz for the error effects to read; bias terms are "
+        "added through EmitContext.add_bias so --truth can report the realized bias"),
+    Stage.OUTPUT: (
+        "updates ox oy oz, gx gy gz as the part outputs them (saturation, rounding); counters go through "
+        "EmitContext.count"),
+}
+#: Sensor-stage effects with an order below this change axes (mounting); the error effects come after.
+FRAME_ORDERS = 10
+
+#: The sensor triads: scene table, output variables in the sensor stage, bias accumulator prefix.
+TRIADS = {"gyro": ("imu.gyro", "g", "bg"), "accel": ("imu.accel", "o", "ba")}
+AXES = "xyz"
+
+
+@dataclass(frozen=True)
+class Param:
+    """One parameter: `key` in `table` ("imu", "imu.gyro", "imu.accel"); plain numbers are in `unit`, strings
+    carry their own units (imu_emulator.units). `aliases` are other keys of the same dimension that datasheets
+    use for the same figure (e.g. arw for a gyro's noise density); at most one of them may be given."""
+    key: str
+    table: str
+    unit: str
+    description: str
+    shape: str = "vector3"      # "scalar", "vector3" (one value broadcast), "triple" (exactly 3), "matrix3"
+    default: Any = 0.0
+    aliases: tuple[str, ...] = ()
+    datasheet: str = ""          # how datasheets print it, for the documentation table
+    example: Any = None          # a valid nonzero value (docs, and the tests that vary every parameter)
+
+    @property
+    def path(self) -> str:
+        return f"{self.table}.{self.key}"
+
+
+@dataclass(frozen=True)
+class Effect:
+    name: str                    # the [effects] key (an identifier)
+    description: str             # one line
+    stage: Stage
+    order: int                   # position within the stage; lower runs first
+    emit: Callable[["EmitContext"], list[str]] = field(repr=False)
+    params: tuple[Param, ...] = ()
+    state: tuple[str, ...] = ()  # what the per-IMU state slots hold (carried across blocks)
+    random: bool = False         # draws random numbers (needs [scene] seed for a chosen realization)
+    nav_rate: bool = False       # navigation-stage effect that adds a rate of the navigation frame
+    #: checks that need several parameters (validate(values, where) raises SceneError naming the key); run by
+    #: scene validation for each IMU when the effect is on
+    validate: Callable[[dict, str], None] | None = field(default=None, repr=False)
+
+
+def triad_params(key: str, gyro_unit: str, accel_unit: str, description: str, shape: str = "vector3",
+                 gyro_aliases=(), accel_aliases=(), gyro_datasheet="", accel_datasheet="") -> tuple[Param, Param]:
+    """The same parameter for both triads, [imu.gyro] and [imu.accel]."""
+    return (Param(key, "imu.gyro", gyro_unit, f"gyro {description}", shape, aliases=tuple(gyro_aliases),
+                  datasheet=gyro_datasheet),
+            Param(key, "imu.accel", accel_unit, f"accelerometer {description}", shape,
+                  aliases=tuple(accel_aliases), datasheet=accel_datasheet))
+
+
+class EmitContext:
+    """What an effect's emit function sees: the scene, the IMU (None in the navigation stage), its index, its
+    parameter values in SI, and helpers that allocate state slots, random streams and counters so that the
+    kernel, the Simulation and --truth agree on their layout."""
+
+    def __init__(self, plan, effect: Effect, scene, imu, m: int | None):
+        self.plan = plan
+        self.effect = effect
+        self.scene = scene
+        self.imu = imu
+        self.m = m
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / self.scene.rate_hz
+
+    def value(self, path: str):
+        """A parameter of this effect by its path ("imu.lever_arm_m", "imu.gyro.noise_density")."""
+        if not any(p.path == path for p in self.effect.params):
+            raise KeyError(f"{self.effect.name} did not declare {path}")
+        return self.imu.values[path]
+
+    def var(self, name: str) -> str:
+        """A local variable name private to this effect and IMU."""
+        return f"{self.effect.name}_{self.m}_{name}"
+
+    def state(self, name: str, initial: Callable[[Callable[[str, int], float]], float]) -> str:
+        """A state slot carried across blocks: returns its local variable; `initial(draw)` gives its value at
+        the run's start, where draw(stream, counter) is a standard normal of this IMU's named stream."""
+        if name.split("[")[0] not in self.effect.state:
+            raise KeyError(f"{self.effect.name} did not declare state {name!r}")
+        prefix = self.effect.name
+        var = self.var("".join(c if c.isalnum() else "_" for c in name))
+        return self.plan.add_state(var, self.m, lambda draw: initial(lambda s, c: draw(f"{prefix}.{s}", c)))
+
+    def normal(self, stream: str, counter: str = "s") -> str:
+        """Source for the standard normal number `counter` of this IMU's stream `stream` (default: this run
+        sample's)."""
+        if not self.effect.random:
+            raise KeyError(f"{self.effect.name} is not declared random")
+        index = self.plan.add_stream(self.m, f"{self.effect.name}.{stream}")
+        return f"normal(keys[{index}], {counter})"
+
+    def add_bias(self, triad: str, axis: int, expr: str) -> list[str]:
+        """Add a bias term to an output (and to the realized bias that --truth reports)."""
+        _, out, acc = TRIADS[triad]
+        return [f"{out}{AXES[axis]} += {expr}", f"{acc}{AXES[axis]} += {expr}"]

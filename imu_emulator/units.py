@@ -1,0 +1,98 @@
+"""Parameter values as datasheets print them ("0.2 deg/sqrt(h)", "120 ug/sqrt(Hz)", "500 ppm") -> SI floats.
+
+A pint registry with an explicit, small unit context rather than pint's default one, because datasheets and
+pint disagree on one symbol: "g" is standard gravity here (so "ug", "mg" are micro-g and milli-g), never gram.
+Angle is a base dimension of its own, so "5 m/s" given for a gyro key is an error rather than silently rad/s.
+Plain numbers are taken in the key's own unit (SI unless the key's name says otherwise, e.g. mounting_rpy_deg).
+"""
+from __future__ import annotations
+
+import math
+import re
+from functools import lru_cache
+
+import numpy as np
+
+from imu_emulator.errors import SceneError
+
+DEFINITIONS = """
+pi = 3.1415926535897932384626433832795028841971693993751 = π
+milli- = 1e-3 = m-
+micro- = 1e-6 = u- = µ- = μ-
+nano- = 1e-9 = n-
+kilo- = 1e3 = k-
+meter = [length] = m
+second = [time] = s = sec
+radian = [angle] = rad
+minute = 60 * second = min
+hour = 60 * minute = h = hr
+hertz = 1 / second = Hz
+degree = pi / 180 * radian = deg = °
+degree_per_second = degree / second = dps
+standard_gravity = 9.80665 * meter / second ** 2 = g = g0
+percent = 0.01 = %
+ppm = 1e-6
+"""
+# pint has no sqrt() in unit strings; datasheets write sqrt(Hz), sqrt(h) or √Hz.
+_SQRT = re.compile(r"(?:sqrt\(\s*([^()]*?)\s*\)|√\s*\(\s*([^()]*?)\s*\)|√\s*([A-Za-zµμ]+))")
+
+
+@lru_cache(maxsize=1)
+def registry():
+    import pint
+    reg = pint.UnitRegistry(None)
+    reg.load_definitions(DEFINITIONS.strip().splitlines())
+    return reg
+
+
+def _rewrite(text: str) -> str:
+    return _SQRT.sub(lambda m: f"(({m.group(1) or m.group(2) or m.group(3)})**0.5)", text)
+
+
+def to_unit(value, unit: str, where: str) -> float:
+    """A number (already in `unit`) or a string with units -> float in `unit`. Errors name `where`."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, str, np.integer, np.floating)):
+        raise SceneError(f"{where}: expected a number or a string with units, got {value!r}")
+    if isinstance(value, str):
+        import pint
+        reg = registry()
+        try:
+            quantity = reg.Quantity(_rewrite(value.strip()))
+            number = float(quantity.to(reg.Unit(_rewrite(unit))).magnitude)
+        except pint.DimensionalityError:
+            raise SceneError(f"{where}: {value!r} has the wrong dimension (expected a value in {unit})") from None
+        except Exception:
+            raise SceneError(f"{where}: cannot read {value!r} as a value with units (e.g. '5 deg/h', "
+                             f"'120 ug/sqrt(Hz)'; expected a value in {unit})") from None
+    else:
+        number = float(value)
+    if not math.isfinite(number):
+        raise SceneError(f"{where}: must be finite, got {value!r}")
+    return number
+
+
+def parse(value, unit: str, shape: str, where: str):
+    """A parameter of `shape` -> float ("scalar"), tuple of 3 floats ("vector3": one value is broadcast to
+    the three axes; "triple": exactly three values) or 3 tuples of 3 floats ("matrix3": one value fills every element), each in `unit`."""
+    if shape == "scalar":
+        return to_unit(value, unit, where)
+    if shape == "triple":
+        if not isinstance(value, (list, tuple, np.ndarray)) or len(value) != 3:
+            raise SceneError(f"{where}: expected a list of three numbers, got {value!r}")
+        return tuple(to_unit(v, unit, f"{where}[{i}]") for i, v in enumerate(value))
+    if shape == "vector3":
+        if isinstance(value, (list, tuple)):
+            if len(value) != 3:
+                raise SceneError(f"{where}: expected one value or a list of three, got {len(value)} values")
+            return tuple(to_unit(v, unit, f"{where}[{i}]") for i, v in enumerate(value))
+        number = to_unit(value, unit, where)
+        return (number, number, number)
+    if shape == "matrix3":
+        if isinstance(value, (list, tuple)):
+            if len(value) != 3 or not all(isinstance(row, (list, tuple)) and len(row) == 3 for row in value):
+                raise SceneError(f"{where}: expected one value or a 3x3 list of lists")
+            return tuple(tuple(to_unit(v, unit, f"{where}[{i}][{j}]") for j, v in enumerate(row))
+                         for i, row in enumerate(value))
+        number = to_unit(value, unit, where)
+        return tuple(tuple(number for _ in range(3)) for _ in range(3))
+    raise ValueError(shape)

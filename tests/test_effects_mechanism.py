@@ -1,0 +1,198 @@
+"""The effect records drive validation, the kernel's source and its cache key; the cache never serves a
+broken or stale entry."""
+from __future__ import annotations
+
+import dataclasses
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from imu_emulator import kernel as kernel_module
+from imu_emulator import scene_from_dict
+from imu_emulator.effects import EFFECTS, STAGE_CONTRACT, Stage, all_params
+from imu_emulator.errors import SceneError
+from imu_emulator.kernel import compile_kernel, generate_source, generator_modules, scene_key
+
+ROOT = Path(__file__).resolve().parent.parent
+EXAMPLES = ROOT / "examples"
+GOLDEN = Path(__file__).parent / "data" / "kernels"
+
+
+def _scene(effects=None, imu=None, **scene):
+    head = {"rate_hz": 100, "duration_s": 0.5, **scene}
+    return scene_from_dict({"scene": head, "trajectory": {"x": "0.5*t*t", "y": "0", "z": "0"},
+                            "attitude": {"roll": "0.1*t", "pitch": "0", "yaw": "0.2*t"},
+                            "imu": [imu or {"name": "a"}], "effects": effects or {}})
+
+
+def _sample_value(param, scale: float):
+    """A valid, nonzero value of the parameter's shape in its own unit (the record's example if it has one)."""
+    if param.example is not None:
+        return param.example * scale
+    if param.shape == "scalar":
+        return 0.3 * scale
+    if param.shape in ("vector3", "triple"):
+        return [0.1 * scale, 0.2 * scale, 0.3 * scale]
+    return [[0.01 * scale * (1 + i + 3 * j) for j in range(3)] for i in range(3)]
+
+
+def _imu_with(values: dict) -> dict:
+    imu: dict = {"name": "a"}
+    for param, value in values.items():
+        if param.table == "imu":
+            imu[param.key] = value
+        else:
+            imu.setdefault(param.table.split(".", 1)[1], {})[param.key] = value
+    return imu
+
+
+def test_every_parameter_of_every_effect_changes_key_and_source():
+    everything = {name: True for name in EFFECTS}
+    base = {param: _sample_value(param, 1.0) for _, param in all_params()}
+    reference = _scene(everything, _imu_with(base))
+    ref_key, ref_source = scene_key(reference, True, False), generate_source(reference, True, False)
+    assert all_params(), "the effects declare parameters"
+    for effect, param in all_params():
+        changed = _scene(everything, _imu_with({**base, param: _sample_value(param, 11.0)}))   # x11 crosses a decade (the flicker band)
+        assert scene_key(changed, True, False) != ref_key, param.path
+        assert generate_source(changed, True, False) != ref_source, f"{effect.name}: {param.path}"
+
+
+def test_effect_named_false_gives_the_same_source_as_not_named():
+    for name in EFFECTS:
+        off = _scene({name: False})
+        assert generate_source(off, True, True) == generate_source(_scene(), True, True), name
+
+
+def test_records_declare_stage_order_and_contract():
+    for effect in EFFECTS.values():
+        assert effect.name.isidentifier() and effect.description and "\n" not in effect.description
+        assert isinstance(effect.stage, Stage) and isinstance(effect.order, int)
+        for param in effect.params:
+            assert param.table in ("imu", "imu.gyro", "imu.accel")
+    assert set(STAGE_CONTRACT) == set(Stage)
+    order = [(e.stage, e.order) for e in EFFECTS.values()]
+    assert order == sorted(order)
+
+
+def test_imu_keys_and_warnings_come_from_the_records():
+    with pytest.raises(SceneError, match=r"imu\[0\]\.wobble: unknown key"):
+        _scene(imu={"name": "a", "wobble": 1})
+    for effect, param in all_params():
+        scene = _scene({}, _imu_with({param: _sample_value(param, 1.0)}))
+        expected = f"imu[0].{param.path.split('.', 1)[1]} is ignored because effects.{effect.name} is not true"
+        assert expected in scene.warnings
+        on = _scene({effect.name: True}, _imu_with({p: _sample_value(p, 1.0) for p in effect.params}))
+        assert not any("is ignored" in w for w in on.warnings)
+
+
+def test_imu_names_and_seed_do_not_reach_the_source():
+    a = _scene({"lever_arm": True}, {"name": "first", "lever_arm_m": [0.1, 0, 0]})
+    b = _scene({"lever_arm": True}, {"name": "x\nimport os  # 'quoted' \u00e9", "lever_arm_m": [0.1, 0, 0]},
+               seed=12345)
+    assert generate_source(a, True, True) == generate_source(b, True, True)
+    assert scene_key(a, True, True) != scene_key(b, True, True)      # the key is the whole scene
+    seeded = _scene({"lever_arm": True}, {"name": "first", "lever_arm_m": [0.1, 0, 0]}, seed=7)
+    assert scene_key(seeded, True, True) == scene_key(a, True, True)   # the seed arrives at run time
+
+
+def test_generator_modules_are_found_by_their_imports():
+    names = {p.relative_to(ROOT / "imu_emulator").as_posix() for p in generator_modules()}
+    for expected in ("kernel.py", "motion.py", "expressions.py", "rotations.py", "phase.py", "counter_rng.py",
+                     "scene.py", "units.py", "effects/__init__.py", "effects/_record.py",
+                     *(f"effects/{name}.py" for name in EFFECTS)):
+        assert expected in names, expected
+
+
+@pytest.mark.parametrize("scene_path", sorted(EXAMPLES.glob("*.toml")), ids=lambda p: p.stem)
+def test_golden_kernels(scene_path):
+    """Regenerate with `python tools/regen_golden_kernels.py` after a deliberate change, and review the diff."""
+    from imu_emulator import load_scene
+    golden = (GOLDEN / f"{scene_path.stem}.py.txt").read_text()
+    assert generate_source(load_scene(scene_path), attitude=True, truth=False) == golden
+
+
+def test_kernel_command_prints_the_source():
+    out = subprocess.run([sys.executable, "-m", "imu_emulator", "kernel", str(EXAMPLES / "circle.toml")],
+                         capture_output=True, text=True, check=True).stdout
+    assert out == (GOLDEN / "circle.py.txt").read_text()
+    table = subprocess.run([sys.executable, "-m", "imu_emulator", "kernel", "--effects"],
+                           capture_output=True, text=True, check=True).stdout
+    for name in EFFECTS:
+        assert f"`{name}`" in table
+
+
+# --- cache ------------------------------------------------------------------------------------------
+
+@pytest.fixture
+def fresh_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path))
+    monkeypatch.setattr(kernel_module, "_loaded", {})
+    return tmp_path / "kernels"
+
+
+def _entries(root: Path) -> list[str]:
+    return sorted(p.name for p in root.iterdir()) if root.exists() else []
+
+
+def _run(scene):
+    from imu_emulator.simulation import Simulation
+    return Simulation(scene).run()
+
+
+def test_a_kernel_that_fails_to_compile_leaves_no_entry(fresh_cache, monkeypatch):
+    scene = _scene({"gravity": True})
+    original = EFFECTS["gravity"]
+    monkeypatch.setitem(EFFECTS, "gravity", dataclasses.replace(original, emit=lambda ctx: ["fnz = fnz + nowhere"]))
+    with pytest.raises(Exception):
+        compile_kernel(scene)
+    assert _entries(fresh_cache) == []
+    # the same key, now generated correctly, compiles and runs: nothing broken was kept
+    EFFECTS["gravity"] = original
+    out = _run(scene)
+    np.testing.assert_allclose(out.accel[0, 0], [1.0, 0, 9.80665], atol=1e-12)   # t=0: level, a = (1, 0, 0)
+    assert _entries(fresh_cache) == [scene_key(scene, True, False)]
+
+
+@pytest.mark.parametrize("damage", ["truncate", "garbage", "does_not_compile"])
+def test_a_corrupt_entry_is_regenerated(fresh_cache, damage):
+    scene = _scene({"gravity": True})
+    expected = _run(scene)
+    source_file = fresh_cache / scene_key(scene, True, False) / "kernel.py"
+    text = source_file.read_text()
+    if damage == "truncate":
+        source_file.write_text(text[: len(text) // 2])
+    elif damage == "garbage":
+        source_file.write_bytes(os.urandom(300))
+    else:   # a valid checksum over source that does not compile
+        import hashlib
+        bad = text.split("\n", 1)[1].replace("fnz = fnz + 9.80665", "fnz = fnz + not_defined")
+        source_file.write_text("# sha256 " + hashlib.sha256(bad.encode()).hexdigest() + "\n" + bad)
+    kernel_module._loaded.clear()
+    again = _run(scene)
+    np.testing.assert_array_equal(again.accel, expected.accel)
+    assert kernel_module._valid_entry(source_file)
+    assert _entries(fresh_cache) == [scene_key(scene, True, False)]
+
+
+def test_two_processes_fill_the_cache_at_once(tmp_path):
+    script = textwrap.dedent(f"""
+        import sys
+        sys.path.insert(0, {str(ROOT)!r})
+        from imu_emulator import load_scene, simulate
+        out = simulate(load_scene({str(EXAMPLES / 'two_imus.toml')!r}))
+        print(repr(float(out.accel.sum() + out.gyro.sum())))
+    """)
+    env = {**os.environ, "IMU_EMULATOR_CACHE": str(tmp_path)}
+    procs = [subprocess.Popen([sys.executable, "-c", script], env=env, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    results = [p.communicate(timeout=600) for p in procs]
+    assert all(p.returncode == 0 for p in procs), [r[1] for r in results]
+    assert results[0][0] == results[1][0]
+    entries = _entries(tmp_path / "kernels")
+    assert len(entries) == 1 and not entries[0].startswith("."), entries

@@ -1,0 +1,98 @@
+"""Cost of each sensor-error effect alone and of the full error model, on the circle scene at 1 kHz with a
+lever arm, and the cost of one counter-based normal.
+
+    .venv/bin/python tools/bench_effects.py [--rounds 7] [--seconds 60]
+
+Variants are interleaved (A, B, C, A, B, C, ...) and timed in thread CPU time (time.thread_time_ns) beside
+wall time, because the machine is shared: compare the ratios, not one run's absolute figures. Prints figures;
+asserts nothing.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from imu_emulator import scene_from_dict  # noqa: E402
+from imu_emulator.simulation import Simulation  # noqa: E402
+
+BLOCK = 65536
+GYRO = {"noise_density": "0.007 deg/s/sqrt(Hz)", "bias_instability": "10 deg/h", "random_walk": "0.5 deg/h/sqrt(h)",
+        "bias": ["0.1 deg/s", 0, 0], "turn_on_bias_sd": "0.2 deg/s"}
+ACCEL = {"noise_density": "120 ug/sqrt(Hz)", "bias_instability": "30 ug", "random_walk": "0.01 m/s^2/sqrt(h)",
+         "bias": "2 mg", "turn_on_bias_sd": "5 mg"}
+
+
+def circle(effects, seconds: float):
+    return scene_from_dict({
+        "scene": {"rate_hz": 1000, "duration_s": seconds, "seed": 1},
+        "trajectory": {"shape": "circle", "radius_m": 5.0, "frequency_hz": 1.0},
+        "attitude": {"mode": "tangent"},
+        "imu": [{"name": "imu0", "lever_arm_m": [0.1, -0.05, 0.02], "gyro": GYRO, "accel": ACCEL}],
+        "effects": {"gravity": True, "lever_arm": True, **{name: True for name in effects}},
+    })
+
+
+def time_run(sim: Simulation, n: int, out) -> tuple[int, int]:
+    """Thread CPU ns and wall ns for the whole run, output buffers reused (as streaming does)."""
+    cpu0, wall0 = time.thread_time_ns(), time.perf_counter_ns()
+    for k0 in range(0, n, BLOCK):
+        size = min(BLOCK, n - k0)
+        sim.block(k0, size, out=out if size == BLOCK else None)
+    return time.thread_time_ns() - cpu0, time.perf_counter_ns() - wall0
+
+
+def normal_cost(rounds: int) -> list[float]:
+    from imu_emulator.counter_rng import normals
+    key = np.uint64(12345)
+    normals(key, 0, 10)
+    n = 5_000_000
+    costs = []
+    for _ in range(rounds):
+        cpu0 = time.thread_time_ns()
+        normals(key, 0, n)
+        costs.append((time.thread_time_ns() - cpu0) / n)
+    return costs
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--rounds", type=int, default=7)
+    parser.add_argument("--seconds", type=float, default=60.0, help="scene length per timed run (1 kHz)")
+    args = parser.parse_args()
+
+    variants = [("kinematics only (gravity + lever arm)", []), ("+ noise", ["noise"]),
+                ("+ bias_instability", ["bias_instability"]), ("+ random_walk", ["random_walk"]),
+                ("+ bias", ["bias"]), ("full error model", ["noise", "bias_instability", "random_walk", "bias"])]
+    sims = []
+    for label, effects in variants:
+        scene = circle(effects, args.seconds)
+        sim = Simulation(scene, attitude=False)
+        out = sim.block(0, BLOCK)
+        sims.append((label, sim, out, scene.n_samples))
+    cpu = {label: [] for label, *_ in sims}
+    wall = {label: [] for label, *_ in sims}
+    for _ in range(args.rounds):
+        for label, sim, out, n in sims:
+            c, w = time_run(sim, n, out)
+            cpu[label].append(c / n)
+            wall[label].append(w / n)
+    base = np.median(cpu[sims[0][0]])
+    print(f"circle scene, 1 kHz, lever arm, {args.seconds:g} s per run, {args.rounds} interleaved rounds "
+          f"(ns/sample; thread CPU min / median / max, wall median; Msamples/s from the CPU median)")
+    for label, *_ in sims:
+        c = np.array(cpu[label])
+        print(f"  {label:40} {c.min():7.1f} {np.median(c):7.1f} {c.max():7.1f}   wall {np.median(wall[label]):7.1f}"
+              f"   {1e3 / np.median(c):6.2f} M/s   effect cost {np.median(c) - base:+7.1f}")
+    nc = normal_cost(args.rounds)
+    print(f"one counter-based normal (normals() loop, thread CPU): min {min(nc):.2f} median {np.median(nc):.2f} ns")
+
+
+if __name__ == "__main__":
+    main()
