@@ -93,7 +93,7 @@ def test_imu_keys_and_warnings_come_from_the_records():
 
 def test_imu_names_and_seed_do_not_reach_the_source():
     a = _scene({"lever_arm": True}, {"name": "first", "lever_arm_m": [0.1, 0, 0]})
-    b = _scene({"lever_arm": True}, {"name": "x\nimport os  # 'quoted' \u00e9", "lever_arm_m": [0.1, 0, 0]},
+    b = _scene({"lever_arm": True}, {"name": "x\"; import os  # 'quoted' \u00e9", "lever_arm_m": [0.1, 0, 0]},
                seed=12345)
     assert generate_source(a, True, True) == generate_source(b, True, True)
     assert scene_key(a, True, True) != scene_key(b, True, True)      # the key is the whole scene
