@@ -163,6 +163,7 @@ class EffectPlan:
         self.active = [e for e in EFFECTS.values() if e.name in scene.effects]
         self.slots: list[tuple[str, int, object]] = []    # (variable, imu, initial(draw))
         self.streams: list[tuple[int, str]] = []          # (imu, name)
+        self.counters: list[tuple[int, int, str]] = []    # (state slot, imu, label)
         self.navigation = self._lines(Stage.NAVIGATION, None, None)
         self.nav_rate = any(e.nav_rate for e in self.active if e.stage == Stage.NAVIGATION)
         self.per_imu = []
@@ -189,6 +190,10 @@ class EffectPlan:
     def add_state(self, var: str, m: int, initial) -> str:
         self.slots.append((var, m, initial))
         return var
+
+    def add_counter(self, var: str, m: int, label: str) -> str:
+        self.counters.append((len(self.slots), m, label))
+        return self.add_state(var, m, lambda draw: 0.0)
 
     def add_stream(self, m: int, name: str) -> int:
         if (m, name) not in self.streams:

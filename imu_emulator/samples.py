@@ -58,3 +58,14 @@ def concatenate(blocks: list[SampleBlock]) -> SampleBlock:
                        gyro=np.concatenate([b.gyro for b in blocks], axis=1),
                        quat=None if first.quat is None else np.concatenate([b.quat for b in blocks], axis=1),
                        truth=truth)
+
+
+def counts_text(counts: dict[str, dict[str, int]]) -> str:
+    """One line for the effects' counters ("range saturation: imu0 gyro.z 120, accel.z 0"), "" when none."""
+    parts = {}
+    for imu, labels in counts.items():
+        for label, n in labels.items():
+            effect, _, what = label.partition(".")
+            parts.setdefault(effect, []).append(f"{imu} {what} {n}")
+    return "; ".join(f"{effect} saturation: " + ", ".join(items) if effect == "range" else
+                     f"{effect}: " + ", ".join(items) for effect, items in parts.items())

@@ -56,6 +56,14 @@ class Simulation:
     def bias_truth(self) -> bool:
         return self.truth and self._plan.bias_truth
 
+    def counts(self) -> dict[str, dict[str, int]]:
+        """What the effects counted so far in this run (e.g. "range.gyro.x": samples saturated at the full
+        scale), per IMU name; empty when no effect counts."""
+        found: dict[str, dict[str, int]] = {}
+        for slot, m, label in self._plan.counters:
+            found.setdefault(self.scene.imus[m].name, {})[label] = int(self._state[slot])
+        return found
+
     @staticmethod
     def trial(kernel, scene: Scene, attitude: bool, truth: bool) -> None:
         """Call a freshly loaded kernel on no sample with the argument types `block` uses (numba compiles on

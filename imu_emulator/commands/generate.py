@@ -25,6 +25,7 @@ def register(subparsers) -> None:
 def cmd_generate(args) -> int:
     from imu_emulator.output import check_path, open_writer
     from imu_emulator.run_size import check_output
+    from imu_emulator.samples import counts_text
     from imu_emulator.simulation import Simulation
 
     check_path(args.output)
@@ -49,6 +50,9 @@ def cmd_generate(args) -> int:
             progress.close()
     if not args.quiet:
         print(f"wrote {total} samples x {len(scene.imus)} IMU(s) to {args.output}", file=sys.stderr)
+        counted = counts_text(sim.counts())
+        if counted:
+            print(counted, file=sys.stderr)
     return 0
 
 

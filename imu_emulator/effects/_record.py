@@ -141,6 +141,13 @@ class EmitContext:
         index = self.plan.add_stream(self.m, f"{self.effect.name}.{stream}")
         return f"normal(keys[{index}], {counter})"
 
+    def count(self, label: str) -> str:
+        """A counter of this IMU carried across blocks (a state slot from 0, exact up to 2**53): returns its
+        local variable; Simulation.counts() reports it as "<effect>.<label>" of this IMU."""
+        var = self.var("count_" + "".join(c if c.isalnum() else "_" for c in label))
+        self.plan.add_counter(var, self.m, f"{self.effect.name}.{label}")
+        return var
+
     def add_bias(self, triad: str, axis: int, expr: str) -> list[str]:
         """Add a bias term to an output (and to the realized bias that --truth reports)."""
         _, out, acc = TRIADS[triad]

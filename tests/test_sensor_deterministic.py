@@ -1,0 +1,200 @@
+"""Deterministic sensor errors against closed forms (to 1e-12): scale factor, misalignment composed with mounting,
+g-sensitivity, quadratic nonlinearity's DC shift, range saturation and its count, resolution steps.
+
+The motions are chosen so the true sensor-frame values are known in closed form: a level body turning at a
+constant yaw rate W about z while standing still has omega_b = (0, 0, W) and f_b = (0, 0, g) exactly (ENU);
+the mounting rotation comes from scipy's Rotation (an independent implementation of the z-y-x convention).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from imu_emulator import scene_from_dict
+from imu_emulator.errors import SceneError
+from imu_emulator.simulation import Simulation
+
+G0 = 9.80665
+W = 0.7                       # rad/s yaw rate
+MOUNT_RPY_DEG = (10.0, -20.0, 35.0)
+
+
+def turning_scene(effects, gyro=None, accel=None, mounting=MOUNT_RPY_DEG, rate_hz=100, duration_s=0.2, **imu):
+    return scene_from_dict({
+        "scene": {"rate_hz": rate_hz, "duration_s": duration_s},
+        "trajectory": {"shape": "static"},
+        "attitude": {"roll": "0", "pitch": "0", "yaw": f"{W!r}*t"},
+        "imu": [{"name": "imu0", "mounting_rpy_deg": list(mounting), "gyro": dict(gyro or {}),
+                 "accel": dict(accel or {}), **imu}],
+        "effects": {"gravity": True, "mounting": True, **{name: True for name in effects}}})
+
+
+def true_sensor_values(mounting=MOUNT_RPY_DEG):
+    """omega and f in sensor axes: sensor = M^T body, M = Rz(yaw) Ry(pitch) Rx(roll) of the mounting."""
+    roll, pitch, yaw = mounting
+    m = Rotation.from_euler("ZYX", [yaw, pitch, roll], degrees=True).as_matrix()
+    return m.T @ np.array([0.0, 0.0, W]), m.T @ np.array([0.0, 0.0, G0])
+
+
+def run(scene):
+    sim = Simulation(scene, attitude=False)
+    return sim.run(), sim
+
+
+def assert_close(actual, expected):
+    np.testing.assert_allclose(actual, np.broadcast_to(expected, actual.shape), rtol=1e-12, atol=1e-12)
+
+
+def test_scale_factor_and_misalignment_compose_after_mounting():
+    s_g, s_a = np.array([500e-6, -300e-6, 1e-3]), 0.003
+    mis_g = np.array([[0.0, 1e-3, -2e-3], [0.5e-3, 0.0, 1.5e-3], [-1e-3, 2e-3, 0.0]])
+    scene = turning_scene(("scale_factor", "misalignment"),
+                          gyro={"scale_factor": ["500 ppm", "-300 ppm", "0.1 %"], "misalignment": mis_g.tolist()},
+                          accel={"scale_factor": "0.3 %", "misalignment": "1 %"})
+    out, _ = run(scene)
+    omega, f = true_sensor_values()
+    mis_a = 0.01 * (np.ones((3, 3)) - np.eye(3))   # one value fills every off-diagonal element
+    assert_close(out.gyro[0], (np.eye(3) + np.diag(s_g) + mis_g) @ omega)
+    assert_close(out.accel[0], (np.eye(3) + s_a * np.eye(3) + mis_a) @ f)
+
+
+def test_misalignment_angles_per_axis_fill_their_rows():
+    scene = turning_scene(("misalignment",), gyro={"misalignment": ["1 mrad", "2 mrad", "0.1 deg"]})
+    out, _ = run(scene)
+    omega, _ = true_sensor_values()
+    rows = np.array([1e-3, 2e-3, np.radians(0.1)])
+    assert_close(out.gyro[0], (np.eye(3) + rows[:, None] * (np.ones((3, 3)) - np.eye(3))) @ omega)
+
+
+def test_g_sensitivity_adds_g_times_specific_force_to_the_gyros():
+    full = [[0.1, 0.02, -0.03], [0.0, 0.05, 0.01], [0.04, 0.0, 0.2]]     # deg/s/g
+    out, _ = run(turning_scene(("g_sensitivity",), gyro={"g_sensitivity": [[f"{v} deg/s/g" for v in row]
+                                                                            for row in full]}))
+    omega, f = true_sensor_values()
+    per_si = np.radians(1.0) / G0
+    assert_close(out.gyro[0], omega + per_si * np.array(full) @ f)
+    out, _ = run(turning_scene(("g_sensitivity",), gyro={"g_sensitivity": "0.1 deg/s/g"}))
+    assert_close(out.gyro[0], omega + 0.1 * per_si * f)     # one value: the diagonal
+
+
+def vibration_scene(effects, accel, a0, freq, rate_hz, periods):
+    # x = -a0/(2 pi f)^2 sin(2 pi f t): specific force along x is a0 sin(2 pi f t), level, no rotation
+    amp = a0 / (2 * np.pi * freq) ** 2
+    return scene_from_dict({
+        "scene": {"rate_hz": rate_hz, "duration_s": periods / freq},
+        "trajectory": {"x": f"-{amp!r}*sin(2*pi*{freq!r}*t)", "y": "0", "z": "0"},
+        "imu": [{"name": "imu0", "accel": accel}],
+        "effects": {"gravity": True, **{name: True for name in effects}}})
+
+
+def test_quadratic_nonlinearity_rectifies_a_sine_vibration_into_k2_a0_squared_over_2():
+    a0, k2 = 30.0, 2e-3          # m/s^2, 1/(m/s^2)
+    out, _ = run(vibration_scene(("nonlinearity",), {"nonlinearity": [k2, 0.0, 0.0]}, a0, 50.0, 1000, 10))
+    # the mean of sin^2 over whole periods sampled evenly (20 samples a period) is exactly 1/2
+    assert abs(out.accel[0, :, 0].mean() - k2 * a0 ** 2 / 2) < 1e-12
+    # and per sample: a + K2 a^2, the z axis (g) gets nothing with K2_z = 0
+    t = out.t_s
+    a = a0 * np.sin(2 * np.pi * 50.0 * t)
+    np.testing.assert_allclose(out.accel[0, :, 0], a + k2 * a * a, atol=1e-11)
+    assert_close(out.accel[0, :, 2], G0)
+    # datasheet form: ug/g^2
+    out2, _ = run(vibration_scene(("nonlinearity",), {"nonlinearity": "200 ug/g^2"}, a0, 50.0, 1000, 10))
+    assert abs(out2.accel[0, :, 0].mean() - 200e-6 / G0 * a0 ** 2 / 2) < 1e-12
+
+
+def ramp_scene(effects, gyro, accel, rate_hz=100, duration_s=2.0, t0=-1.0):
+    # without gravity, accel z = t (z = t^3/6, untouched by the yaw) and gyro z = -t (yaw = -t^2/2): both cross
+    # +-range within the run; the other axes read 0
+    return scene_from_dict({
+        "scene": {"rate_hz": rate_hz, "duration_s": duration_s, "t0_s": t0},
+        "trajectory": {"x": "0", "y": "0", "z": "t**3/6"},
+        "attitude": {"roll": "0", "pitch": "0", "yaw": "-t**2/2"},
+        "imu": [{"name": "imu0", "gyro": gyro, "accel": accel}],
+        "effects": {name: True for name in effects}})
+
+
+def test_range_saturates_exactly_at_full_scale_and_counts_per_axis():
+    out, sim = run(ramp_scene(("range",), {"range": [1.0, 1.0, 0.5]}, {"range": [1.0, "1 g", "0.5 m/s^2"]}))
+    t = out.t_s
+    a_z, w_z = t, -t
+    # whatever the true value beyond the range, the output is the range itself, bit for bit
+    assert_close(out.accel[0, :, 2], np.clip(a_z, -0.5, 0.5))
+    assert set(out.accel[0, np.abs(a_z) > 0.5, 2]) == {0.5, -0.5}
+    assert_close(out.gyro[0, :, 2], np.clip(w_z, -0.5, 0.5))
+    assert_close(out.accel[0, :, :2], 0.0)
+    counts = sim.counts()["imu0"]
+    assert counts["range.accel.z"] == int(np.sum(np.abs(a_z) > 0.5)) > 0
+    assert counts["range.gyro.z"] == int(np.sum(np.abs(w_z) > 0.5)) > 0
+    assert counts["range.accel.x"] == 0 and counts["range.gyro.x"] == 0
+    # a value exactly at the range is not beyond it: t = -0.5 s and +0.5 s are on the grid (k = 50, 150)
+    assert np.sum(np.abs(a_z) == 0.5) == 2
+    assert counts["range.accel.z"] == int(np.sum(np.abs(a_z) >= 0.5)) - 2
+
+
+def test_range_count_follows_the_run_across_blocks():
+    scene = ramp_scene(("range",), {}, {"range": [0.0, 0.0, 0.5]})
+    sim = Simulation(scene, attitude=False)
+    for k0 in range(0, sim.n_samples, 7):
+        sim.block(k0, min(7, sim.n_samples - k0))
+    whole, at_once = run(scene)
+    assert sim.counts() == at_once.counts()
+    assert at_once.counts()["imu0"]["range.accel.z"] == int(np.sum(np.abs(whole.t_s) > 0.5))
+
+
+def test_resolution_rounds_to_the_lsb_after_range():
+    lsb_a, lsb_g = 0.0613, np.radians(0.061)   # 0.0613: no sample of the ramp is a tie
+    out, _ = run(ramp_scene(("range", "resolution"), {"resolution": "0.061 deg/s"},
+                            {"resolution": lsb_a, "range": [0.0, 0.0, 0.5]}, rate_hz=1000))
+    t = out.t_s
+    assert_close(out.accel[0, :, 2], lsb_a * np.round(np.clip(t, -0.5, 0.5) / lsb_a))
+    assert_close(out.gyro[0, :, 2], lsb_g * np.round(-t / lsb_g))
+    # a staircase: steps of exactly one LSB along the ramp, never further than half an LSB from the value
+    steps = np.unique(np.round(np.diff(out.accel[0, :, 2]) / lsb_a, 9))
+    assert set(steps) == {0.0, 1.0}
+    assert np.all(np.abs(out.accel[0, :, 2] - np.clip(t, -0.5, 0.5)) <= lsb_a / 2 + 1e-12)
+
+
+@pytest.mark.parametrize("table, key, value, message", [
+    ("gyro", "range", -5.0, r"imu\[0\]\.gyro\.range: a full scale is positive"),
+    ("accel", "resolution", "-1 mg", r"imu\[0\]\.accel\.resolution: the LSB is positive"),
+    ("accel", "misalignment", "1 m/s", r"imu\[0\]\.accel\.misalignment: .* wrong dimension"),
+    ("gyro", "g_sensitivity", "0.1 deg/s", r"imu\[0\]\.gyro\.g_sensitivity: .* wrong dimension"),
+])
+def test_bad_values_name_the_key(table, key, value, message):
+    with pytest.raises(SceneError, match=message):
+        turning_scene(("range", "resolution", "misalignment", "g_sensitivity"), **{table: {key: value}})
+
+
+RANGE_SCENE = """
+[scene]
+rate_hz = 100
+duration_s = 2.0
+t0_s = -1.0
+[trajectory]
+x = "0"
+y = "0"
+z = "t**3/6"
+[[imu]]
+name = "imu0"
+[imu.accel]
+range = ["1 g", "1 g", "0.05 g"]
+[effects]
+range = true
+"""
+
+
+def test_generate_and_stream_show_the_range_saturation_counts(tmp_path, capsys):
+    from imu_emulator.cli import main
+    path = tmp_path / "range.toml"
+    path.write_text(RANGE_SCENE)
+    beyond = int(np.sum(np.abs(-1.0 + np.arange(200) / 100) > 0.05 * G0))   # accel z = t
+    assert main(["generate", str(path), "-o", str(tmp_path / "out.csv")]) == 0
+    assert f"range saturation: imu0 accel.x 0, imu0 accel.y 0, imu0 accel.z {beyond}" in capsys.readouterr().err
+    stats = tmp_path / "stats.json"
+    assert main(["stream", str(path), "--format", "bosch-mm7", "--to", f"file:{tmp_path / 'cap.log'}", "--speed", "0",
+                 "--no-realtime", "--stats-json", str(stats)]) == 0
+    assert f"range saturation: imu0 accel.x 0, imu0 accel.y 0, imu0 accel.z {beyond}" in capsys.readouterr().err
+    import json
+    assert json.loads(stats.read_text())["effect_counts"] == {
+        "imu0": {"range.accel.x": 0, "range.accel.y": 0, "range.accel.z": beyond}}
