@@ -36,6 +36,8 @@ class Simulation:
         self._plan = EffectPlan(scene)
         self._keys = self._plan.keys(scene.seed)
         self._stateful = bool(self._plan.slots)
+        #: each IMU's temperature profile reaches the samples when the temperature effect is on
+        self.temperature = "temperature" in scene.effects
         self._position = self._series(scene.trajectory, 3 if scene.attitude_mode == "tangent" else 2, "trajectory")
         self._euler = self._series(scene.attitude, 2, "attitude")
         self.kernel = compile_kernel(scene, attitude=attitude, truth=truth)
@@ -119,12 +121,17 @@ class Simulation:
         if out is None:
             out = SampleBlock(k0=k0, t_s=t, accel=np.empty((n_imu, n, 3)), gyro=np.empty((n_imu, n, 3)),
                               quat=np.empty((n_imu, n, 4)) if self.attitude else None,
-                              truth=self._new_truth(n) if self.truth else None)
+                              truth=self._new_truth(n) if self.truth else None,
+                              temperature_c=np.empty((n_imu, n)) if self.temperature else None)
         else:
             out.k0 = k0
             out.t_s[:] = t
         self._call(k0, n, s0, out)
         self._check_finite(out.accel, out.gyro, k0)
+        if self.temperature:
+            from imu_emulator.effects.temperature import profile
+            for m, imu in enumerate(self.scene.imus):
+                out.temperature_c[m] = profile(imu.values, t)
         return out
 
     def _new_truth(self, n: int) -> dict:
@@ -193,7 +200,8 @@ class Simulation:
         whole = SampleBlock(k0=0, t_s=np.empty(n_total), accel=np.empty((n_imu, n_total, 3)),
                             gyro=np.empty((n_imu, n_total, 3)),
                             quat=np.empty((n_imu, n_total, 4)) if self.attitude else None,
-                            truth=self._new_truth(n_total) if self.truth else None)
+                            truth=self._new_truth(n_total) if self.truth else None,
+                            temperature_c=np.empty((n_imu, n_total)) if self.temperature else None)
         for k0 in range(0, n_total, block_size):
             self.block(k0, min(block_size, n_total - k0), out=whole.view(k0, min(k0 + block_size, n_total)))
             if progress is not None:

@@ -197,8 +197,10 @@ class Stream:
     def samples(self, block, time_ns: np.ndarray):
         from firmware_protocols import Samples
         i = self.imu_index
+        # the simulated temperature (temperature effect) for formats that carry one
+        temperature = None if block.temperature_c is None else block.temperature_c[i]
         if self.device is None:
-            return Samples(time_ns, block.accel[i], block.gyro[i], quat=block.quat[i])
+            return Samples(time_ns, block.accel[i], block.gyro[i], quat=block.quat[i], temperature_c=temperature)
         # A device may be asked for any field its format knows at any moment: give it all we have.
         nav = {}
         if self.navigation is not None and block.truth is not None:
@@ -209,7 +211,7 @@ class Stream:
                    "velocity_ned": to_ned(block.truth["velocity"], frame),
                    "linear_accel_ned": to_ned(specific_force, frame)}
         return Samples(time_ns, block.accel[i], block.gyro[i], quat=block.quat[i], euler=quat_to_euler(block.quat[i]),
-                       **nav)
+                       temperature_c=temperature, **nav)
 
     def encode(self, block, time_ns: np.ndarray) -> tuple[list, int]:
         """Per-sample prepared payloads for one block, and the saturation count after it. A device stream

@@ -31,6 +31,8 @@ degree = pi / 180 * radian = deg = °
 degree_per_second = degree / second = dps
 standard_gravity = 9.80665 * meter / second ** 2 = g = g0
 percent = 0.01 = %
+kelvin = [temperature] = K = degC
+
 ppm = 1e-6
 """
 # pint has no sqrt() in unit strings; datasheets write sqrt(Hz), sqrt(h) or √Hz.
@@ -125,6 +127,14 @@ def parse(value, unit: str, shape: str, where: str):
                          for i, row in enumerate(value))
         number = to_unit(value, unit, where)
         return tuple(tuple(number for _ in range(3)) for _ in range(3))
+    if shape == "expression":
+        # a number or an expression in t (imu_emulator.expressions), in `unit`; kept as its checked text
+        from imu_emulator import expressions
+        if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+            raise SceneError(f"{where}: expected a number or an expression in t, got {value!r}")
+        text = str(float(value)) if not isinstance(value, str) else value.strip()
+        expressions.check(text, where, set())
+        return text
     if shape in ("diagonal3", "crossaxis"):
         # diagonal3: one value or three fill the diagonal (e.g. g-sensitivity of each axis to its own axis);
         # crossaxis: one value fills the off-diagonal, three fill row i's off-diagonal elements (axis i's

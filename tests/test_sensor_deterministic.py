@@ -198,3 +198,51 @@ def test_generate_and_stream_show_the_range_saturation_counts(tmp_path, capsys):
     import json
     assert json.loads(stats.read_text())["effect_counts"] == {
         "imu0": {"range.accel.x": 0, "range.accel.y": 0, "range.accel.z": beyond}}
+
+
+def temperature_scene(imu, gyro=None, accel=None, rate_hz=10, duration_s=2000.0):
+    return scene_from_dict({
+        "scene": {"rate_hz": rate_hz, "duration_s": duration_s},
+        "trajectory": {"shape": "static"},
+        "attitude": {"roll": "0", "pitch": "0", "yaw": f"{W!r}*t"},
+        "imu": [{"name": "imu0", "gyro": dict(gyro or {}), "accel": dict(accel or {}), **imu}],
+        "effects": {"gravity": True, "temperature": True}})
+
+
+def test_temperature_coefficients_follow_a_warm_up_profile():
+    # T(t) = 20 + 0.001 t + 15 (1 - exp(-t/300)); v = v_true (1 + s1 (T - T0)) + b1 (T - T0), T0 = 25
+    scene = temperature_scene({"temperature_c": "20 + 0.001*t", "warmup_rise_c": 15, "warmup_tau_s": 300},
+                              gyro={"bias_tc": ["0.015 deg/s/K", 0, 0], "scale_tc": [0, 0, "300 ppm/K"]},
+                              accel={"bias_tc": "0.2 mg/K", "scale_tc": [0, 0, "0.01 %/degC"]})
+    out, _ = run(scene)
+    t = out.t_s
+    temperature = 20 + 0.001 * t + 15 * (1 - np.exp(-t / 300))
+    d = temperature - 25.0
+    np.testing.assert_allclose(out.temperature_c[0], temperature, rtol=1e-12)
+    np.testing.assert_allclose(out.gyro[0, :, 0], np.radians(0.015) * d, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(out.gyro[0, :, 2], W * (1 + 300e-6 * d), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(out.accel[0, :, 0], 0.2e-3 * G0 * d, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(out.accel[0, :, 2], G0 * (1 + 1e-4 * d) + 0.2e-3 * G0 * d, rtol=1e-12, atol=1e-12)
+
+
+def test_a_constant_temperature_reaches_the_samples_and_the_wire(tmp_path):
+    scene = temperature_scene({"temperature_c": 41.5}, duration_s=1.0)
+    out, _ = run(scene)
+    assert np.all(out.temperature_c == 41.5)
+    assert np.all(out.gyro[0, :, 2] == W)          # no coefficient: the profile alone costs the kernel nothing
+    # the NPZ output carries it
+    from imu_emulator.cli import main
+    path = tmp_path / "hot.toml"
+    path.write_text('[scene]\nrate_hz = 10\nduration_s = 1.0\n[trajectory]\nshape = "static"\n[[imu]]\nname = "a"\n'
+                    'temperature_c = "30 + t"\n[effects]\ntemperature = true\n')
+    assert main(["generate", str(path), "-o", str(tmp_path / "out.npz"), "--quiet"]) == 0
+    data = np.load(tmp_path / "out.npz")
+    np.testing.assert_allclose(data["temperature_c"][0], 30 + data["t"], rtol=1e-15)
+    # and the wire: MAVLink HIGHRES_IMU's float temperature, decoded by pymavlink
+    mavlink2 = pytest.importorskip("pymavlink.dialects.v20.common")
+    capture = tmp_path / "wire.bin"
+    assert main(["stream", str(path), "--format", "mavlink-highres", "--to", f"file:{capture}", "--speed", "0",
+                 "--no-realtime", "--quiet"]) == 0
+    import io
+    messages = mavlink2.MAVLink(io.BytesIO()).parse_buffer(capture.read_bytes())
+    assert [m.temperature for m in messages] == pytest.approx(30 + data["t"], rel=1e-6)   # float32 on the wire
