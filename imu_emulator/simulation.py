@@ -141,8 +141,8 @@ class Simulation:
         return truth
 
     def _call(self, k0: int, n: int, s0: int, out: SampleBlock) -> None:
-        mot = self._evaluate(self._position, k0, n)
-        att = self._evaluate(self._euler, k0, n)
+        mot = self._evaluate(self._position, k0, n, s0)
+        att = self._evaluate(self._euler, k0, n, s0)
         quat = out.quat if self.attitude else _EMPTY3
         tr = [out.truth[k] for k in TRUTH_KEYS] if self.truth else [_EMPTY2] * 5
         bias = [out.truth[k] for k in BIAS_TRUTH_KEYS] if self.bias_truth else [_EMPTY3] * 2
@@ -166,12 +166,15 @@ class Simulation:
                                   truth=self._new_truth(n) if self.truth else None)
             self._call(k, n, self._next, scratch)
 
-    def _evaluate(self, series, k0: int, n: int):
+    def _evaluate(self, series, k0: int, n: int, s0: int):
         if series is None:
             return _EMPTY3
         fitted, order = series
         # Relative to the data's first stamp: an absolute t = 1e7 s carries 1.9e-9 s of rounding.
         tau = (self.scene.t0_s - fitted.t_start) + (k0 + np.arange(n, dtype=np.float64)) / self.scene.rate_hz
+        if "clock" in self.scene.effects:   # the actual sampling instants, as the kernel's clock lines give them
+            from imu_emulator.effects.clock import offsets
+            tau = tau + offsets(self.scene, self.scene.seed, k0, s0, n) / self.scene.rate_hz
         return np.ascontiguousarray(fitted.evaluate_relative(tau, order))
 
     def _check_finite(self, acc, gyro, k0: int) -> None:

@@ -246,3 +246,51 @@ def test_a_constant_temperature_reaches_the_samples_and_the_wire(tmp_path):
     import io
     messages = mavlink2.MAVLink(io.BytesIO()).parse_buffer(capture.read_bytes())
     assert [m.temperature for m in messages] == pytest.approx(30 + data["t"], rel=1e-6)   # float32 on the wire
+
+
+CLOCK_MOTION = {"trajectory": {"x": "3*sin(2*pi*1.3*t) + 0.2*t**2", "y": "cos(2*pi*0.4*t)", "z": "0"},
+                "attitude": {"roll": "0.3*sin(2*pi*0.7*t)", "pitch": "0.1*t", "yaw": "0.5*cos(2*pi*0.2*t)"}}
+
+
+def clock_scene(rate_hz, duration_s, t0=0.0, clock=None, seed=0):
+    return scene_from_dict({"scene": {"rate_hz": rate_hz, "duration_s": duration_s, "t0_s": t0, "seed": seed},
+                            **CLOCK_MOTION, "imu": [{"name": "imu0", "lever_arm_m": [0.1, 0.2, -0.1], **(clock or {})}],
+                            "effects": {"gravity": True, "lever_arm": True, **({"clock": True} if clock else {})}})
+
+
+def test_clock_error_samples_the_motion_at_the_actual_instants():
+    # +50 ppm (specs/sensor-errors.md: t_k = k dt (1 + ppm 1e-6)): sample k of the clocked scene is the motion
+    # at (1 + 50e-6) k dt, which a scene at the rate f_s / (1 + 50e-6) samples exactly at its sample k
+    rate, n = 200.0, 2000
+    clocked = Simulation(clock_scene(rate, n / rate, clock={"clock_ppm": 50}), truth=True).run()
+    reference = Simulation(clock_scene(rate / (1 + 50e-6), n / rate), truth=True).run()
+    np.testing.assert_allclose(clocked.t_s, np.arange(n) / rate, rtol=1e-15)    # nominal stamps
+    # to 1e-12 of each quantity's scale: t itself is known to an ulp (1.8e-15 s at 10 s), times the fastest
+    # rate of change of a 200 m/s^2 term at 1.3 Hz gives ~2e-12 m/s^2; relative 1e-12 of the scale covers it
+    for name in ("accel", "gyro"):
+        got, want = getattr(clocked, name), getattr(reference, name)
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.max(np.abs(want)))
+    np.testing.assert_allclose(clocked.truth["position"], reference.truth["position"], rtol=0,
+                               atol=1e-12 * np.max(np.abs(reference.truth["position"])))
+    # and it is not the nominal motion: 50 ppm over 10 s is 0.5 ms, visible in the 1.3 Hz sine
+    nominal = Simulation(clock_scene(rate, n / rate), truth=True).run()
+    assert np.max(np.abs(clocked.accel - nominal.accel)) > 1e-3
+
+
+def test_clock_jitter_moves_the_instants_by_seeded_normals():
+    from imu_emulator.counter_rng import normals, stream_key
+    rate, n, sigma = 100.0, 500, 2e-4
+    clocked = Simulation(clock_scene(rate, n / rate, clock={"clock_jitter_s": sigma}, seed=7), truth=True).run()
+    jitter = sigma * normals(np.uint64(stream_key(7, -1, "clock.jitter")), 0, n)
+    # the position truth at the jittered instants, closed form
+    t = np.arange(n) / rate + jitter
+    np.testing.assert_allclose(clocked.truth["position"][:, 0], 3 * np.sin(2 * np.pi * 1.3 * t) + 0.2 * t ** 2,
+                               rtol=0, atol=1e-12 * 8)
+    np.testing.assert_allclose(clocked.truth["position"][:, 1], np.cos(2 * np.pi * 0.4 * t), rtol=1e-12, atol=1e-12)
+
+
+def test_one_sample_clock_per_scene():
+    with pytest.raises(SceneError, match=r"imu\[1\]\.clock_ppm: the IMUs of a scene share one sample clock"):
+        raw = {"scene": {"rate_hz": 100, "duration_s": 1.0}, "trajectory": {"shape": "static"},
+               "imu": [{"name": "a", "clock_ppm": 50}, {"name": "b", "clock_ppm": 20}], "effects": {"clock": True}}
+        Simulation(scene_from_dict(raw))

@@ -84,6 +84,9 @@ class Effect:
     state: tuple[str, ...] = ()  # what the per-IMU state slots hold (carried across blocks)
     random: bool = False         # draws random numbers (needs [scene] seed for a chosen realization)
     nav_rate: bool = False       # navigation-stage effect that adds a rate of the navigation frame
+    #: navigation-stage effect whose lines define `clk`, the actual sampling instant's offset from sample k in
+    #: samples (t = t0 + (k + clk) dt); they run before the motion, which is evaluated at that instant
+    sample_clock: bool = False
     #: checks that need several parameters (validate(values, where) raises SceneError naming the key); run by
     #: scene validation for each IMU when the effect is on
     validate: Callable[[dict, str], None] | None = field(default=None, repr=False)
