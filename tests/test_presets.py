@@ -21,7 +21,6 @@ from imu_emulator import presets, scene_from_dict
 from imu_emulator.commands.models import cmd_models
 from imu_emulator.errors import SceneError
 from imu_emulator.simulation import Simulation
-from imu_emulator.units import to_unit
 
 allantools = pytest.importorskip("allantools")
 
@@ -45,15 +44,6 @@ def preset_scene(models, rate_hz, duration_s, seed=1, effects=("noise", "bias_in
                             "effects": {name: True for name in effects}})
 
 
-def datasheet_lines(name: str, triad: str) -> tuple[float, float]:
-    """(N in unit/sqrt(Hz), B) of a preset's triad in SI, read from its file with the scene's own units."""
-    table = presets.describe(name)[triad]
-    unit, n_unit = ("rad/s", "rad/s/sqrt(Hz)") if triad == "gyro" else ("m/s^2", "m/s^2/sqrt(Hz)")
-    noise = table.get("noise_density", table.get("arw", table.get("vrw")))
-    b = table.get("bias_instability")
-    return to_unit(noise, n_unit, name), (to_unit(b, unit, name) if b else 0.0)
-
-
 def expected(n: float, b: float, taus) -> np.ndarray:
     return np.sqrt(n ** 2 / np.asarray(taus) + (FLOOR * b) ** 2)
 
@@ -74,7 +64,7 @@ def check_presets(rate_hz, seeds, floor_taus, x_only=False):
                 adev = allan(data[m, :, 0], rate_hz, [1.0, *floor_taus])
                 sums[name, triad] = sums.get((name, triad), 0.0) + adev / len(seeds)
     for (name, triad), adev in sums.items():
-        n, b = datasheet_lines(name, triad)
+        n, b = presets.datasheet_lines(name, triad)
         want = expected(n, b, [1.0, *floor_taus])
         assert abs(adev[0] / want[0] - 1) < 0.03, (name, triad, "tau = 1 s", adev[0], want[0])
         ratio = adev[1:] / want[1:]

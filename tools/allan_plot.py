@@ -18,18 +18,9 @@ sys.path.insert(0, str(ROOT))
 
 from imu_emulator import presets, scene_from_dict  # noqa: E402
 from imu_emulator.simulation import Simulation  # noqa: E402
-from imu_emulator.units import to_unit  # noqa: E402
 
 RATE_HZ = 100.0
 FLOOR = 0.664
-
-
-def lines(model: str, triad: str) -> tuple[float, float]:
-    table = presets.describe(model)[triad]
-    unit, n_unit = ("rad/s", "rad/s/sqrt(Hz)") if triad == "gyro" else ("m/s^2", "m/s^2/sqrt(Hz)")
-    noise = table.get("noise_density", table.get("arw", table.get("vrw")))
-    b = table.get("bias_instability")
-    return to_unit(noise, n_unit, model), (to_unit(b, unit, model) if b else 0.0)
 
 
 def main() -> None:
@@ -54,7 +45,7 @@ def main() -> None:
     for ax, (triad, data) in zip(axes, (("gyro", out.gyro), ("accel", out.accel))):
         scale, unit = scales[triad]
         t, adev, err, _ = allantools.oadev(data[0, :, 0], rate=RATE_HZ, data_type="freq", taus=taus)
-        n, b = lines(args.model, triad)
+        n, b = presets.datasheet_lines(args.model, triad)
         ax.errorbar(t, adev * scale, yerr=err * scale, fmt=".", label="generated (allantools oadev)")
         ax.loglog(t, n / np.sqrt(t) * scale, "--", label="datasheet N/√τ")
         if b:

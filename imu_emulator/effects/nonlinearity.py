@@ -2,17 +2,15 @@
 sine vibration of amplitude a0 it gives the DC shift K2·a0²/2 (the vibration rectification error). K2 is per
 unit of the triad's quantity; datasheets' vibration-rectification figures are K2 directly ("10 ug/g^2"), and a
 quadratic term reaching x % of full scale FS at FS is K2 = x % / FS ("0.5 %/(16 g)")."""
-from imu_emulator.effects._linear import TRUE
-from imu_emulator.effects._record import AXES, TRIADS, Effect, Stage, triad_params
+from imu_emulator.effects._linear import TRUE, per_axis
+from imu_emulator.effects._record import Effect, Stage, triad_params
 
 
 def emit(ctx) -> list[str]:
     lines = []
-    for triad, (_, out, _) in TRIADS.items():
-        for axis, k2 in enumerate(ctx.value(f"imu.{triad}.nonlinearity")):
-            if k2:
-                v = TRUE[triad][axis]
-                lines.append(f"{out}{AXES[axis]} += {k2!r} * ({v} * {v})")
+    for triad, v, axis, k2 in per_axis(ctx, "nonlinearity"):
+        true = TRUE[triad]["xyz".index(axis)]
+        lines.append(f"{v} += {k2!r} * ({true} * {true})")
     return lines
 
 

@@ -1,27 +1,21 @@
 """Range: the sensor's full scale. Outputs beyond ±range saturate there and are counted per IMU and axis
 (Simulation.counts(), shown by generate and stream; apart from the wire fields' own saturation counts).
 0 (the default) leaves that axis unlimited."""
-from imu_emulator.effects._record import AXES, TRIADS, Effect, Stage, triad_params
-from imu_emulator.errors import SceneError
+from imu_emulator.effects._linear import per_axis, require_nonnegative
+from imu_emulator.effects._record import Effect, Stage, triad_params
 
 
 def emit(ctx) -> list[str]:
     lines = []
-    for triad, (_, out, _) in TRIADS.items():
-        for axis, full_scale in enumerate(ctx.value(f"imu.{triad}.range")):
-            if full_scale:
-                v, count = f"{out}{AXES[axis]}", ctx.count(f"{triad}.{AXES[axis]}")
-                lines += [f"if {v} > {full_scale!r}:", f"    {v} = {full_scale!r}", f"    {count} += 1.0",
-                          f"elif {v} < {-full_scale!r}:", f"    {v} = {-full_scale!r}", f"    {count} += 1.0"]
+    for triad, v, axis, full_scale in per_axis(ctx, "range"):
+        count = ctx.count(f"{triad}.{axis}")
+        lines += [f"if {v} > {full_scale!r}:", f"    {v} = {full_scale!r}", f"    {count} += 1.0",
+                  f"elif {v} < {-full_scale!r}:", f"    {v} = {-full_scale!r}", f"    {count} += 1.0"]
     return lines
 
 
 def validate(values: dict, where: str) -> None:
-    for triad in TRIADS:
-        for axis, full_scale in enumerate(values[f"imu.{triad}.range"]):
-            if full_scale < 0:
-                raise SceneError(f"{where}.{triad}.range: a full scale is positive (or 0 for unlimited), "
-                                 f"got {full_scale!r} on axis {AXES[axis]}")
+    require_nonnegative(values, "range", where, "a full scale is positive (or 0 for unlimited)")
 
 
 EFFECT = Effect(

@@ -1,25 +1,15 @@
 """Resolution: outputs rounded to the nearest multiple of the LSB, floor(v / lsb + 1/2)·lsb (ties go up),
 after range."""
-from imu_emulator.effects._record import AXES, TRIADS, Effect, Stage, triad_params
-from imu_emulator.errors import SceneError
+from imu_emulator.effects._linear import per_axis, require_nonnegative
+from imu_emulator.effects._record import Effect, Stage, triad_params
 
 
 def emit(ctx) -> list[str]:
-    lines = []
-    for triad, (_, out, _) in TRIADS.items():
-        for axis, lsb in enumerate(ctx.value(f"imu.{triad}.resolution")):
-            if lsb:
-                v = f"{out}{AXES[axis]}"
-                lines.append(f"{v} = math.floor({v} / {lsb!r} + 0.5) * {lsb!r}")
-    return lines
+    return [f"{v} = math.floor({v} / {lsb!r} + 0.5) * {lsb!r}" for _, v, _, lsb in per_axis(ctx, "resolution")]
 
 
 def validate(values: dict, where: str) -> None:
-    for triad in TRIADS:
-        for axis, lsb in enumerate(values[f"imu.{triad}.resolution"]):
-            if lsb < 0:
-                raise SceneError(f"{where}.{triad}.resolution: the LSB is positive (or 0: not rounded), "
-                                 f"got {lsb!r} on axis {AXES[axis]}")
+    require_nonnegative(values, "resolution", where, "the LSB is positive (or 0: not rounded)")
 
 
 EFFECT = Effect(

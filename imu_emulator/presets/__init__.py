@@ -39,3 +39,14 @@ def describe(name: str) -> dict:
     """part, source and the tables, for `imu-emulator models`."""
     data = _read(name)
     return {"part": data["part"], "source": data["source"], "gyro": data.get("gyro", {}), "accel": data.get("accel", {})}
+
+
+def datasheet_lines(name: str, triad: str) -> tuple[float, float]:
+    """(N, B) of a preset's triad in SI (noise density, bias instability; B = 0 when the datasheet gives none):
+    the Allan-deviation lines N/sqrt(tau) and 0.664 B that its generated output should show."""
+    from imu_emulator.units import to_unit
+    table = describe(name)[triad]
+    unit, n_unit = ("rad/s", "rad/s/sqrt(Hz)") if triad == "gyro" else ("m/s^2", "m/s^2/sqrt(Hz)")
+    noise = table.get("noise_density", table.get("arw", table.get("vrw")))
+    b = table.get("bias_instability")
+    return to_unit(noise, n_unit, name), (to_unit(b, unit, name) if b else 0.0)
