@@ -250,3 +250,44 @@ def check_symbolic(expr, where: str, source: str, what: str = "its value") -> No
                          (sympy.I, "is complex")):
         if expr.has(atom) or expr.has(-atom):
             raise SceneError(f"{where}: {what} {reason} for every t (in {source!r})")
+
+
+class _Code(str):
+    """Source text of a checked expression, built by _fold: operators give parenthesized source."""
+    def _op(self, other, op, reverse=False):
+        a, b = (other, self) if reverse else (self, other)
+        return _Code(f"({a} {op} {b})")
+
+    __add__ = lambda self, o: self._op(o, "+")          # noqa: E731
+    __sub__ = lambda self, o: self._op(o, "-")          # noqa: E731
+    __mul__ = lambda self, o: self._op(o, "*")          # noqa: E731
+    __truediv__ = lambda self, o: self._op(o, "/")      # noqa: E731
+    __pow__ = lambda self, o: self._op(o, "**")         # noqa: E731
+    __neg__ = lambda self: _Code(f"(-{self})")          # noqa: E731
+    __pos__ = lambda self: self                         # noqa: E731
+
+
+_NUMPY_NAMES = {"asin": "arcsin", "acos": "arccos", "atan": "arctan", "atan2": "arctan2", "abs": "abs"}
+
+
+def to_code(tree: ast.Expression, params: Mapping[str, float]) -> str:
+    """Python source (math module, variable t) of a checked tree: numbers as repr of floats, names of the
+    whitelist only, so no user text reaches generated code."""
+    def name(n):
+        if n == TIME:
+            return _Code("t")
+        return _Code(repr(float(params[n] if n in params else CONSTANTS[n])))
+
+    def call(fn, args):
+        return _Code(("abs" if fn == "abs" else f"math.{fn}") + "(" + ", ".join(args) + ")")
+    return str(_fold(tree, lambda v: _Code(repr(float(v))), name, call))
+
+
+def evaluate_array(tree: ast.Expression, params: Mapping[str, float], t):
+    """Evaluate a checked tree at the times t (numpy array) with numpy."""
+    import numpy as np
+
+    def name(n):
+        return t if n == TIME else float(params[n] if n in params else CONSTANTS[n])
+    value = _fold(tree, float, name, lambda fn, args: getattr(np, _NUMPY_NAMES.get(fn, fn))(*args))
+    return np.broadcast_to(np.asarray(value, dtype=float), np.shape(t))

@@ -20,6 +20,7 @@ import hashlib
 import importlib.util
 import json
 import os
+import re
 import shutil
 import sys
 import tempfile
@@ -72,7 +73,8 @@ def kernel($args):
             j = c0 + jj
             k = k0 + j
             s = s0 + j
-            t = $t0 + k * $dt
+            $clock
+            t = $t0 + k * $dt$clock_shift
             $motion
             # -- stage 1: navigation frame
             fnx = ax
@@ -163,7 +165,10 @@ class EffectPlan:
         self.active = [e for e in EFFECTS.values() if e.name in scene.effects]
         self.slots: list[tuple[str, int, object]] = []    # (variable, imu, initial(draw))
         self.streams: list[tuple[int, str]] = []          # (imu, name)
-        self.navigation = self._lines(Stage.NAVIGATION, None, None)
+        self.counters: list[tuple[int, int, str]] = []    # (state slot, imu, label)
+        navigation = [e for e in self.active if e.stage == Stage.NAVIGATION]
+        self.clock = self._emit([e for e in navigation if e.sample_clock], None, None)
+        self.navigation = self._emit([e for e in navigation if not e.sample_clock], None, None)
         self.nav_rate = any(e.nav_rate for e in self.active if e.stage == Stage.NAVIGATION)
         self.per_imu = []
         for m, imu in enumerate(scene.imus):
@@ -190,6 +195,10 @@ class EffectPlan:
         self.slots.append((var, m, initial))
         return var
 
+    def add_counter(self, var: str, m: int, label: str) -> str:
+        self.counters.append((len(self.slots), m, label))
+        return self.add_state(var, m, lambda draw: 0.0)
+
     def add_stream(self, m: int, name: str) -> int:
         if (m, name) not in self.streams:
             self.streams.append((m, name))
@@ -197,7 +206,9 @@ class EffectPlan:
 
     def keys(self, seed: int) -> np.ndarray:
         from imu_emulator.counter_rng import stream_key
-        return np.array([stream_key(seed, m, name) for m, name in self.streams] or [0], dtype=np.uint64)
+        # the navigation stage's streams belong to no IMU: index -1
+        return np.array([stream_key(seed, -1 if m is None else m, name) for m, name in self.streams] or [0],
+                        dtype=np.uint64)
 
     def initial_state(self, seed: int) -> np.ndarray:
         """Every state slot's value at the run's start (random draws keyed on the seed, never on the block)."""
@@ -221,7 +232,11 @@ def generate_source(scene: Scene, attitude: bool, truth: bool) -> str:
     phase_stage = []
     if n_phase:
         phase_stage = ["for jj in range(mc):", "    k = k0 + c0 + jj"]
-        phase_stage += ["    " + line for line in motion.phase_lines]
+        phase_lines = motion.phase_lines
+        if plan.clock:   # the phase at the actual instant: frac(C0 + (k + clk) CS), clk small
+            phase_stage += ["    s = s0 + c0 + jj"] + ["    " + line for line in plan.clock]
+            phase_lines = [re.sub(r"(PH(\d+)_C0\))$", r"\1 + clk * PH\2_HI", line) for line in phase_lines]
+        phase_stage += ["    " + line for line in phase_lines]
         phase_stage += [f"    phases[jj, {i}] = {name}" for i, name in enumerate(motion.phase_vars)]
     body = [f"{name} = phases[jj, {i}]" for i, name in enumerate(motion.phase_vars)] + motion.lines
     if not motion.rotation_given:   # attitude given as a rotation matrix (e.g. quaternion logs)
@@ -271,6 +286,7 @@ def generate_source(scene: Scene, attitude: bool, truth: bool) -> str:
         args=", ".join(ARGS), load_state=[f"{var} = state[{i}]" for i, (var, _, _) in enumerate(plan.slots)],
         store_state=[f"state[{i}] = {var}" for i, (var, _, _) in enumerate(plan.slots)],
         n_phase=max(n_phase, 1), phase_stage=phase_stage, t0=repr(float(scene.t0_s)), dt=repr(1.0 / scene.rate_hz),
+        clock=plan.clock, clock_shift=f" + clk * {1.0 / scene.rate_hz!r}" if plan.clock else "",
         motion=body, navigation=navigation, attitude=attitude_lines, per_imu=per_imu, truth=truth_lines)
 
 

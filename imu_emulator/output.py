@@ -30,16 +30,17 @@ class Writer(FinishOnExit):
     The output file is created at construction (an unwritable path fails before the run), and appears at
     its path on close(); discard() (or close() after an exception) leaves nothing behind."""
 
-    def __init__(self, path: str | Path, imu_names, truth: bool, bias_truth: bool = False):
+    def __init__(self, path: str | Path, imu_names, truth: bool, bias_truth: bool = False, temperature: bool = False):
         self.path = check_path(path)
         self.imu_names = list(imu_names)
         self.truth = truth
         self.bias_truth = truth and bias_truth
+        self.temperature = temperature
         self.blocks: list[SampleBlock] = []
         self.csv = self.path.suffix.lower() == ".csv"
         self._out = AtomicOutput(self.path, "w" if self.csv else "wb")
         if self.csv:
-            self._out.write(",".join(CSV_COLUMNS + (TRUTH_COLUMNS if truth else ())
+            self._out.write(",".join(CSV_COLUMNS + (("temp_c",) if temperature else ()) + (TRUTH_COLUMNS if truth else ())
                                       + (BIAS_COLUMNS if self.bias_truth else ())) + "\n")
 
     def write(self, block: SampleBlock) -> None:
@@ -53,7 +54,8 @@ class Writer(FinishOnExit):
         per_imu = []
         for m, name in enumerate(self.imu_names):
             bias = [block.truth["accel_bias"][m], block.truth["gyro_bias"][m]] if self.bias_truth else []
-            numeric = np.column_stack([block.t_s, block.accel[m], block.gyro[m], *extra, *bias])
+            temperature = [block.temperature_c[m]] if self.temperature else []
+            numeric = np.column_stack([block.t_s, block.accel[m], block.gyro[m], *temperature, *extra, *bias])
             # %.17g keeps every bit: reading the CSV back gives the same doubles.
             text = np.char.mod("%.17g", numeric).tolist()
             per_imu.append([",".join((r[0], name, *r[1:])) for r in text])
@@ -79,6 +81,8 @@ class Writer(FinishOnExit):
         arrays = {"t": data.t_s, "imu_names": np.array(self.imu_names), "accel": data.accel, "gyro": data.gyro}
         if data.quat is not None:
             arrays["quat"] = data.quat
+        if data.temperature_c is not None:
+            arrays["temperature_c"] = data.temperature_c
         if self.truth:
             arrays.update(data.truth)
         try:
@@ -87,9 +91,10 @@ class Writer(FinishOnExit):
             raise output_error(self.path, exc) from None
 
 
-def open_writer(path: str | Path, imu_names, truth: bool, bias_truth: bool = False):
-    """The writer for the output file's suffix: .mcap is a ROS 2 bag (imu_emulator.output_mcap)."""
+def open_writer(path: str | Path, imu_names, truth: bool, bias_truth: bool = False, temperature: bool = False):
+    """The writer for the output file's suffix: .mcap is a ROS 2 bag (imu_emulator.output_mcap; it carries no
+    temperature)."""
     if Path(path).suffix.lower() == ".mcap":
         from imu_emulator.output_mcap import McapWriter
         return McapWriter(check_path(path), imu_names, truth)
-    return Writer(path, imu_names, truth, bias_truth=bias_truth)
+    return Writer(path, imu_names, truth, bias_truth=bias_truth, temperature=temperature)

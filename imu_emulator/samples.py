@@ -22,6 +22,8 @@ class SampleBlock:
                                 # "euler" (n, 3) roll, pitch, yaw of the body, "omega_body", "alpha_body" (n, 3);
                                 # with a bias effect on: "accel_bias", "gyro_bias" (n_imu, n, 3), realized
                                 # bias of each triad (constant + turn-on + instability + random walk)
+    temperature_c: np.ndarray | None = None   # (n_imu, n) each IMU's simulated temperature, degC, with the
+                                              # temperature effect on (else None: formats send their default)
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
@@ -36,7 +38,8 @@ class SampleBlock:
                            gyro=self.gyro[:, start:stop],
                            quat=None if self.quat is None else self.quat[:, start:stop],
                            truth=None if self.truth is None else {k: _along_samples(v, start, stop)
-                                                                  for k, v in self.truth.items()})
+                                                                  for k, v in self.truth.items()},
+                           temperature_c=None if self.temperature_c is None else self.temperature_c[:, start:stop])
 
     def time_ns(self, offset_ns: int = 0) -> np.ndarray:
         """Sample times as integer nanoseconds (exact to the ns for any sane t0), plus an offset."""
@@ -57,4 +60,16 @@ def concatenate(blocks: list[SampleBlock]) -> SampleBlock:
                        accel=np.concatenate([b.accel for b in blocks], axis=1),
                        gyro=np.concatenate([b.gyro for b in blocks], axis=1),
                        quat=None if first.quat is None else np.concatenate([b.quat for b in blocks], axis=1),
-                       truth=truth)
+                       truth=truth, temperature_c=None if first.temperature_c is None else
+                       np.concatenate([b.temperature_c for b in blocks], axis=1))
+
+
+def counts_text(counts: dict[str, dict[str, int]]) -> str:
+    """One line for the effects' counters ("range saturation: imu0 gyro.z 120, accel.z 0"), "" when none."""
+    parts = {}
+    for imu, labels in counts.items():
+        for label, n in labels.items():
+            effect, _, what = label.partition(".")
+            parts.setdefault(effect, []).append(f"{imu} {what} {n}")
+    return "; ".join(f"{effect} saturation: " + ", ".join(items) if effect == "range" else
+                     f"{effect}: " + ", ".join(items) for effect, items in parts.items())

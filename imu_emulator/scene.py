@@ -376,8 +376,8 @@ def _imu(table, where: str, effects: frozenset[str], taken: set[str], warnings: 
         raise SceneError(f"{where}: expected a table")
     declared = all_params()
     subtables = {p.table.split(".", 1)[1] for _, p in declared if p.table != "imu"}
-    _no_unknown(table, {"name", *subtables, *(k for _, p in declared if p.table == "imu" for k in (p.key, *p.aliases))},
-                where)
+    _no_unknown(table, {"name", "model", *subtables,
+                        *(k for _, p in declared if p.table == "imu" for k in (p.key, *p.aliases))}, where)
     name = table.get("name", where.replace("[", "").replace("]", ""))
     # names become CSV cells and labels on the wire: one printable line, no comma
     if not isinstance(name, str) or not name or "," in name or not name.isprintable() or len(name) > 64:
@@ -390,6 +390,15 @@ def _imu(table, where: str, effects: frozenset[str], taken: set[str], warnings: 
         sources[f"imu.{sub}"] = (_table(table, sub, f"{where}."), f"{where}.{sub}")
         _no_unknown(sources[f"imu.{sub}"][0],
                     {k for _, p in declared if p.table == f"imu.{sub}" for k in (p.key, *p.aliases)}, f"{where}.{sub}")
+    # a preset (model = "NAME") fills what the IMU's own keys leave open, without "ignored" warnings: it is a
+    # datasheet, not a request for effects
+    preset = {}
+    if "model" in table:
+        from imu_emulator import presets
+        for sub, keys in presets.load(table["model"], f"{where}.model").items():
+            preset[f"imu.{sub}"] = (keys, f"{where}.model({table['model']}).{sub}")
+            _no_unknown(keys, {k for _, p in declared if p.table == f"imu.{sub}" for k in (p.key, *p.aliases)},
+                        preset[f"imu.{sub}"][1])
     values = {}
     for effect, param in declared:
         source, prefix = sources[param.table]
@@ -398,7 +407,12 @@ def _imu(table, where: str, effects: frozenset[str], taken: set[str], warnings: 
             raise SceneError(f"{prefix}.{given[1]}: give either {given[0]} or {given[1]}, not both")
         default = units.parse(param.default, param.unit, param.shape, f"{prefix}.{param.key}")
         values[param.path] = default
-        if given:
+        from_preset = [key for key in (param.key, *param.aliases) if key in preset.get(param.table, ({},))[0]]
+        if not given and from_preset:
+            preset_table, preset_prefix = preset[param.table]
+            values[param.path] = units.parse(preset_table[from_preset[0]], param.unit, param.shape,
+                                             f"{preset_prefix}.{from_preset[0]}")
+        elif given:
             values[param.path] = units.parse(source[given[0]], param.unit, param.shape, f"{prefix}.{given[0]}")
             _check_bound(values[param.path], BOUNDS.get(param.path), f"{prefix}.{given[0]}")
             # a value that changes nothing (the default, e.g. a zero lever arm) is not worth a warning

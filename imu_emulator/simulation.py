@@ -36,6 +36,8 @@ class Simulation:
         self._plan = EffectPlan(scene)
         self._keys = self._plan.keys(scene.seed)
         self._stateful = bool(self._plan.slots)
+        #: each IMU's temperature profile reaches the samples when the temperature effect is on
+        self.temperature = "temperature" in scene.effects
         self._position = self._series(scene.trajectory, 3 if scene.attitude_mode == "tangent" else 2, "trajectory")
         self._euler = self._series(scene.attitude, 2, "attitude")
         self.kernel = compile_kernel(scene, attitude=attitude, truth=truth)
@@ -55,6 +57,14 @@ class Simulation:
     @property
     def bias_truth(self) -> bool:
         return self.truth and self._plan.bias_truth
+
+    def counts(self) -> dict[str, dict[str, int]]:
+        """What the effects counted so far in this run (e.g. "range.gyro.x": samples saturated at the full
+        scale), per IMU name; empty when no effect counts."""
+        found: dict[str, dict[str, int]] = {}
+        for slot, m, label in self._plan.counters:
+            found.setdefault(self.scene.imus[m].name, {})[label] = int(self._state[slot])
+        return found
 
     @staticmethod
     def trial(kernel, scene: Scene, attitude: bool, truth: bool) -> None:
@@ -111,12 +121,17 @@ class Simulation:
         if out is None:
             out = SampleBlock(k0=k0, t_s=t, accel=np.empty((n_imu, n, 3)), gyro=np.empty((n_imu, n, 3)),
                               quat=np.empty((n_imu, n, 4)) if self.attitude else None,
-                              truth=self._new_truth(n) if self.truth else None)
+                              truth=self._new_truth(n) if self.truth else None,
+                              temperature_c=np.empty((n_imu, n)) if self.temperature else None)
         else:
             out.k0 = k0
             out.t_s[:] = t
         self._call(k0, n, s0, out)
         self._check_finite(out.accel, out.gyro, k0)
+        if self.temperature:
+            from imu_emulator.effects.temperature import profile
+            for m, imu in enumerate(self.scene.imus):
+                out.temperature_c[m] = profile(imu.values, t)
         return out
 
     def _new_truth(self, n: int) -> dict:
@@ -126,8 +141,8 @@ class Simulation:
         return truth
 
     def _call(self, k0: int, n: int, s0: int, out: SampleBlock) -> None:
-        mot = self._evaluate(self._position, k0, n)
-        att = self._evaluate(self._euler, k0, n)
+        mot = self._evaluate(self._position, k0, n, s0)
+        att = self._evaluate(self._euler, k0, n, s0)
         quat = out.quat if self.attitude else _EMPTY3
         tr = [out.truth[k] for k in TRUTH_KEYS] if self.truth else [_EMPTY2] * 5
         bias = [out.truth[k] for k in BIAS_TRUTH_KEYS] if self.bias_truth else [_EMPTY3] * 2
@@ -151,12 +166,15 @@ class Simulation:
                                   truth=self._new_truth(n) if self.truth else None)
             self._call(k, n, self._next, scratch)
 
-    def _evaluate(self, series, k0: int, n: int):
+    def _evaluate(self, series, k0: int, n: int, s0: int):
         if series is None:
             return _EMPTY3
         fitted, order = series
         # Relative to the data's first stamp: an absolute t = 1e7 s carries 1.9e-9 s of rounding.
         tau = (self.scene.t0_s - fitted.t_start) + (k0 + np.arange(n, dtype=np.float64)) / self.scene.rate_hz
+        if "clock" in self.scene.effects:   # the actual sampling instants, as the kernel's clock lines give them
+            from imu_emulator.effects.clock import offsets
+            tau = tau + offsets(self.scene, self.scene.seed, k0, s0, n) / self.scene.rate_hz
         return np.ascontiguousarray(fitted.evaluate_relative(tau, order))
 
     def _check_finite(self, acc, gyro, k0: int) -> None:
@@ -185,7 +203,8 @@ class Simulation:
         whole = SampleBlock(k0=0, t_s=np.empty(n_total), accel=np.empty((n_imu, n_total, 3)),
                             gyro=np.empty((n_imu, n_total, 3)),
                             quat=np.empty((n_imu, n_total, 4)) if self.attitude else None,
-                            truth=self._new_truth(n_total) if self.truth else None)
+                            truth=self._new_truth(n_total) if self.truth else None,
+                            temperature_c=np.empty((n_imu, n_total)) if self.temperature else None)
         for k0 in range(0, n_total, block_size):
             self.block(k0, min(block_size, n_total - k0), out=whole.view(k0, min(k0 + block_size, n_total)))
             if progress is not None:

@@ -38,6 +38,7 @@ from imu_emulator.errors import ImuEmulatorError, SceneError, TargetError
 from imu_emulator.outfile import AtomicOutput
 from imu_emulator.geodesy import local_to_geodetic, to_ned
 from imu_emulator.rotations import quat_to_euler, quat_to_matrix
+from imu_emulator.samples import counts_text
 from imu_emulator.realtime import LatenessStats, Pacer, drop_realtime, enable_realtime
 from imu_emulator.transport import TargetOptions, check_carries, link_capacity, open_target, parse_target
 
@@ -196,8 +197,10 @@ class Stream:
     def samples(self, block, time_ns: np.ndarray):
         from firmware_protocols import Samples
         i = self.imu_index
+        # the simulated temperature (temperature effect) for formats that carry one
+        temperature = None if block.temperature_c is None else block.temperature_c[i]
         if self.device is None:
-            return Samples(time_ns, block.accel[i], block.gyro[i], quat=block.quat[i])
+            return Samples(time_ns, block.accel[i], block.gyro[i], quat=block.quat[i], temperature_c=temperature)
         # A device may be asked for any field its format knows at any moment: give it all we have.
         nav = {}
         if self.navigation is not None and block.truth is not None:
@@ -208,7 +211,7 @@ class Stream:
                    "velocity_ned": to_ned(block.truth["velocity"], frame),
                    "linear_accel_ned": to_ned(specific_force, frame)}
         return Samples(time_ns, block.accel[i], block.gyro[i], quat=block.quat[i], euler=quat_to_euler(block.quat[i]),
-                       **nav)
+                       temperature_c=temperature, **nav)
 
     def encode(self, block, time_ns: np.ndarray) -> tuple[list, int]:
         """Per-sample prepared payloads for one block, and the saturation count after it. A device stream
@@ -325,6 +328,7 @@ class _Block:
     n: int                   # samples in the block
     items: list              # per stream: prepared payloads, one per sample (or the raw Samples, for a device)
     saturated: list          # per stream: encoder saturation total after this block
+    counts: dict             # the effects' counters after this block (range saturation per IMU and axis)
 
     def __len__(self) -> int:
         return self.n
@@ -410,6 +414,7 @@ class Streamer:
         self.total = min(limits) if limits else None
         self.stats = LatenessStats(1e9 / rate_hz)
         self.samples_done = 0
+        self.effect_counts: dict = {}    # the simulation's counters (range saturation), apart from the wire's
         self._time_offset_ns = 0
         self._first_ns = 0
         self._last_ns = 0
@@ -436,7 +441,7 @@ class Streamer:
                 offset += (j // self.scene_samples) * self._loop_period_ns()
             time_ns = block.time_ns(offset)
             encoded = [stream.encode(block, time_ns) for stream in self.streams]
-            yield _Block(j, n, [e[0] for e in encoded], [e[1] for e in encoded])
+            yield _Block(j, n, [e[0] for e in encoded], [e[1] for e in encoded], self.sim.counts())
             j += n
 
     def _start_producer(self):
@@ -641,6 +646,7 @@ class Streamer:
                                   file=sys.stderr, flush=True)
             for stream, saturated in zip(streams, block.saturated):
                 stream.saturated = saturated if stream.device is None else stream.device.saturated
+            self.effect_counts = block.counts
             self._last_ns = time.monotonic_ns()
 
     # - reporting -
@@ -659,6 +665,7 @@ class Streamer:
                 "fifo_given_up": self.pacer.fifo_given_up if self.pacer else 0,
                 "dropped": sum(s.dropped for s in self.streams),
                 "saturated": sum(s.saturated for s in self.streams),
+                "effect_counts": self.effect_counts,
                 "streams": [s.summary() for s in self.streams]}
 
     def _status_text(self, state: str) -> str:
@@ -666,7 +673,7 @@ class Streamer:
         late = s["lateness"]
         return (f"{state}: {s['samples']} samples, {s['achieved_hz']:.1f} Hz, late p50 {late['p50_us']:.0f} us "
                 f"p99 {late['p99_us']:.0f} us max {late['max_us']:.0f} us, dropped {s['dropped']}, "
-                f"saturated {s['saturated']}")
+                f"saturated {s['saturated']}" + (f"; {counts_text(self.effect_counts)}" if self.effect_counts else ""))
 
 
 def _link_text(link: dict) -> str:

@@ -31,6 +31,8 @@ degree = pi / 180 * radian = deg = °
 degree_per_second = degree / second = dps
 standard_gravity = 9.80665 * meter / second ** 2 = g = g0
 percent = 0.01 = %
+kelvin = [temperature] = K = degC
+
 ppm = 1e-6
 """
 # pint has no sqrt() in unit strings; datasheets write sqrt(Hz), sqrt(h) or √Hz.
@@ -50,7 +52,12 @@ def _rewrite(text: str) -> str:
 
 
 def to_unit(value, unit: str, where: str) -> float:
-    """A number (already in `unit`) or a string with units -> float in `unit`. Errors name `where`."""
+    """A number (already in `unit`) or a string with units -> float in `unit`. Errors name `where`.
+    `unit` may name alternatives "A|B" (e.g. "rad|1": a misalignment as an angle or as a cross-axis ratio,
+    equal for small angles): a string is converted to the first alternative of its dimension, plain numbers
+    are taken in A."""
+    if "|" in unit:
+        return _to_any_unit(value, unit.split("|"), where)
     if isinstance(value, bool) or not isinstance(value, (int, float, str, np.integer, np.floating)):
         raise SceneError(f"{where}: expected a number or a string with units, got {value!r}")
     if isinstance(value, str):
@@ -69,6 +76,31 @@ def to_unit(value, unit: str, where: str) -> float:
     if not math.isfinite(number):
         raise SceneError(f"{where}: must be finite, got {value!r}")
     return number
+
+
+def _to_any_unit(value, alternatives: list[str], where: str) -> float:
+    if not isinstance(value, str):
+        return to_unit(value, alternatives[0], where)
+    for alternative in alternatives[:-1]:
+        try:
+            return to_unit(value, alternative, where)
+        except SceneError as exc:
+            if "wrong dimension" not in str(exc):
+                raise
+    try:
+        return to_unit(value, alternatives[-1], where)
+    except SceneError as exc:
+        if "wrong dimension" not in str(exc):
+            raise
+        raise SceneError(f"{where}: {value!r} has the wrong dimension (expected a value in "
+                         f"{' or '.join(alternatives)})") from None
+
+
+def _matrix(value, unit: str, where: str):
+    if len(value) != 3 or not all(isinstance(row, (list, tuple)) and len(row) == 3 for row in value):
+        raise SceneError(f"{where}: expected one value, three, or a 3x3 list of lists")
+    return tuple(tuple(to_unit(v, unit, f"{where}[{i}][{j}]") for j, v in enumerate(row))
+                 for i, row in enumerate(value))
 
 
 def parse(value, unit: str, shape: str, where: str):
@@ -95,4 +127,26 @@ def parse(value, unit: str, shape: str, where: str):
                          for i, row in enumerate(value))
         number = to_unit(value, unit, where)
         return tuple(tuple(number for _ in range(3)) for _ in range(3))
+    if shape == "expression":
+        # a number or an expression in t (imu_emulator.expressions), in `unit`; kept as its checked text
+        from imu_emulator import expressions
+        if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+            raise SceneError(f"{where}: expected a number or an expression in t, got {value!r}")
+        text = str(float(value)) if not isinstance(value, str) else value.strip()
+        expressions.check(text, where, set())
+        return text
+    if shape in ("diagonal3", "crossaxis"):
+        # diagonal3: one value or three fill the diagonal (e.g. g-sensitivity of each axis to its own axis);
+        # crossaxis: one value fills the off-diagonal, three fill row i's off-diagonal elements (axis i's
+        # sensitivity to both other axes); either: a 3x3 list is taken as it is
+        if isinstance(value, (list, tuple)) and value and isinstance(value[0], (list, tuple)):
+            return _matrix(value, unit, where)
+        diagonal = shape == "diagonal3"
+        if isinstance(value, (list, tuple)):
+            if len(value) != 3:
+                raise SceneError(f"{where}: expected one value, three, or a 3x3 list of lists")
+            row = [to_unit(v, unit, f"{where}[{i}]") for i, v in enumerate(value)]
+        else:
+            row = [to_unit(value, unit, where)] * 3
+        return tuple(tuple(row[i] if (i == j) == diagonal else 0.0 for j in range(3)) for i in range(3))
     raise ValueError(shape)

@@ -36,6 +36,8 @@ def _sample_value(param, scale: float):
         return param.example * scale
     if param.shape == "scalar":
         return 0.3 * scale
+    if param.shape == "expression":
+        return f"{20 * scale!r} + 0.1*t"
     if param.shape in ("vector3", "triple"):
         return [0.1 * scale, 0.2 * scale, 0.3 * scale]
     return [[0.01 * scale * (1 + i + 3 * j) for j in range(3)] for i in range(3)]

@@ -24,9 +24,18 @@ from imu_emulator.simulation import Simulation  # noqa: E402
 
 BLOCK = 65536
 GYRO = {"noise_density": "0.007 deg/s/sqrt(Hz)", "bias_instability": "10 deg/h", "random_walk": "0.5 deg/h/sqrt(h)",
-        "bias": ["0.1 deg/s", 0, 0], "turn_on_bias_sd": "0.2 deg/s"}
+        "bias": ["0.1 deg/s", 0, 0], "turn_on_bias_sd": "0.2 deg/s",
+        "scale_factor": "500 ppm", "misalignment": "1 mrad", "g_sensitivity": "0.1 deg/s/g",
+        "nonlinearity": "1e-4 s/deg", "bias_tc": "0.01 deg/s/K", "scale_tc": "30 ppm/K",
+        "range": "2000 deg/s", "resolution": "0.061 deg/s"}
 ACCEL = {"noise_density": "120 ug/sqrt(Hz)", "bias_instability": "30 ug", "random_walk": "0.01 m/s^2/sqrt(h)",
-         "bias": "2 mg", "turn_on_bias_sd": "5 mg"}
+         "bias": "2 mg", "turn_on_bias_sd": "5 mg",
+         "scale_factor": "0.1 %", "misalignment": "1 mrad", "nonlinearity": "10 ug/g^2",
+         "bias_tc": "0.1 mg/K", "scale_tc": "100 ppm/K", "range": "16 g", "resolution": "0.488 mg"}
+IMU = {"temperature_c": "20 + 0.001*t", "warmup_rise_c": 15.0, "warmup_tau_s": 300.0}
+DETERMINISTIC = ["scale_factor", "misalignment", "g_sensitivity", "nonlinearity", "temperature", "range", "resolution"]
+#: the issue's full error model: noise + bias instability + random walk + scale/misalignment + range + resolution
+FULL = ["noise", "bias_instability", "random_walk", "scale_factor", "misalignment", "range", "resolution"]
 
 
 def circle(effects, seconds: float):
@@ -34,7 +43,7 @@ def circle(effects, seconds: float):
         "scene": {"rate_hz": 1000, "duration_s": seconds, "seed": 1},
         "trajectory": {"shape": "circle", "radius_m": 5.0, "frequency_hz": 1.0},
         "attitude": {"mode": "tangent"},
-        "imu": [{"name": "imu0", "lever_arm_m": [0.1, -0.05, 0.02], "gyro": GYRO, "accel": ACCEL}],
+        "imu": [{"name": "imu0", "lever_arm_m": [0.1, -0.05, 0.02], "gyro": GYRO, "accel": ACCEL, **IMU}],
         "effects": {"gravity": True, "lever_arm": True, **{name: True for name in effects}},
     })
 
@@ -69,7 +78,9 @@ def main() -> None:
 
     variants = [("kinematics only (gravity + lever arm)", []), ("+ noise", ["noise"]),
                 ("+ bias_instability", ["bias_instability"]), ("+ random_walk", ["random_walk"]),
-                ("+ bias", ["bias"]), ("full error model", ["noise", "bias_instability", "random_walk", "bias"])]
+                ("+ bias", ["bias"]), ("stochastic (noise, BI, RW, bias)", ["noise", "bias_instability", "random_walk", "bias"]),
+                *((f"+ {name}", [name]) for name in DETERMINISTIC),
+                ("full error model (issue 9 §6)", FULL), ("every error effect", [*FULL, "bias", *DETERMINISTIC[2:5]])]
     sims = []
     for label, effects in variants:
         scene = circle(effects, args.seconds)

@@ -25,6 +25,7 @@ def register(subparsers) -> None:
 def cmd_generate(args) -> int:
     from imu_emulator.output import check_path, open_writer
     from imu_emulator.run_size import check_output
+    from imu_emulator.samples import counts_text
     from imu_emulator.simulation import Simulation
 
     check_path(args.output)
@@ -34,7 +35,8 @@ def cmd_generate(args) -> int:
     # at its path only when every block is written (a failed run leaves nothing behind).
     from imu_emulator.kernel import EffectPlan
     bias_truth = EffectPlan(scene).bias_truth    # the realized-bias columns, known before compiling
-    with open_writer(args.output, scene.imu_names, args.truth, bias_truth=bias_truth) as writer:
+    with open_writer(args.output, scene.imu_names, args.truth, bias_truth=bias_truth,
+                     temperature="temperature" in scene.effects) as writer:
         check_output(scene, args.output, args.truth, args.allow_large)
         # a ROS Imu message has an orientation field: fill it from the sensor frame's attitude
         sim = Simulation(scene, attitude=args.output.lower().endswith(".mcap"), truth=args.truth)
@@ -49,6 +51,9 @@ def cmd_generate(args) -> int:
             progress.close()
     if not args.quiet:
         print(f"wrote {total} samples x {len(scene.imus)} IMU(s) to {args.output}", file=sys.stderr)
+        counted = counts_text(sim.counts())
+        if counted:
+            print(counted, file=sys.stderr)
     return 0
 
 

@@ -84,6 +84,9 @@ class Effect:
     state: tuple[str, ...] = ()  # what the per-IMU state slots hold (carried across blocks)
     random: bool = False         # draws random numbers (needs [scene] seed for a chosen realization)
     nav_rate: bool = False       # navigation-stage effect that adds a rate of the navigation frame
+    #: navigation-stage effect whose lines define `clk`, the actual sampling instant's offset from sample k in
+    #: samples (t = t0 + (k + clk) dt); they run before the motion, which is evaluated at that instant
+    sample_clock: bool = False
     #: checks that need several parameters (validate(values, where) raises SceneError naming the key); run by
     #: scene validation for each IMU when the effect is on
     validate: Callable[[dict, str], None] | None = field(default=None, repr=False)
@@ -140,6 +143,13 @@ class EmitContext:
             raise KeyError(f"{self.effect.name} is not declared random")
         index = self.plan.add_stream(self.m, f"{self.effect.name}.{stream}")
         return f"normal(keys[{index}], {counter})"
+
+    def count(self, label: str) -> str:
+        """A counter of this IMU carried across blocks (a state slot from 0, exact up to 2**53): returns its
+        local variable; Simulation.counts() reports it as "<effect>.<label>" of this IMU."""
+        var = self.var("count_" + "".join(c if c.isalnum() else "_" for c in label))
+        self.plan.add_counter(var, self.m, f"{self.effect.name}.{label}")
+        return var
 
     def add_bias(self, triad: str, axis: int, expr: str) -> list[str]:
         """Add a bias term to an output (and to the realized bias that --truth reports)."""
