@@ -74,7 +74,7 @@ def to_unit(value, unit: str, where: str) -> float:
     else:
         number = float(value)
     if not math.isfinite(number):
-        raise SceneError(f"{where}: must be finite, got {value!r}")
+        raise SceneError(f"{where}: must be finite, got {value!r} (TOML reads numbers beyond 1.8e308 as inf)")
     return number
 
 

@@ -12,7 +12,6 @@ import tokenize
 import pytest
 
 from imu_emulator import SceneError, scene_from_dict
-from imu_emulator.scene import ImuSpec
 from imu_emulator.kernel import generate_source
 from imu_emulator.simulation import Simulation
 
@@ -90,7 +89,7 @@ def test_the_reported_exploit_runs_no_code(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     scene = scene_from_dict({"scene": {"rate_hz": 10, "duration_s": 0.3}, "trajectory": {"x": "t", "y": "0", "z": "0"},
                              "imu": [{"name": "a"}]}, path=EXPLOIT)
-    scene = dataclasses.replace(scene, imus=(ImuSpec(EXPLOIT),))
+    scene = dataclasses.replace(scene, imus=(dataclasses.replace(scene.imus[0], name=EXPLOIT),))
     out = Simulation(scene).run()
     assert out.accel.shape == (1, 3, 3)
     assert not os.path.exists(tmp_path / "PWNED")
