@@ -236,3 +236,11 @@ def compile_kernel(scene: Scene, attitude: bool = True, truth: bool = False):
     _loaded[key] = module.kernel
     return module.kernel
 
+
+
+def cached_kernel(scene: Scene, attitude: bool = True, truth: bool = False) -> tuple[Path, bool]:
+    """Where this scene's kernel source lives in the cache, and whether numba's compiled form of it is there
+    (so the next run loads it instead of compiling)."""
+    path = cache_dir() / f"k_{scene_key(scene, attitude, truth)}.py"
+    compiled = path.exists() and any((path.parent / "__pycache__").glob(f"{path.stem}.kernel-*.nbi"))
+    return path, compiled
