@@ -43,18 +43,7 @@ class Writer(FinishOnExit):
         if not self.csv:
             self.blocks.append(block)
             return
-        extra = []
-        if self.truth:
-            tr = block.truth
-            extra = [tr["position"], tr["velocity"], tr["euler"], tr["omega_body"]]
-        per_imu = []
-        for m, name in enumerate(self.imu_names):
-            numeric = np.column_stack([block.t_s, block.accel[m], block.gyro[m], *extra])
-            # %.17g keeps every bit: reading the CSV back gives the same doubles.
-            text = np.char.mod("%.17g", numeric).tolist()
-            per_imu.append([",".join((r[0], name, *r[1:])) for r in text])
-        # One row per IMU per sample, sample k of every IMU before sample k+1.
-        self._out.write("\n".join(row for rows in zip(*per_imu) for row in rows) + "\n")
+        self._out.write(csv_rows(block, self.imu_names, self.truth))
 
     def close(self) -> None:
         """Finish the file and put it at its path."""
@@ -89,3 +78,35 @@ def open_writer(path: str | Path, imu_names, truth: bool):
         from imu_emulator.output_mcap import McapWriter
         return McapWriter(check_path(path), imu_names, truth)
     return Writer(path, imu_names, truth)
+
+
+def csv_rows(block: SampleBlock, imu_names, truth: bool) -> str:
+    """The CSV rows of one block (no header): one row per IMU per sample, sample k of every IMU before sample k+1.
+
+    Numbers are the shortest text that reads back as the same double (pyarrow's CSV writer, double-conversion's
+    shortest mode): exact like %.17g, shorter, and about 20x faster than formatting in numpy.
+    """
+    import pyarrow as pa
+    import pyarrow.csv as pa_csv
+
+    n_imu, n = len(imu_names), len(block)
+
+    def interleaved(per_imu):      # (n_imu, n, k) -> (n * n_imu, k), IMU index fastest
+        return np.ascontiguousarray(per_imu.transpose(1, 0, 2)).reshape(n * n_imu, -1)
+
+    columns = {"t": np.repeat(block.t_s, n_imu),
+               "imu": pa.DictionaryArray.from_arrays(np.tile(np.arange(n_imu, dtype=np.int32), n),
+                                                     pa.array(list(imu_names)))}
+    numeric = [interleaved(block.accel), interleaved(block.gyro)]
+    if truth:
+        tr = block.truth
+        numeric += [np.repeat(tr[key], n_imu, axis=0) for key in ("position", "velocity", "euler", "omega_body")]
+    values = np.hstack(numeric)
+    for i, name in enumerate(CSV_COLUMNS[2:] + (TRUTH_COLUMNS if truth else ())):
+        columns[name] = values[:, i]
+    # pyarrow's "needed" quotes every string; plain names go unquoted, as they always did.
+    plain = not any(ch in name for name in imu_names for ch in '"\r\n')
+    sink = pa.BufferOutputStream()
+    pa_csv.write_csv(pa.table(columns), sink, write_options=pa_csv.WriteOptions(
+        include_header=False, quoting_style="none" if plain else "needed"))
+    return sink.getvalue().to_pybytes().decode()
