@@ -26,7 +26,11 @@ import numpy as np
 
 from imu_emulator.scene import Expressions, ImuSpec, Scene
 
-CODEGEN_VERSION = "1"
+CODEGEN_VERSION = "2"
+CHUNK = 256          # samples per phase stage; the kernel's scratch `phases` is (CHUNK, N_PHASE)
+# Ranks of the kernel's array arguments after (k0, n): mot, att, hold, out_acc, out_gyro, out_quat, tr_pos,
+# tr_vel, tr_euler, tr_omega, tr_alpha, phases (scratch: the kernel allocates nothing, so it runs without NRT).
+KERNEL_ARRAY_NDIMS = (3, 3, 1, 3, 3, 3, 2, 2, 2, 2, 2, 2)
 EPS_SPEED = 1e-6     # m/s: below this the body is standing still for tangent attitude
 
 
@@ -155,7 +159,8 @@ def generate_source(scene: Scene, attitude: bool, truth: bool) -> str:
         "from imu_emulator.phase import sincos_cycles",
         "from imu_emulator.rotations import matrix_to_quat_scalar, quat_multiply_scalar",
         f"EPS_V2 = {EPS_SPEED ** 2!r}",
-        "CHUNK = 256",
+        f"CHUNK = {CHUNK!r}",
+        f"N_PHASE = {max(len(motion.phase_vars), 1)!r}",
     ]
     header += [f"{name} = {value!r}" for name, value in motion.constants.items()]
     # Samples are processed in chunks: first every periodic phase of the chunk (short, independent
@@ -165,9 +170,9 @@ def generate_source(scene: Scene, attitude: bool, truth: bool) -> str:
     func = [
         "",
         "@numba.njit(cache=True, nogil=True, error_model='numpy')",
-        "def kernel(k0, n, mot, att, hold, out_acc, out_gyro, out_quat, tr_pos, tr_vel, tr_euler, tr_omega, tr_alpha):",
+        "def kernel(k0, n, mot, att, hold, out_acc, out_gyro, out_quat, tr_pos, tr_vel, tr_euler, tr_omega, tr_alpha,",
+        "           phases):",
         "    hcy, hsy, hcp, hsp = hold[0], hold[1], hold[2], hold[3]",
-        f"    phases = np.empty((CHUNK, {max(n_phase, 1)}))",
         "    for j0 in range(0, n, CHUNK):",
         "        m = min(CHUNK, n - j0)",
     ]
@@ -216,31 +221,47 @@ _loaded: dict[str, object] = {}
 
 
 def compile_kernel(scene: Scene, attitude: bool = True, truth: bool = False):
-    """The kernel function for this scene's motion, effects and outputs (cached in memory and on disk)."""
+    """The kernel function for this scene's motion, effects and outputs (cached in memory and on disk).
+
+    Called as kernel(k0, n, mot, att, hold, out_acc, out_gyro, out_quat, tr_pos, tr_vel, tr_euler, tr_omega,
+    tr_alpha). A kernel compiled before is loaded as machine code without numba (imu_emulator.native)."""
+    from imu_emulator import native
+
     key = scene_key(scene, attitude, truth)
     if key in _loaded:
         return _loaded[key]
     directory = cache_dir()
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / f"k_{key}.py"
-    if not path.exists():
-        source = generate_source(scene, attitude, truth)
-        tmp = path.with_suffix(f".tmp{os.getpid()}")
-        tmp.write_text(source)
-        os.replace(tmp, path)  # atomic: a concurrent run sees the whole file or none
-    spec = importlib.util.spec_from_file_location(f"imu_emulator_kernel_{key}", path)
-    module = importlib.util.module_from_spec(spec)
-    # numba's on-disk cache refers to the module by name when it reloads a compiled kernel.
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    _loaded[key] = module.kernel
-    return module.kernel
+    object_path = path.with_suffix(".o")
+    loaded = native.load(object_path, KERNEL_ARRAY_NDIMS)
+    if loaded is None:
+        if not path.exists():
+            source = generate_source(scene, attitude, truth)
+            tmp = path.with_suffix(f".tmp{os.getpid()}")
+            tmp.write_text(source)
+            os.replace(tmp, path)  # atomic: a concurrent run sees the whole file or none
+        spec = importlib.util.spec_from_file_location(f"imu_emulator_kernel_{key}", path)
+        module = importlib.util.module_from_spec(spec)
+        # numba's on-disk cache refers to the module by name when it reloads a compiled kernel.
+        sys.modules[spec.name] = module
+        spec.loader.exec_module(module)
+        meta = {"n_phase": module.N_PHASE}
+        if native.export(module.kernel, KERNEL_ARRAY_NDIMS, object_path, meta):
+            loaded = native.load(object_path, KERNEL_ARRAY_NDIMS)
+        if loaded is None:   # this numba or platform cannot: keep its dispatcher
+            loaded = module.kernel, meta
+    function, meta = loaded
+    n_phase = int(meta["n_phase"])
 
+    def kernel(*args):
+        function(*args, np.empty((CHUNK, n_phase)))
+    _loaded[key] = kernel
+    return kernel
 
 
 def cached_kernel(scene: Scene, attitude: bool = True, truth: bool = False) -> tuple[Path, bool]:
-    """Where this scene's kernel source lives in the cache, and whether numba's compiled form of it is there
-    (so the next run loads it instead of compiling)."""
-    path = cache_dir() / f"k_{scene_key(scene, attitude, truth)}.py"
-    compiled = path.exists() and any((path.parent / "__pycache__").glob(f"{path.stem}.kernel-*.nbi"))
-    return path, compiled
+    """Where this scene's compiled kernel lives in the cache, and whether it is there (so the next run loads it
+    instead of compiling)."""
+    path = cache_dir() / f"k_{scene_key(scene, attitude, truth)}.o"
+    return path, path.exists()

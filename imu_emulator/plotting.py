@@ -33,11 +33,16 @@ class PlotData:
 def from_scene(path: str) -> PlotData:
     from imu_emulator.scene import load_scene
     from imu_emulator.simulation import Simulation
-    scene = load_scene(path)
-    out = Simulation(scene, attitude=False, truth=True).run()
+    return from_simulation(Simulation(load_scene(path), attitude=False, truth=True))
+
+
+def from_simulation(sim) -> PlotData:
+    """A whole run of a Simulation built with truth=True."""
+    scene = sim.scene
+    out = sim.run()
     arms = [imu.lever_arm_m if "lever_arm" in scene.effects else (0.0, 0.0, 0.0) for imu in scene.imus]
     return PlotData(out.t_s, list(scene.imu_names), out.accel, out.gyro, out.truth["position"], out.truth["euler"],
-                    arms, scene.frame, f"{path} ({scene.frame})")
+                    arms, scene.frame, f"{scene.path} ({scene.frame})")
 
 
 def from_output(path: str) -> PlotData:

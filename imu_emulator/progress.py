@@ -26,3 +26,43 @@ class Progress:
     def close(self) -> None:
         if self.shown:
             sys.stderr.write("\n")
+
+
+class CompileStatus:
+    """Around a Simulation's construction: when the scene's kernel is not in the cache yet, say so on stderr
+    ("compiling kernel for scene X (first run) …") with the elapsed time, updated in place on a terminal, and the
+    total when done. Silent when the kernel is cached or with --quiet."""
+
+    def __init__(self, scene, attitude: bool, truth: bool, quiet: bool = False):
+        from imu_emulator.kernel import cached_kernel
+        self.active = not quiet and not cached_kernel(scene, attitude=attitude, truth=truth)[1]
+        self.label = f"compiling kernel for scene {scene.path or '<in code>'} (first run) …"
+        self.tty = sys.stderr.isatty()
+        self._stop = None
+
+    def __enter__(self):
+        if not self.active:
+            return self
+        import threading
+        self.start = time.monotonic()
+        sys.stderr.write(self.label + ("" if self.tty else "\n"))
+        sys.stderr.flush()
+        if self.tty:
+            self._stop = threading.Event()
+            threading.Thread(target=self._tick, daemon=True).start()
+        return self
+
+    def _tick(self) -> None:
+        while not self._stop.wait(0.5):
+            sys.stderr.write(f"\r{self.label} {time.monotonic() - self.start:.1f} s")
+            sys.stderr.flush()
+
+    def __exit__(self, *exc) -> None:
+        if not self.active:
+            return
+        if self._stop is not None:
+            self._stop.set()
+        elapsed = time.monotonic() - self.start
+        outcome = "compiled" if exc[0] is None else "failed"
+        sys.stderr.write(f"{chr(13) + self.label + ' ' if self.tty else ''}{outcome} in {elapsed:.1f} s\n")
+        sys.stderr.flush()

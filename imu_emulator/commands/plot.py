@@ -32,7 +32,16 @@ def cmd_plot(args) -> int:
         raise ImuEmulatorError(f"{output}: directory {output.parent} does not exist")
     if not source.exists():
         raise ImuEmulatorError(f"{source}: no such file")
-    data = plotting.from_scene(str(source)) if source.suffix.lower() == ".toml" else plotting.from_output(str(source))
+    if source.suffix.lower() == ".toml":
+        from imu_emulator.progress import CompileStatus
+        from imu_emulator.scene import load_scene
+        from imu_emulator.simulation import Simulation
+        scene = load_scene(source)
+        with CompileStatus(scene, attitude=False, truth=True):
+            sim = Simulation(scene, attitude=False, truth=True)
+        data = plotting.from_simulation(sim)
+    else:
+        data = plotting.from_output(str(source))
     plotting.draw(data, output)
     if data.position is None:
         print(f"note: {source} has no trajectory (write it with `generate --truth`); plotted the signals only",
