@@ -195,7 +195,7 @@ def _code_fingerprint() -> str:
     """Changes when the code that generates kernels changes, so stale cached kernels are never used."""
     here = Path(__file__).parent
     h = hashlib.sha256(CODEGEN_VERSION.encode())
-    for name in ("kernel.py", "motion.py", "expressions.py", "rotations.py", "phase.py"):
+    for name in ("kernel.py", "motion.py", "expressions.py", "rotations.py", "phase.py", "native.py"):
         h.update((here / name).read_bytes())
     return h.hexdigest()
 

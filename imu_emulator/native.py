@@ -55,7 +55,7 @@ def export(kernel, ndims: tuple[int, ...], path: Path, meta: dict) -> bool:
         name = entry.native_name
     except Exception:      # noqa: BLE001 -- any failure means: keep numba's dispatcher
         return False
-    header = json.dumps({"entry": name, "meta": meta}).encode()
+    header = json.dumps({"entry": name, "meta": meta, "host": _host()}).encode()
     blob = len(header).to_bytes(4, "little") + header + bytes(code)
     tmp = path.with_suffix(f".tmp{os.getpid()}")
     tmp.write_bytes(blob)
@@ -91,6 +91,12 @@ class NativeKernel:
         for original, contiguous in copies:
             if original.flags.writeable:
                 original[...] = contiguous
+
+
+def _host() -> str:
+    """The CPU the machine code is compiled for (numba targets the host's exact CPU and features)."""
+    import llvmlite.binding as llvm
+    return f"{llvm.get_process_triple()} {llvm.get_host_cpu_name()} {llvm.get_host_cpu_features().flatten()}"
 
 
 def _numba_extension(name: str, relative: str):
@@ -144,6 +150,8 @@ def load(path: Path, ndims: tuple[int, ...]) -> tuple[NativeKernel, dict] | None
         import llvmlite.binding as llvm
         size = int.from_bytes(blob[:4], "little")
         header = json.loads(blob[4:4 + size])
+        if header.get("host") != _host():   # compiled for another CPU (a copied cache): compile again
+            return None
         engine = _jit_linker()
         engine.add_object_file(llvm.ObjectFileRef.from_data(blob[4 + size:]))
         engine.finalize_object()

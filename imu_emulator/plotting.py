@@ -107,7 +107,7 @@ def draw(data: PlotData, output: str | Path):
         step = _decimate(len(pos))
         axes3d.plot(*pos[step].T, lw=1, color="0.4", label="path of S")
         lo, hi = pos.min(axis=0), pos.max(axis=0)
-        size = 0.06 * max(float(np.max(hi - lo)), 1e-3)
+        size = 0.06 * max(float(np.max(hi - lo)), 1.0)   # a body standing still is drawn 6 cm long
         picks = np.linspace(0, len(pos) - 1, _TRIANGLES).astype(int)
         rot = _rotations(data.euler[picks])
         body = np.array([[size, 0, 0], [-size / 2, size / 2, 0], [-size / 2, -size / 2, 0]])

@@ -29,15 +29,15 @@ class Progress:
 
 
 class CompileStatus:
-    """Around a Simulation's construction: when the scene's kernel is not in the cache yet, say so on stderr
-    ("compiling kernel for scene X (first run) …") with the elapsed time, updated in place on a terminal, and the
-    total when done. Silent when the kernel is cached or with --quiet."""
+    """Around a Simulation's construction: when the scene's kernel is not in the cache yet, a status line on the
+    terminal ("compiling kernel for scene X (first run) … 3.5 s", updated in place) and the total when done. Like
+    the progress bar, silent when stderr is not a terminal (logs, pipes, tests: errors stay one line) or --quiet."""
 
     def __init__(self, scene, attitude: bool, truth: bool, quiet: bool = False):
         from imu_emulator.kernel import cached_kernel
-        self.active = not quiet and not cached_kernel(scene, attitude=attitude, truth=truth)[1]
+        self.active = (not quiet and sys.stderr.isatty()
+                       and not cached_kernel(scene, attitude=attitude, truth=truth)[1])
         self.label = f"compiling kernel for scene {scene.path or '<in code>'} (first run) …"
-        self.tty = sys.stderr.isatty()
         self._stop = None
 
     def __enter__(self):
@@ -45,11 +45,10 @@ class CompileStatus:
             return self
         import threading
         self.start = time.monotonic()
-        sys.stderr.write(self.label + ("" if self.tty else "\n"))
+        sys.stderr.write(self.label)
         sys.stderr.flush()
-        if self.tty:
-            self._stop = threading.Event()
-            threading.Thread(target=self._tick, daemon=True).start()
+        self._stop = threading.Event()
+        threading.Thread(target=self._tick, daemon=True).start()
         return self
 
     def _tick(self) -> None:
@@ -60,9 +59,7 @@ class CompileStatus:
     def __exit__(self, *exc) -> None:
         if not self.active:
             return
-        if self._stop is not None:
-            self._stop.set()
-        elapsed = time.monotonic() - self.start
+        self._stop.set()
         outcome = "compiled" if exc[0] is None else "failed"
-        sys.stderr.write(f"{chr(13) + self.label + ' ' if self.tty else ''}{outcome} in {elapsed:.1f} s\n")
+        sys.stderr.write(f"\r{self.label} {outcome} in {time.monotonic() - self.start:.1f} s\n")
         sys.stderr.flush()

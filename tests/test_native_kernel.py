@@ -75,13 +75,19 @@ def test_damaged_object_is_compiled_again(cache):
     assert path.read_bytes()[:4] != b"\x10\x00\x00\x00"
 
 
-def test_first_compile_is_announced_with_its_time(cache, tmp_path):
+def test_first_compile_is_announced_with_its_time_on_a_terminal(cache, tmp_path, capsys, monkeypatch):
+    from imu_emulator.cli import main
     scene = str(ROOT / "examples" / "orientation_only.toml")
-    args = [sys.executable, "-m", "imu_emulator", "generate", scene, "-o", str(tmp_path / "o.npz")]
-    env = {"IMU_EMULATOR_CACHE": str(cache.parent)}
-    import os
-    cold = subprocess.run(args, capture_output=True, text=True, cwd=ROOT, env={**os.environ, **env})
-    warm = subprocess.run(args, capture_output=True, text=True, cwd=ROOT, env={**os.environ, **env})
-    assert f"compiling kernel for scene {scene} (first run) …" in cold.stderr
-    assert "compiled in " in cold.stderr
-    assert "compiling" not in warm.stderr
+    args = ["generate", scene, "-o", str(tmp_path / "o.npz")]
+    assert main(args) == 0                      # stderr is not a terminal: no status line (errors stay one line)
+    assert "compiling" not in capsys.readouterr().err
+    kernel_module._loaded.clear()
+    for leftover in cache.iterdir():
+        leftover.unlink() if leftover.is_file() else None
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    assert main(args) == 0
+    cold = capsys.readouterr().err
+    assert f"compiling kernel for scene {scene} (first run) …" in cold and " compiled in " in cold
+    kernel_module._loaded.clear()
+    assert main(args) == 0                      # warm: nothing to announce
+    assert "compiling" not in capsys.readouterr().err
