@@ -46,37 +46,33 @@ def from_simulation(sim) -> PlotData:
 
 
 def from_output(path: str) -> PlotData:
-    """An NPZ or CSV written by `generate` (with --truth for the trajectory)."""
-    p = Path(path)
-    if p.suffix.lower() == ".npz":
-        with np.load(p) as data:
-            names = [str(n) for n in data["imu_names"]]
-            truth = "position" in data
-            return PlotData(data["t"], names, data["accel"], data["gyro"], data["position"] if truth else None,
-                            data["euler"] if truth else None, title=str(path))
-    if p.suffix.lower() == ".csv":
-        return _from_csv(p)
-    raise ImuEmulatorError(f"{path}: expected a scene (.toml) or an output of `generate` (.npz, .csv)")
+    """An NPZ or CSV written by `generate` (with --truth for the trajectory), or a plain IMU log (imu_emulator.imulog
+    reads and checks the signals; the trajectory comes from the truth columns when present)."""
+    from imu_emulator.imulog import read_logs
+    logs = read_logs(path)
+    records = list(logs.values())
+    n = min(len(r.t) for r in records)
+    names = [name or Path(path).stem for name in logs]
+    position, euler = _truth(Path(path), len(records))
+    return PlotData(records[0].t[:n], names, np.stack([r.accel[:n] for r in records]),
+                    np.stack([r.gyro[:n] for r in records]), position, euler, title=str(path))
 
 
-def _from_csv(path: Path) -> PlotData:
+def _truth(path: Path, n_imu: int):
+    """Position and roll, pitch, yaw of S from a `generate --truth` output, else (None, None)."""
+    if path.suffix.lower() == ".npz":
+        with np.load(path) as data:
+            if "position" in data and "euler" in data:
+                return data["position"], data["euler"]
+        return None, None
     with open(path) as f:
-        header = f.readline().strip().split(",")
-    if header[:2] != ["t", "imu"]:
-        raise ImuEmulatorError(f"{path}: not a CSV written by `generate` (header starts {header[:2]})")
-    names = np.loadtxt(path, delimiter=",", skiprows=1, usecols=1, dtype=str, ndmin=1)
-    numbers = np.loadtxt(path, delimiter=",", skiprows=1, usecols=[0] + list(range(2, len(header))), ndmin=2)
-    imu_names = list(dict.fromkeys(names.tolist()))
-    columns = {name: i for i, name in enumerate([header[0]] + header[2:])}
-    rows = [numbers[names == name] for name in imu_names]
-    first = rows[0]
-
-    def cols(rows_, keys):
-        return np.stack([r[:, [columns[k] for k in keys]] for r in rows_])
-    truth = "px" in columns
-    return PlotData(first[:, 0], imu_names, cols(rows, ("ax", "ay", "az")), cols(rows, ("gx", "gy", "gz")),
-                    first[:, [columns[k] for k in ("px", "py", "pz")]] if truth else None,
-                    first[:, [columns[k] for k in ("roll", "pitch", "yaw")]] if truth else None, title=str(path))
+        header = [name.strip().lower() for name in f.readline().split(",")]
+    wanted = ("px", "py", "pz", "roll", "pitch", "yaw")
+    if not set(wanted) <= set(header):
+        return None, None
+    # rows run IMU-fastest (sample k of every IMU, then k+1): every n_imu-th row is one per sample
+    values = np.loadtxt(path, delimiter=",", skiprows=1, usecols=[header.index(c) for c in wanted], ndmin=2)[::n_imu]
+    return values[:, :3], values[:, 3:]
 
 
 def _decimate(n: int) -> slice:
