@@ -46,7 +46,7 @@ def cmd_check(args) -> int:
     from imu_emulator.streaming import build_streams, link_budget, streams_from_tables
 
     scene = load_scene(args.scene)
-    streams = build_streams(streams_from_tables(scene.streams, scene.imu_names), scene.imu_names)
+    streams = build_streams(streams_from_tables(scene.streams, scene.imu_names), scene.imu_names, scene.rate_hz)
 
     print(f"scene {args.scene}: valid")
     body = "forward-left-up" if scene.frame == "ENU" else "forward-right-down"
