@@ -37,7 +37,6 @@ from firmware_protocols.base import EncodeError, can_bits_worst_case
 from imu_emulator.errors import ImuEmulatorError, SceneError, TargetError
 from imu_emulator.outfile import AtomicOutput
 from imu_emulator.geodesy import local_to_geodetic, to_ned
-from imu_emulator.rotations import quat_to_euler, quat_to_matrix
 from imu_emulator.realtime import LatenessStats, Pacer, drop_realtime, enable_realtime
 from imu_emulator.transport import TargetOptions, check_carries, link_capacity, open_target, parse_target
 
@@ -216,6 +215,8 @@ class Stream:
         i = self.imu_index
         if self.device is None:
             return Samples(time_ns, block.accel[i], block.gyro[i], quat=block.quat[i])
+        # imported here: rotations pulls in numba, which every command would pay for at start-up otherwise
+        from imu_emulator.rotations import quat_to_euler, quat_to_matrix
         # A device may be asked for any field its format knows at any moment: give it all we have.
         nav = {}
         if self.navigation is not None and block.truth is not None:
