@@ -143,8 +143,8 @@ register(FormatInfo(
                                                                                                   accel_axes),
     frames_per_sample=BoschMM7Encoder.frames_per_sample,
     options={
-        "rate_axes": "(axes, signs) feeding yaw, roll, pitch rate (default ((2, 0, 1), (1, -1, 1)))",
-        "accel_axes": "(axes, signs) feeding AY, AX, AZ (default ((1, 0, 2), (1, 1, 1)))",
-        "counter": "first message counter 0..15 (default 0)",
+        "rate_axes": "(axes, signs) feeding yaw, roll, pitch rate; axes 0..2, signs +-1",
+        "accel_axes": "(axes, signs) feeding AY, AX, AZ; axes 0..2, signs +-1",
+        "counter": "first message counter 0..15",
     },
 ))

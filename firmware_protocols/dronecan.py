@@ -534,10 +534,10 @@ class DroneCanDecoder(CanStreamDecoder):
 # --- registry -----------------------------------------------------------------------------------
 
 _COMMON_OPTIONS = {
-    "node_id": "source node id 1..127 (default 42)",
-    "priority": "transfer priority 0..31 (default 31, lowest)",
-    "fd": "CAN FD framing: one frame per transfer (default False: classic 8-byte frames)",
-    "transfer_id": "first transfer id 0..31 (default 0)",
+    "node_id": "source node id 1..127",
+    "priority": "transfer priority 0..31 (31 is lowest)",
+    "fd": "CAN FD framing: one frame per transfer (False: classic 8-byte frames)",
+    "transfer_id": "first transfer id 0..31",
 }
 
 register(FormatInfo(
@@ -546,7 +546,7 @@ register(FormatInfo(
     encoder=RawImuEncoder, decoder=lambda **_: DroneCanDecoder((1003,)),
     frames_per_sample=tuple((n, True, False) for n in RAW_IMU.frame_lengths(False)),
     options={**_COMMON_OPTIONS,
-             "sample_period_s": "integration interval in s (default: time since the previous sample)"},
+             "sample_period_s": "integration interval in s, > 0 (None: time since the previous sample)"},
 ))
 register(FormatInfo(
     name="dronecan-solution", kind="can",
@@ -560,5 +560,5 @@ register(FormatInfo(
     description="DroneCAN uavcan.equipment.ahrs.MagneticFieldStrength2 (id 1002): field in gauss",
     encoder=MagneticFieldStrength2Encoder, decoder=lambda **_: DroneCanDecoder((1002,)),
     frames_per_sample=tuple((n, True, False) for n in _mag2_message(0).frame_lengths(False)),
-    options={**_COMMON_OPTIONS, "sensor_id": "uint8 sensor id (default 0)"},
+    options={**_COMMON_OPTIONS, "sensor_id": "sensor id 0..255"},
 ))

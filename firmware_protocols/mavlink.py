@@ -649,19 +649,19 @@ class MavlinkDecoder:
 # --- registry -----------------------------------------------------------------------------------
 
 _COMMON_OPTIONS = {
-    "sysid": "MAVLink system id (default 1)",
-    "compid": "MAVLink component id (default 1)",
+    "sysid": "MAVLink system id 0..255",
+    "compid": "MAVLink component id 0..255",
     "seq": "sequence number of the first packet, 0..255; continues across encode calls",
     "signing_key": "32-byte secret key (bytes or 64 hex digits): sign every packet",
-    "link_id": "signing link id, 0..255 (default 0)",
+    "link_id": "signing link id 0..255",
     "signing_link": "a SigningLink shared with other encoders on the same link",
-    "sign_time": "signing timestamp from 'wall' clock (default) or 'sample' time (time_ns as Unix ns)",
-    "truncate": "cut trailing zero payload bytes as MAVLink 2 does (default True)",
+    "sign_time": "signing timestamp from 'wall' clock or 'sample' time (time_ns as Unix ns)",
+    "truncate": "cut trailing zero payload bytes as MAVLink 2 does",
 }
-_ID_OPTION = {"id": "sensor instance id sent in the message's id field (default 0)"}
+_ID_OPTION = {"id": "sensor instance id 0..255 sent in the message's id field (None: 0)"}
 _PRESSURE_OPTIONS = {
-    "diff_pressure_pa": "constant differential pressure to report, Pa (default: not reported)",
-    "pressure_alt_m": "constant pressure altitude to report, m (default: ISA altitude of the static pressure)",
+    "diff_pressure_pa": "constant differential pressure to report, Pa (None: not reported)",
+    "pressure_alt_m": "constant pressure altitude to report, m (None: ISA altitude of the static pressure)",
 }
 
 for _spec in MESSAGES.values():

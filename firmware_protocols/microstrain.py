@@ -261,10 +261,12 @@ def _split_fields(payload: bytes):
 
 
 _OPTIONS = {
-    "fields": f"comma-separated 0x80 fields in wire order (default {','.join(DEFAULT_FIELDS)}); "
+    "fields": "comma-separated 0x80 fields in wire order; "
               f"known: {', '.join(FIELDS)}",
-    "gps_week_offset": "GPS week added to time_ns for the GPS timestamp field (default 0)",
-    "gps_flags": f"GPS timestamp valid flags (default 0x{GPS_FLAGS_DEFAULT:02X}: initialized, TOW and week valid)",
+    "gps_week_offset": "GPS week added to time_ns for the GPS timestamp field, >= 0",
+    "gps_flags": "GPS timestamp valid flags 0..0xFFFF (0x1C: initialized, TOW and week valid)",
+    "descriptor_set": "MIP data set: 0x80 sensor, 0x81 GNSS or 0x82 filter data (each with its own fields)",
+    "filter_state": "filter data set's constant filter state field 0..0xFFFF",
 }
 
 register(FormatInfo(

@@ -95,3 +95,31 @@ def create_device(name: str, rate_hz: float, **options):
     if info.device is None:
         raise ValueError(f"format {name!r} has no device (its real parts only talk)")
     return info.device(rate_hz, **options)
+
+
+def option_defaults(info: FormatInfo) -> dict:
+    """Every keyword the format's encoder factory accepts, with its default, read from the signature (so a
+    listing built from it cannot drift from the code). Follows `**options` into base classes' __init__;
+    parameters bound by the registry (functools.partial, names starting with '_') are not options."""
+    import inspect
+    defaults: dict = {}
+    target, bound_self = info.encoder, False
+    while target is not None:
+        parameters = list(inspect.signature(target).parameters.items())[int(bound_self):]
+        follow = None
+        for name, parameter in parameters:
+            if parameter.kind is parameter.VAR_KEYWORD:
+                follow = _next_init(target)
+            elif parameter.kind is not parameter.VAR_POSITIONAL and not name.startswith("_"):
+                defaults.setdefault(name, parameter.default)
+        target, bound_self = follow, True
+    return defaults
+
+
+def _next_init(target):
+    """The base class __init__ that a subclass's `**options` are passed on to."""
+    cls = target if isinstance(target, type) else getattr(target, "__self__", None)
+    for base in (cls.__mro__[1:] if isinstance(cls, type) else ()):
+        if "__init__" in vars(base) and base is not object:
+            return base.__init__
+    return None

@@ -742,5 +742,5 @@ for _name in ("VNYMR", "VNIMU"):      # VNYPR only for the device's register 6 (
         encoder=lambda checksum="xor", _n=_name: AsciiEncoder(_n, checksum),
         decoder=AsciiDecoder,
         bytes_per_sample=AsciiEncoder(_name).bytes_per_sample,
-        options={"checksum": "'xor' (8-bit, 2 hex digits, default) or 'crc' (CRC-16/XMODEM, 4 hex digits)"},
+        options={"checksum": "'xor' (8-bit, 2 hex digits) or 'crc' (CRC-16/XMODEM, 4 hex digits)"},
     ))

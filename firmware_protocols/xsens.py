@@ -367,13 +367,14 @@ class XsensDecoder:
 
 
 _OPTIONS = {
-    "items": f"comma-separated MTData2 items in wire order (default {','.join(DEFAULT_ITEMS)}); "
+    "items": "comma-separated MTData2 items in wire order; "
              f"known: {', '.join(ITEMS)}",
-    "precision": "float32 (default), float64, fp1220 or fp1632 for real-valued items",
-    "frame": "ENU (default), NED or NWU: declared in the orientation XDIs; data must already be in it",
-    "mag_reference_gauss": "field strength in gauss that reads 1.0 arbitrary unit (default 0.5)",
-    "status_word": "constant StatusWord value (default 0)",
-    "packet_counter_start": "first PacketCounter value (default 0); wraps 65535 -> 0",
+    "precision": "float32, float64, fp1220 or fp1632 for real-valued items",
+    "precisions": "per-item precision overriding `precision`, e.g. {acceleration = 'fp1632'}",
+    "frame": "ENU, NED or NWU: declared in the orientation XDIs; data must already be in it",
+    "mag_reference_gauss": "field strength in gauss that reads 1.0 arbitrary unit, > 0",
+    "status_word": "constant StatusWord value 0..0xFFFFFFFF",
+    "packet_counter_start": "first PacketCounter value 0..65535; wraps 65535 -> 0",
 }
 
 register(FormatInfo(

@@ -451,3 +451,10 @@ def compile_kernel(scene: Scene, attitude: bool = True, truth: bool = False):
     kernel = _import(entry / "kernel.py", key)
     _loaded[key] = kernel
     return kernel
+
+
+def cached_kernel(scene: Scene, attitude: bool = True, truth: bool = False) -> tuple[Path, bool]:
+    """Where this scene's kernel lives in the cache, and whether it is there compiled already (numba's index
+    beside it), for `check` and the first-run status line; it generates and compiles nothing."""
+    entry = cache_dir() / scene_key(scene, attitude, truth)
+    return entry, (entry / "kernel.py").exists() and any((entry / "__pycache__").glob("*.nbi"))

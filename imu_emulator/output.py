@@ -47,20 +47,7 @@ class Writer(FinishOnExit):
         if not self.csv:
             self.blocks.append(block)
             return
-        extra = []
-        if self.truth:
-            tr = block.truth
-            extra = [tr["position"], tr["velocity"], tr["euler"], tr["omega_body"]]
-        per_imu = []
-        for m, name in enumerate(self.imu_names):
-            bias = [block.truth["accel_bias"][m], block.truth["gyro_bias"][m]] if self.bias_truth else []
-            temperature = [block.temperature_c[m]] if self.temperature else []
-            numeric = np.column_stack([block.t_s, block.accel[m], block.gyro[m], *temperature, *extra, *bias])
-            # %.17g keeps every bit: reading the CSV back gives the same doubles.
-            text = np.char.mod("%.17g", numeric).tolist()
-            per_imu.append([",".join((r[0], name, *r[1:])) for r in text])
-        # One row per IMU per sample, sample k of every IMU before sample k+1.
-        self._out.write("\n".join(row for rows in zip(*per_imu) for row in rows) + "\n")
+        self._out.write(csv_rows(block, self.imu_names, self.truth, self.bias_truth, self.temperature))
 
     def close(self) -> None:
         """Finish the file and put it at its path."""
@@ -98,3 +85,42 @@ def open_writer(path: str | Path, imu_names, truth: bool, bias_truth: bool = Fal
         from imu_emulator.output_mcap import McapWriter
         return McapWriter(check_path(path), imu_names, truth)
     return Writer(path, imu_names, truth, bias_truth=bias_truth, temperature=temperature)
+
+
+def csv_rows(block: SampleBlock, imu_names, truth: bool, bias_truth: bool = False,
+             temperature: bool = False) -> str:
+    """The CSV rows of one block (no header): one row per IMU per sample, sample k of every IMU before sample k+1.
+
+    Numbers are the shortest text that reads back as the same double (pyarrow's CSV writer, double-conversion's
+    shortest mode): exact like %.17g, shorter, and about 20x faster than formatting in numpy.
+    """
+    import pyarrow as pa
+    import pyarrow.csv as pa_csv
+
+    n_imu, n = len(imu_names), len(block)
+
+    def interleaved(per_imu):      # (n_imu, n, k) -> (n * n_imu, k), IMU index fastest
+        return np.ascontiguousarray(per_imu.transpose(1, 0, 2)).reshape(n * n_imu, -1)
+
+    columns = {"t": np.repeat(block.t_s, n_imu),
+               "imu": pa.DictionaryArray.from_arrays(np.tile(np.arange(n_imu, dtype=np.int32), n),
+                                                     pa.array(list(imu_names)))}
+    numeric = [interleaved(block.accel), interleaved(block.gyro)]
+    if temperature:
+        numeric.append(interleaved(block.temperature_c[:, :, None]))
+    if truth:
+        tr = block.truth
+        numeric += [np.repeat(tr[key], n_imu, axis=0) for key in ("position", "velocity", "euler", "omega_body")]
+    if bias_truth:
+        numeric += [interleaved(block.truth["accel_bias"]), interleaved(block.truth["gyro_bias"])]
+    values = np.hstack(numeric)
+    names = (CSV_COLUMNS[2:] + (("temp_c",) if temperature else ()) + (TRUTH_COLUMNS if truth else ())
+             + (BIAS_COLUMNS if bias_truth else ()))
+    for i, name in enumerate(names):
+        columns[name] = values[:, i]
+    # pyarrow's "needed" quotes every string; plain names go unquoted, as they always did.
+    plain = not any(ch in name for name in imu_names for ch in '"\r\n')
+    sink = pa.BufferOutputStream()
+    pa_csv.write_csv(pa.table(columns), sink, write_options=pa_csv.WriteOptions(
+        include_header=False, quoting_style="none" if plain else "needed"))
+    return sink.getvalue().to_pybytes().decode()

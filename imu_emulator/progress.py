@@ -26,3 +26,40 @@ class Progress:
     def close(self) -> None:
         if self.shown:
             sys.stderr.write("\n")
+
+
+class CompileStatus:
+    """Around a Simulation's construction: when the scene's kernel is not in the cache yet, a status line on the
+    terminal ("compiling kernel for scene X (first run) … 3.5 s", updated in place) and the total when done. Like
+    the progress bar, silent when stderr is not a terminal (logs, pipes, tests: errors stay one line) or --quiet."""
+
+    def __init__(self, scene, attitude: bool, truth: bool, quiet: bool = False):
+        from imu_emulator.kernel import cached_kernel
+        self.active = (not quiet and sys.stderr.isatty()
+                       and not cached_kernel(scene, attitude=attitude, truth=truth)[1])
+        self.label = f"compiling kernel for scene {scene.path or '<in code>'} (first run) …"
+        self._stop = None
+
+    def __enter__(self):
+        if not self.active:
+            return self
+        import threading
+        self.start = time.monotonic()
+        sys.stderr.write(self.label)
+        sys.stderr.flush()
+        self._stop = threading.Event()
+        threading.Thread(target=self._tick, daemon=True).start()
+        return self
+
+    def _tick(self) -> None:
+        while not self._stop.wait(0.5):
+            sys.stderr.write(f"\r{self.label} {time.monotonic() - self.start:.1f} s")
+            sys.stderr.flush()
+
+    def __exit__(self, *exc) -> None:
+        if not self.active:
+            return
+        self._stop.set()
+        outcome = "compiled" if exc[0] is None else "failed"
+        sys.stderr.write(f"\r{self.label} {outcome} in {time.monotonic() - self.start:.1f} s\n")
+        sys.stderr.flush()

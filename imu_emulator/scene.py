@@ -22,7 +22,6 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 FRAMES = ("ENU", "NED")
-SHAPES = ("static", "circle")
 ATTITUDE_MODES = ("euler", "tangent", "file")
 DEFAULT_DERIVATIVE = "spline5c"   # see README "What accuracy costs in time"
 SEED_LIMIT = 2 ** 64      # [scene] seed: an integer 0 <= seed < 2**64
@@ -211,19 +210,15 @@ def _expressions(table: Mapping, keys, where: str, params: Mapping[str, float]) 
     return Expressions(tuple(texts))
 
 
-def _shape(table: Mapping, where: str) -> Expressions:
-    """Built-in shapes are written as expressions, so they take exactly the symbolic path."""
-    shape = _choice(table, "shape", where, SHAPES, None)
-    if shape == "static":
-        _no_unknown(table, {"shape", "position_m"}, where)
-        x, y, z = _vector3(table, "position_m", where, MAX_POSITION_M, " m")
-        return Expressions((repr(x), repr(y), repr(z)))
-    _no_unknown(table, {"shape", "radius_m", "frequency_hz", "height_m", "center_m"}, where)
-    r = _number(table, "radius_m", where, required=True, positive=True, bound=MAX_POSITION_M, unit=" m")
-    f = _number(table, "frequency_hz", where, required=True, bound=MAX_FREQUENCY_HZ, unit=" Hz")
-    h = _number(table, "height_m", where, default=0.0, bound=MAX_POSITION_M, unit=" m")
-    cx, cy, cz = _vector3(table, "center_m", where, MAX_POSITION_M, " m")
-    return Expressions((f"{cx!r} + {r!r}*cos(2*pi*{f!r}*t)", f"{cy!r} + {r!r}*sin(2*pi*{f!r}*t)", repr(cz + h)))
+def _shape(table: Mapping, where: str, frame: str, gravity: float):
+    """A built-in shape (imu_emulator.shapes): the trajectory, the sampled track behind it (or None) and the
+    [attitude] table the shape implies (empty if none)."""
+    from imu_emulator import shapes
+    shape = shapes.build(table, where, frame, gravity)
+    attitude = shape.attitude or {}
+    if shape.track is None:
+        return shape.trajectory, None, attitude
+    return _sampled_from_track(shape.track, "position", DEFAULT_DERIVATIVE), shape.track, attitude
 
 
 def _sampled_from_track(track, columns: str, derivative: str, noise: float = 0.0) -> SampledData:
@@ -455,8 +450,9 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
         raise SceneError("trajectory: missing (give x/y/z expressions, a shape, or a file)")
     track = None
     log = None
+    implied_attitude = {}
     if "shape" in traj_table:
-        trajectory = _shape(traj_table, "trajectory")
+        trajectory, track, implied_attitude = _shape(traj_table, "trajectory", frame, gravity)
     elif _is_log(traj_table):
         _no_unknown(traj_table, {"file", "derivative", "position_noise_m"} | LOG_KEYS, "trajectory")
         derivative = _check_derivative(traj_table.get("derivative", DEFAULT_DERIVATIVE), "trajectory.derivative")
@@ -476,7 +472,7 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
         _no_unknown(traj_table, {"x", "y", "z"}, "trajectory")
         trajectory = _expressions(traj_table, ("x", "y", "z"), "trajectory", params)
 
-    att_table = _table(raw, "attitude")
+    att_table = _table(raw, "attitude") or implied_attitude
     # a log's attitude is what a replay is for: it is the default there
     mode = _choice(att_table, "mode", "attitude", ATTITUDE_MODES, "file" if log is not None else "euler")
     heading = math.radians(_number(att_table, "initial_heading_deg", "attitude", default=0.0,

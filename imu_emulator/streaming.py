@@ -37,7 +37,6 @@ from firmware_protocols.base import EncodeError, can_bits_worst_case
 from imu_emulator.errors import ImuEmulatorError, SceneError, TargetError
 from imu_emulator.outfile import AtomicOutput
 from imu_emulator.geodesy import local_to_geodetic, to_ned
-from imu_emulator.rotations import quat_to_euler, quat_to_matrix
 from imu_emulator.samples import counts_text
 from imu_emulator.realtime import LatenessStats, Pacer, drop_realtime, enable_realtime
 from imu_emulator.transport import TargetOptions, check_carries, link_capacity, open_target, parse_target
@@ -121,39 +120,54 @@ def streams_from_tables(tables, imu_names, defaults: TargetOptions = TargetOptio
 
 # --- link budget --------------------------------------------------------------------------------
 
-def link_budget_problem(stream: "Stream", rate_hz: float) -> str | None:
-    """None when the stream fits its link at rate_hz, else a one-line message naming the numbers."""
+@dataclass(frozen=True)
+class LinkBudget:
+    """What a stream needs of its link: `load` is the fraction of the link's capacity (None: no limit known)."""
+    need: str              # e.g. "15,000 B/s (75 B/sample)" or "1120 bits/sample (7 frames, ...) = 0.224 Mbit/s"
+    capacity: str | None   # e.g. "11,520 B/s (baud/10)" or "1 Mbit/s bus"
+    load: float | None
+
+
+def link_budget(stream: "Stream", rate_hz: float) -> LinkBudget:
+    """The stream's demand at rate_hz against its link's capacity (serial bytes, or CAN bits with worst-case
+    stuffing)."""
     capacity, encoder = stream.capacity, stream.encoder
-    label = f"{stream.config.imu} {stream.config.format} at {rate_hz:g} Hz"
     if stream.info.kind == "serial":
-        if capacity.bytes_per_s is None:
-            return None
         per_sample = getattr(encoder, "bytes_per_sample", stream.info.bytes_per_sample)
         need = per_sample * rate_hz
-        if need <= capacity.bytes_per_s:
-            return None
-        return (f"{label} needs {need:,.0f} B/s ({per_sample} B/sample) but {stream.config.target} carries "
-                f"{capacity.bytes_per_s:,.0f} B/s (baud/10); lower the rate, raise the baud or pass --allow-overload")
-    if capacity.bits_per_s is None:
-        return None
+        text = f"{need:,.0f} B/s ({per_sample} B/sample)"
+        if capacity.bytes_per_s is None:
+            return LinkBudget(text, None, None)
+        return LinkBudget(text, f"{capacity.bytes_per_s:,.0f} B/s (baud/10)", need / capacity.bytes_per_s)
     frames = getattr(encoder, "frames_per_sample", stream.info.frames_per_sample)
+    bits = sum(can_bits_worst_case(length, extended, fd) for length, extended, fd in frames)
+    text = (f"{bits} bits/sample ({len(frames)} frames, worst-case stuffing) = "
+            f"{bits * rate_hz / 1e6:.3f} Mbit/s")
+    if capacity.bits_per_s is None:
+        return LinkBudget(text, None, None)
     seconds = 0.0
-    bits = 0
     for length, extended, fd in frames:
         total = can_bits_worst_case(length, extended, fd)
-        bits += total
         if fd and capacity.data_bits_per_s:
             # Approximation: payload and CRC ride the data phase, the rest the nominal phase.
             data_bits = total - can_bits_worst_case(0, extended, fd)
             seconds += (total - data_bits) / capacity.bits_per_s + data_bits / capacity.data_bits_per_s
         else:
             seconds += total / capacity.bits_per_s
-    load = seconds * rate_hz
-    if load <= 1.0:
+    return LinkBudget(text, f"{capacity.bits_per_s / 1e6:g} Mbit/s bus", seconds * rate_hz)
+
+
+def link_budget_problem(stream: "Stream", rate_hz: float) -> str | None:
+    """None when the stream fits its link at rate_hz, else a one-line message naming the numbers."""
+    budget = link_budget(stream, rate_hz)
+    if budget.load is None or budget.load <= 1.0:
         return None
-    return (f"{label} needs {bits} bits/sample ({len(frames)} frames, worst-case stuffing) = "
-            f"{bits * rate_hz / 1e6:.3f} Mbit/s, {load:.0%} of the {capacity.bits_per_s / 1e6:g} Mbit/s bus "
-            f"of {stream.config.target}; lower the rate, raise --bitrate or pass --allow-overload")
+    label = f"{stream.config.imu} {stream.config.format} at {rate_hz:g} Hz"
+    if stream.info.kind == "serial":
+        return (f"{label} needs {budget.need} but {stream.config.target} carries {budget.capacity}; "
+                f"lower the rate, raise the baud or pass --allow-overload")
+    return (f"{label} needs {budget.need}, {budget.load:.0%} of the {budget.capacity} of {stream.config.target}; "
+            f"lower the rate, raise --bitrate or pass --allow-overload")
 
 
 # --- one stream: encoder + transport + counters --------------------------------------------------
@@ -201,6 +215,8 @@ class Stream:
         temperature = None if block.temperature_c is None else block.temperature_c[i]
         if self.device is None:
             return Samples(time_ns, block.accel[i], block.gyro[i], quat=block.quat[i], temperature_c=temperature)
+        # imported here: rotations pulls in numba, which every command would pay for at start-up otherwise
+        from imu_emulator.rotations import quat_to_euler, quat_to_matrix
         # A device may be asked for any field its format knows at any moment: give it all we have.
         nav = {}
         if self.navigation is not None and block.truth is not None:

@@ -1,24 +1,55 @@
 """`imu-emulator formats`: the wire formats, with their size per sample, whether a device answers the driver
-([device]) and the named presets (`--option preset=NAME`)."""
+([device]) and the named presets (`--option preset=NAME`); `--details` adds each format's encoder options with the
+defaults read from the encoder's signature."""
 from __future__ import annotations
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("formats", help="list wire formats")
+    p = subparsers.add_parser("formats", help="list wire formats (--details: their options)")
+    p.add_argument("--details", nargs="?", const="", metavar="NAME",
+                   help="also list each format's options, defaults and ranges (only NAME's if given)")
     p.set_defaults(func=cmd_formats)
+
+
+def _size(info) -> str:
+    from firmware_protocols.base import can_bits_worst_case
+    if info.kind == "serial":
+        return f"{info.bytes_per_sample} B/sample"
+    bits = sum(can_bits_worst_case(*frame) for frame in info.frames_per_sample)
+    return f"{len(info.frames_per_sample)} frames/sample, {bits} bits worst case"
+
+
+def option_rows(info) -> list[tuple[str, str, str]]:
+    """(option, default as the encoder's signature has it, help with the range) for each declared option."""
+    from firmware_protocols.registry import option_defaults
+    defaults = option_defaults(info)
+    return [(name, _show(defaults[name]), text) for name, text in info.options.items()]
+
+
+def _show(value) -> str:
+    # An AxisMap default is written the way a scene file gives it: (axes, signs).
+    if hasattr(value, "axes") and hasattr(value, "signs"):
+        value = (tuple(value.axes), tuple(value.signs))
+    return repr(value)
 
 
 def cmd_formats(args) -> int:
     import firmware_protocols
-    from firmware_protocols.base import can_bits_worst_case
-    for name, info in firmware_protocols.formats().items():
-        if info.kind == "serial":
-            size = f"{info.bytes_per_sample} B/sample"
-        else:
-            bits = sum(can_bits_worst_case(*frame) for frame in info.frames_per_sample)
-            size = f"{len(info.frames_per_sample)} frames/sample, {bits} bits worst case"
+    from imu_emulator.streaming import StreamError
+    known = firmware_protocols.formats()
+    if args.details:
+        if args.details not in known:
+            raise StreamError(f"formats --details: unknown format {args.details!r}; known: {', '.join(known)}")
+        known = {args.details: known[args.details]}
+    for name, info in known.items():
         talks = " [device]" if info.device is not None else ""
-        print(f"{name:24} {info.kind:6} {size:40} {info.description}{talks}")
+        print(f"{name:24} {info.kind:6} {_size(info):40} {info.description}{talks}")
         for preset, (options, text) in info.presets.items():
             print(f"{'':24} preset={preset}: {text}")
+        if args.details is None:
+            continue
+        for option, default, text in option_rows(info):
+            print(f"    {option:22} default {default:24} {text}")
+        if not info.options:
+            print("    (no options)")
     return 0

@@ -7,7 +7,7 @@ import sys
 import threading
 
 from imu_emulator.commands.shared import load_scene_with_warnings, number
-from imu_emulator.progress import Progress
+from imu_emulator.progress import CompileStatus, Progress
 
 
 def register(subparsers) -> None:
@@ -39,7 +39,9 @@ def cmd_generate(args) -> int:
                      temperature="temperature" in scene.effects) as writer:
         check_output(scene, args.output, args.truth, args.allow_large)
         # a ROS Imu message has an orientation field: fill it from the sensor frame's attitude
-        sim = Simulation(scene, attitude=args.output.lower().endswith(".mcap"), truth=args.truth)
+        attitude = args.output.lower().endswith(".mcap")
+        with CompileStatus(scene, attitude=attitude, truth=args.truth, quiet=args.quiet):
+            sim = Simulation(scene, attitude=attitude, truth=args.truth)
         progress = Progress(args.quiet)
         total = sim.n_samples
         try:

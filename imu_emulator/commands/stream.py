@@ -94,6 +94,7 @@ def cmd_stream(args) -> int:
 
 
 def _stream(args, stats) -> None:
+    from imu_emulator.progress import CompileStatus
     from imu_emulator.simulation import Simulation
     from imu_emulator.streaming import RunOptions, StreamConfig, needs_truth, run_streams, streams_from_tables
 
@@ -121,4 +122,7 @@ def _stream(args, stats) -> None:
     options = RunOptions(speed=args.speed, loop=args.loop, epoch_time=args.epoch_time, duration_s=args.duration,
                          count=args.count, quiet=args.quiet, allow_overload=args.allow_overload,
                          realtime=args.realtime, stats_json=stats)
-    run_streams(scene, Simulation(scene, truth=needs_truth(configs)), configs, options)
+    truth = needs_truth(configs)
+    with CompileStatus(scene, attitude=True, truth=truth, quiet=args.quiet):
+        sim = Simulation(scene, truth=truth)
+    run_streams(scene, sim, configs, options)

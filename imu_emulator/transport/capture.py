@@ -4,11 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import can
-
 from imu_emulator.errors import TargetError
 from imu_emulator.transport.base import Transport
-from imu_emulator.transport.frames import to_messages
 
 
 def _open_error(path: str, exc: Exception, doing: str = "cannot open") -> TargetError:
@@ -49,6 +46,11 @@ class RawFileTransport(Transport):
 class CanLogTransport(Transport):
 
     def __init__(self, path: str):
+        # here, not at import: python-can costs ~0.2 s of start-up that raw captures do not need
+        import can
+
+        from imu_emulator.transport.frames import to_messages
+        self._to_messages = to_messages
         suffix = Path(path).suffix.lower()
         known = sorted(can.io.MESSAGE_WRITERS)
         if suffix not in known:
@@ -62,7 +64,7 @@ class CanLogTransport(Transport):
 
     def prepare(self, payload, time_ns: int):
         # The log's time stamps are the samples' times on the declared time base, not wall clock.
-        return to_messages(payload, timestamp=time_ns / 1e9)
+        return self._to_messages(payload, timestamp=time_ns / 1e9)
 
     def send(self, messages) -> bool:
         try:

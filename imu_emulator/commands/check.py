@@ -1,0 +1,101 @@
+"""`imu-emulator check`: validate a scene and say what it will do, without compiling or running anything."""
+from __future__ import annotations
+
+import numpy as np
+import sys
+
+# The longest shortest-round-trip repr of a double, e.g. "-1.2345678901234567e-300".
+_MAX_NUMBER_CHARS = 24
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("check", help="validate a scene and describe it without running it",
+                              description="Validate a scene file; print its frame and conventions, IMUs and effects, "
+                                          "sample count, output sizes, each [[stream]]'s link budget and whether "
+                                          "its kernel is compiled in the cache. Exit 2 with one error line if bad.")
+    p.add_argument("scene", help="scene file (TOML)")
+    p.set_defaults(func=cmd_check)
+
+
+def _megabytes(n_bytes: float) -> str:
+    return f"{n_bytes / 1e6:,.1f} MB"
+
+
+def output_sizes(scene, truth: bool) -> dict[str, int]:
+    """Bytes of `generate`'s output: NPZ's arrays exactly (the file adds small headers), CSV an upper bound."""
+    from imu_emulator.output import CSV_COLUMNS, TRUTH_COLUMNS
+    from imu_emulator.simulation import TRUTH_KEYS
+    n, n_imu = scene.n_samples, len(scene.imus)
+    npz = 8 * n * (1 + 6 * n_imu + (3 * len(TRUTH_KEYS) if truth else 0))
+    numbers = len(CSV_COLUMNS) - 1 + (len(TRUTH_COLUMNS) if truth else 0)
+    longest_name = max(len(name) for name in scene.imu_names)
+    csv = n * n_imu * (numbers * (_MAX_NUMBER_CHARS + 1) + longest_name + 1)
+    return {"NPZ": npz, "CSV": csv}
+
+
+def _describe_part(part) -> str:
+    from imu_emulator.scene import Expressions
+    if isinstance(part, Expressions):
+        return ", ".join(part.texts)
+    return f"{len(part.t)} samples from {part.source}, derivatives by {part.derivative}"
+
+
+def cmd_check(args) -> int:
+    from imu_emulator import kernel
+    from imu_emulator.effects import EFFECTS
+    from imu_emulator.scene import load_scene
+    from imu_emulator.streaming import build_streams, link_budget, streams_from_tables
+
+    scene = load_scene(args.scene)
+    streams = build_streams(streams_from_tables(scene.streams, scene.imu_names), scene.imu_names, scene.rate_hz)
+
+    print(f"scene {args.scene}: valid")
+    body = "forward-left-up" if scene.frame == "ENU" else "forward-right-down"
+    gravity = f"(0, 0, {'+' if scene.frame == 'ENU' else '-'}g)"
+    print(f"  frame      {scene.frame} (body {body}; at rest and level f = {gravity}, g = {scene.gravity_mps2!r} m/s²)")
+    print("  attitude   z-y-x: R = Rz(yaw)·Ry(pitch)·Rx(roll) maps body to navigation; gyros give body-frame rate")
+    print(f"  time       {scene.n_samples:,} samples at {scene.rate_hz:g} Hz, t = {scene.t0_s!r} .. "
+          f"{scene.t0_s + (scene.n_samples - 1) / scene.rate_hz!r} s")
+    if scene.params:
+        print("  params     " + ", ".join(f"{k} = {v!r}" for k, v in scene.params.items()))
+    print(f"  trajectory {_describe_part(scene.trajectory)}")
+    if scene.attitude_mode == "tangent":
+        print(f"  attitude   tangent to the velocity, roll 0 (initial heading "
+              f"{scene.initial_heading_rad * 57.29577951308232:g}°)")
+    else:
+        print(f"  attitude   {scene.attitude_mode}: {_describe_part(scene.attitude)}")
+    print("  effects    " + (", ".join(sorted(scene.effects)) or "none (no gravity either)"))
+    for name in sorted(scene.effects):
+        print(f"    {name:16} {EFFECTS[name].description}")
+    for imu in scene.imus:
+        # the parameters of the effects that are on, in the records' units
+        values = ", ".join(f"{param.path[4:]} = {np.asarray(imu.values[param.path]).tolist()} {param.unit}"
+                           for name in sorted(scene.effects) for param in EFFECTS[name].params)
+        print(f"  imu {imu.name}: {values or 'no parameters'}")
+    for warning in scene.warnings:
+        print(f"  warning: {warning}")
+    sizes = output_sizes(scene, truth=False)
+    sizes_truth = output_sizes(scene, truth=True)
+    print(f"  generate   NPZ {_megabytes(sizes['NPZ'])} ({_megabytes(sizes_truth['NPZ'])} with --truth); "
+          f"CSV at most {_megabytes(sizes['CSV'])} ({_megabytes(sizes_truth['CSV'])} with --truth)")
+
+    problems = []
+    for stream in streams:
+        budget = link_budget(stream, scene.rate_hz)
+        c = stream.config
+        verdict = ("no rate limit on this link" if budget.load is None
+                   else f"{budget.load:.0%} of {budget.capacity}" + (" — DOES NOT FIT" if budget.load > 1 else ""))
+        print(f"  stream     {c.imu} as {c.format} to {c.target}: needs {budget.need}; {verdict}")
+        if budget.load is not None and budget.load > 1:
+            problems.append(f"stream {c.imu} {c.format} to {c.target} needs more than its link carries "
+                            f"({budget.load:.0%}); `stream` refuses it without --allow-overload")
+
+    for command, attitude, truth in (("generate", False, False), ("generate --truth", False, True),
+                                     ("stream", True, False)):
+        path, compiled = kernel.cached_kernel(scene, attitude=attitude, truth=truth)
+        state = "compiled in the cache" if compiled else "not compiled yet (the first run compiles it)"
+        print(f"  kernel     {command}: {state} ({path.name})")
+    if problems:
+        print(f"error: {problems[0]}", file=sys.stderr)
+        return 2
+    return 0

@@ -1,0 +1,111 @@
+"""`imu-emulator check`: validates without running, describes the scene, exits 2 with one line on a bad one."""
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from imu_emulator.cli import main
+
+ROOT = Path(__file__).resolve().parent.parent
+EXAMPLES = sorted((ROOT / "examples").glob("*.toml"))
+
+SMALL = """
+[scene]
+rate_hz = 100
+duration_s = 2.0
+[trajectory]
+shape = "circle"
+radius_m = 2.0
+frequency_hz = 0.5
+[attitude]
+mode = "tangent"
+[[imu]]
+name = "front"
+lever_arm_m = [0.2, 0.0, 0.0]
+[effects]
+gravity = true
+lever_arm = true
+"""
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
+    return tmp_path
+
+
+@pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.name)
+def test_check_every_example(path, capsys, cache):
+    assert main(["check", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"scene {path}: valid")
+    for word in ("frame ", "samples at", "trajectory", "effects", "imu ", "NPZ", "CSV", "kernel"):
+        assert word in out
+    import tomllib
+    raw = tomllib.loads(path.read_text())
+    for imu in raw["imu"]:
+        assert f"imu {imu['name']}:" in out
+    assert out.count("  stream  ") == len(raw.get("stream", []))
+
+
+def test_check_describes_what_generate_then_does(tmp_path, capsys, cache):
+    """Sample count = duration x rate; the NPZ size estimate matches the file `generate` writes (up to the
+    zip and .npy headers, about 100 bytes per array); the CSV bound is above the real CSV; the kernel is
+    reported compiled after `generate` compiled it, and not before."""
+    scene = tmp_path / "small.toml"
+    scene.write_text(SMALL)
+    assert main(["check", str(scene)]) == 0
+    before = capsys.readouterr().out
+    assert "200 samples at 100 Hz" in before
+    assert "generate: not compiled yet" in before
+    assert main(["generate", str(scene), "-o", str(tmp_path / "o.npz"), "--quiet"]) == 0
+    assert main(["generate", str(scene), "-o", str(tmp_path / "o.csv"), "--quiet"]) == 0
+    assert main(["check", str(scene)]) == 0
+    after = capsys.readouterr().out
+    assert "generate: compiled in the cache" in after and "stream: not compiled yet" in after
+    from imu_emulator.commands.check import output_sizes
+    from imu_emulator.scene import load_scene
+    sizes = output_sizes(load_scene(scene), truth=False)
+    data = np.load(tmp_path / "o.npz")
+    payload = sum(data[k].nbytes for k in ("t", "accel", "gyro"))
+    assert sizes["NPZ"] == payload
+    assert payload < os.path.getsize(tmp_path / "o.npz") < payload + 4 * 1024
+    assert os.path.getsize(tmp_path / "o.csv") <= sizes["CSV"]
+
+
+def test_check_reports_each_streams_link_budget(tmp_path, capsys, cache):
+    # mavlink-highres is 75 bytes per sample (MAVLink 2 header 10 + payload 63 + CRC 2): at 100 Hz 7,500 B/s
+    # against 115200 baud / 10 = 11,520 B/s is 65 %.
+    scene = tmp_path / "s.toml"
+    scene.write_text(SMALL + '[[stream]]\nformat = "mavlink-highres"\nto = "serial:/dev/null@115200"\n')
+    assert main(["check", str(scene)]) == 0
+    out = capsys.readouterr().out
+    assert "front as mavlink-highres to serial:/dev/null@115200: needs 7,500 B/s (75 B/sample); 65% of 11,520 B/s" in out
+
+
+BAD = [
+    (SMALL.replace("rate_hz = 100", "rate_hz = 0"), "scene.rate_hz: must be positive"),
+    (SMALL.replace("radius_m = 2.0", ""), "trajectory.radius_m: missing"),
+    (SMALL + "[[stream]]\nformat = \"nope\"\nto = \"pty\"\n", "unknown format 'nope'"),
+    (SMALL + "[[stream]]\nformat = \"mavlink-highres\"\n", "stream[0].to: missing"),
+    (SMALL + "[[stream]]\nimu = \"back\"\nformat = \"mavlink-highres\"\nto = \"pty\"\n", "stream[0].imu: no IMU named 'back'"),
+    (SMALL + "[[stream]]\nformat = \"mavlink-highres\"\nto = \"pty\"\noptions = { sysid = 300 }\n", "sysid: must be 0..255"),
+    # 75 B/sample at 100 Hz = 7,500 B/s > 9600 baud / 10 = 960 B/s
+    (SMALL + "[[stream]]\nformat = \"mavlink-highres\"\nto = \"serial:/dev/null@9600\"\n", "needs more than its link"),
+    ("[scene\n", "not valid TOML"),
+]
+
+
+@pytest.mark.parametrize("text, message", BAD)
+def test_check_bad_scene_is_one_error_line_exit_2(text, message, tmp_path, capsys, cache):
+    scene = tmp_path / "bad.toml"
+    scene.write_text(text)
+    assert main(["check", str(scene)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1 and message in err
+
+
+def test_check_missing_file(capsys, cache):
+    assert main(["check", "/nonexistent/scene.toml"]) == 2
+    assert "cannot read scene file" in capsys.readouterr().err

@@ -1,0 +1,68 @@
+"""`imu-emulator plot`: a PNG for every example, with axes that hold the whole trajectory."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("matplotlib")
+
+from imu_emulator import plotting  # noqa: E402
+from imu_emulator.cli import main  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+EXAMPLES = sorted((ROOT / "examples").glob("*.toml"))
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(autouse=True)
+def cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
+
+
+def _assert_png(path: Path):
+    data = path.read_bytes()
+    assert data[:8] == PNG_SIGNATURE and len(data) > 10_000
+
+
+def _axes_hold(fig, position):
+    ax3d = next(ax for ax in fig.axes if ax.name == "3d")
+    for axis, limits in zip(range(3), (ax3d.get_xlim3d(), ax3d.get_ylim3d(), ax3d.get_zlim3d())):
+        lo, hi = min(limits), max(limits)
+        assert lo <= position[:, axis].min() and position[:, axis].max() <= hi, "xyz"[axis]
+
+
+@pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.name)
+def test_plot_every_example(path, tmp_path):
+    data = plotting.from_scene(str(path))
+    png = tmp_path / "out.png"
+    fig = plotting.draw(data, png)
+    _assert_png(png)
+    _axes_hold(fig, data.position)
+    # one 3-D view plus specific force and angular rate per IMU
+    assert len(fig.axes) == 1 + 2 * len(data.imu_names)
+
+
+def test_plot_cli_on_scene_and_on_generate_outputs(tmp_path, capsys):
+    scene = str(ROOT / "examples" / "two_imus.toml")
+    assert main(["plot", scene, "-o", str(tmp_path / "scene.png")]) == 0
+    _assert_png(tmp_path / "scene.png")
+    for name, truth in (("run.npz", ["--truth"]), ("run.csv", ["--truth"]), ("bare.npz", [])):
+        assert main(["generate", scene, "-o", str(tmp_path / name), "--quiet", *truth]) == 0
+        assert main(["plot", str(tmp_path / name), "-o", str(tmp_path / (name + ".png"))]) == 0
+        _assert_png(tmp_path / (name + ".png"))
+    err = capsys.readouterr().err
+    assert "bare.npz has no trajectory" in err
+    csv = plotting.from_output(str(tmp_path / "run.csv"))
+    npz = plotting.from_output(str(tmp_path / "run.npz"))
+    assert csv.imu_names == npz.imu_names == ["imu0", "imu1"]
+    np.testing.assert_allclose(csv.accel, npz.accel, rtol=1e-15)
+    np.testing.assert_allclose(csv.position, npz.position, rtol=1e-15)
+
+
+def test_plot_bad_input_is_one_error_line(tmp_path, capsys):
+    assert main(["plot", str(tmp_path / "missing.toml")]) == 2
+    assert main(["plot", str(ROOT / "examples" / "helix.toml"), "-o", str(tmp_path / "x.jpg")]) == 2
+    (tmp_path / "junk.txt").write_text("hello")
+    assert main(["plot", str(tmp_path / "junk.txt"), "-o", str(tmp_path / "j.png")]) == 2
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 3 and all(line.startswith("error: ") for line in lines)
