@@ -365,7 +365,7 @@ def _check_bound(value, bound, where: str) -> None:
     limit, unit = bound
     flat = np.ravel(np.asarray(value, dtype=float))
     if np.any(np.abs(flat) > limit):
-        raise SceneError(f"{where}: values must be within ±{limit:g}{unit}, got {value!r}")
+        raise SceneError(f"{where}: {list(value)!r} is out of range (each |value| <= {limit:g}{unit})")
 
 
 def _imu(table, where: str, effects: frozenset[str], taken: set[str], warnings: list[str]) -> ImuSpec:
@@ -413,6 +413,11 @@ def _imu(table, where: str, effects: frozenset[str], taken: set[str], warnings: 
             values[param.path] = units.parse(preset_table[from_preset[0]], param.unit, param.shape,
                                              f"{preset_prefix}.{from_preset[0]}")
         elif given:
+            raw, bound = source[given[0]], BOUNDS.get(param.path)
+            if bound and isinstance(raw, (list, tuple)) and any(
+                    isinstance(v, float) and not math.isfinite(v) for v in raw):
+                raise SceneError(f"{prefix}.{given[0]}: values must be finite numbers (each |value| <= "
+                                 f"{bound[0]:g}{bound[1]}), got {raw!r}")
             values[param.path] = units.parse(source[given[0]], param.unit, param.shape, f"{prefix}.{given[0]}")
             _check_bound(values[param.path], BOUNDS.get(param.path), f"{prefix}.{given[0]}")
             # a value that changes nothing (the default, e.g. a zero lever arm) is not worth a warning
