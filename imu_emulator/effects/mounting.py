@@ -12,8 +12,10 @@ def mounting_matrix(rpy_deg) -> np.ndarray:
 
 def rotation(ctx):
     """The mounting matrix of this IMU, or None when the effect leaves the axes alone."""
+    if "mounting" not in ctx.scene.effects:
+        return None
     rpy = ctx.imu.values["imu.mounting_rpy_deg"]
-    if "mounting" not in ctx.scene.effects or not any(rpy):
+    if not any(rpy):
         return None
     return mounting_matrix(rpy)
 
