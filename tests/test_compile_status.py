@@ -1,0 +1,34 @@
+"""The first compile of a scene's kernel is announced (with its time) on a terminal, and only then."""
+import shutil
+import sys
+from pathlib import Path
+
+import pytest
+
+from imu_emulator import kernel as kernel_module
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setattr(kernel_module, "_loaded", {})
+    return tmp_path / "cache" / "kernels"
+
+
+def test_first_compile_is_announced_with_its_time_on_a_terminal(cache, tmp_path, capsys, monkeypatch):
+    from imu_emulator.cli import main
+    scene = str(ROOT / "examples" / "orientation_only.toml")
+    args = ["generate", scene, "-o", str(tmp_path / "o.npz")]
+    assert main(args) == 0                      # stderr is not a terminal: no status line (errors stay one line)
+    assert "compiling" not in capsys.readouterr().err
+    kernel_module._loaded.clear()
+    shutil.rmtree(cache)                        # cold again
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    assert main(args) == 0
+    cold = capsys.readouterr().err
+    assert f"compiling kernel for scene {scene} (first run) …" in cold and " compiled in " in cold
+    kernel_module._loaded.clear()
+    assert main(args) == 0                      # warm: nothing to announce
+    assert "compiling" not in capsys.readouterr().err
