@@ -144,6 +144,7 @@ class Pacer:
         self.fifo_given_up = 0      # times the sender fell _BEHIND_NS behind and gave SCHED_FIFO up
         self._sent_ns = 0            # when the last wait ended
         self._spaced = not fifo      # catch up spaced out (normal scheduling from the start)
+        self._behind_cpu_ns = 0      # thread CPU time at the previous sample, while behind and spaced
         self.serve_margin_ns = _SERVE_MARGIN_NS
         # When the descriptors were last looked at: at high rates the whole period may be spin and margin,
         # and the caller then polls them itself after a send (see streaming).
@@ -196,10 +197,19 @@ class Pacer:
             # CPU runs between samples (in the one-CPU guest a burst overflowed candump's receive buffer).
             # Not for a sender that gave SCHED_FIFO up: it had a core of its own, and a long catch-up after
             # answering a flood of commands would miss hundreds of deadlines.
-            gap = self._sent_ns + self.period_ns // 2 - now
+            # A sender whose own work per sample exceeds half a period (the one-CPU guest at 1 kHz, where a
+            # system call costs tens of microseconds) would never sleep: then it sleeps as long as it worked
+            # (its CPU time since the previous sample, read only while behind), so a reader sharing the CPU
+            # keeps at least half of it and the sender ends late instead.
+            cpu = time.thread_time_ns()
+            worked = cpu - self._behind_cpu_ns if self._behind_cpu_ns else 0
+            gap = max(self._sent_ns + self.period_ns // 2 - now, min(worked, self._behind_ns))
             if gap > 0:
                 time.sleep(gap / 1e9)
                 now = time.monotonic_ns()
+            self._behind_cpu_ns = cpu
+        else:
+            self._behind_cpu_ns = 0
         self._sent_ns = now
         return now
 

@@ -114,6 +114,22 @@ def test_sender_behind_at_normal_priority_catches_up_at_twice_the_rate_not_in_a_
     assert min(np.diff(woke)) >= period // 2
 
 
+def test_sender_whose_work_exceeds_half_a_period_leaves_the_cpu_half_the_time():
+    # Each sample costs W = 3 ms of CPU at a 2 ms period: spacing by half a period alone would never sleep.
+    # The pacer sleeps at least as long as the sample's CPU time, so consecutive wakes are at least 2 W apart
+    # (lower bounds again: busy CPU time cannot pass faster than wall time, sleeps never end early).
+    period, work = 2_000_000, 3_000_000
+    pacer = Pacer(fifo=False, period_ns=period, spin=False)
+    past = time.monotonic_ns() - 1_000 * period
+    woke = []
+    for k in range(6):
+        woke.append(pacer.wait_until(past + k * period))
+        start = time.thread_time_ns()
+        while time.thread_time_ns() - start < work:
+            pass
+    assert min(np.diff(woke[1:])) >= 2 * work
+
+
 def test_realtime_request_falls_back_gracefully(monkeypatch):
     def refuse(*args):
         raise PermissionError(1, "Operation not permitted")

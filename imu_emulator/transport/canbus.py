@@ -9,6 +9,7 @@ import can
 from imu_emulator.errors import TargetError
 from imu_emulator.transport.base import TargetOptions, Transport, error_name, output_queue
 from imu_emulator.transport.frames import to_messages
+from imu_emulator.transport.socketcan_frames import FrameSender, pack
 
 # Interface counters of a SocketCAN device that tell of frames lost after `send` returned (vcan loops frames
 # back through the receive path, so a full backlog shows as rx_dropped). A receiving socket's own full
@@ -44,11 +45,23 @@ class CanBusTransport(Transport):
         self._brs = bool(options.data_bitrate)
         self._timeout = _BLOCKING_TIMEOUT_S if options.blocking else 0.0
         self._counters_at_open = self._interface_counters()
+        # SocketCAN without waiting (the real-time case): a sample's frames packed once, one system call
+        # (see socketcan_frames). Blocking sends (--speed 0) keep python-can's select-and-retry.
+        self._frames = (FrameSender(self.bus.socket)
+                        if interface == "socketcan" and not self._timeout and hasattr(self.bus, "socket") else None)
 
     def prepare(self, payload, time_ns: int):
+        if self._frames is not None:
+            return pack(payload, bitrate_switch=self._brs)
         return to_messages(payload, bitrate_switch=self._brs)
 
     def send(self, messages) -> bool:
+        if self._frames is not None:
+            code = self._frames.send(*messages)
+            if code is not None:
+                self.count_refusal(errno.errorcode.get(code, f"errno {code}"))
+                return False
+            return True
         for message in messages:
             try:
                 self.bus.send(message, timeout=self._timeout)
