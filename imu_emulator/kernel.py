@@ -73,6 +73,7 @@ def kernel($args):
             k = k0 + j
             s = s0 + j
             $clock
+            $increments
             t = $t0 + k * $dt$clock_shift
             $motion
             # -- stage 1: navigation frame
@@ -91,7 +92,8 @@ def kernel($args):
     hold[0], hold[1], hold[2], hold[3] = hcy, hsy, hcp, hsp
 '''
 
-PER_IMU_TEMPLATE = '''\
+# Stages 2 and 3 up to the sensor axes: the sample's, and the increments' at each quadrature node.
+IMU_FRAME_TEMPLATE = '''\
 # -- IMU $m, stage 2: body frame at the IMU
 fax = fbx
 fay = fby
@@ -100,6 +102,7 @@ gwx = $gwx
 gwy = $gwy
 gwz = $gwz
 $body
+$increment
 # -- stage 3: sensor frame
 ox = fax
 oy = fay
@@ -108,6 +111,9 @@ gx = gwx
 gy = gwy
 gz = gwz
 $frame
+'''
+
+PER_IMU_TEMPLATE = IMU_FRAME_TEMPLATE + '''\
 $sensor
 # -- stage 4: sensor output
 $output
@@ -221,8 +227,9 @@ class EffectPlan:
 
 # --- source ------------------------------------------------------------------------------------------
 
-def generate_source(scene: Scene, attitude: bool, truth: bool) -> str:
-    """The kernel module for this scene and outputs. No user text reaches it except validated numbers as repr."""
+def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int = 0) -> str:
+    """The kernel module for this scene and outputs (`increments`: Gauss–Legendre nodes of the integrated
+    outputs, 0 for none). No user text reaches it except validated numbers as repr."""
     from imu_emulator.motion import motion_code
 
     motion = motion_code(scene, angles=truth)
@@ -244,12 +251,14 @@ def generate_source(scene: Scene, attitude: bool, truth: bool) -> str:
     if plan.nav_rate:
         navigation = ["wnx = 0.0", "wny = 0.0", "wnz = 0.0"] + navigation
 
-    per_imu = []
+    per_imu, frames = [], []
     for m, imu in enumerate(scene.imus):
         stages = plan.per_imu[m]
         gw = ("wx", "wy", "wz")
         if plan.nav_rate:   # R^T w_n: the navigation frame's rate in body axes
             gw = tuple(f"{w} + (r0{c} * wnx + r1{c} * wny + r2{c} * wnz)" for c, w in enumerate(gw))
+        frame_slots = dict(m=m, gwx=gw[0], gwy=gw[1], gwz=gw[2], body=stages["body"], frame=stages["frame"])
+        frames.append(fill(IMU_FRAME_TEMPLATE, **frame_slots, increment=[]).splitlines())
         quat = []
         if attitude:
             M = mounting_rotation(EmitContext(plan, EFFECTS["mounting"], scene, imu, m))
@@ -268,9 +277,12 @@ def generate_source(scene: Scene, attitude: bool, truth: bool) -> str:
         if sensor:   # the true sensor-frame values and the realized bias, for the error effects to use
             sensor = ["tfx, tfy, tfz, twx, twy, twz = ox, oy, oz, gx, gy, gz",
                       "bax = bay = baz = bgx = bgy = bgz = 0.0"] + sensor
-        per_imu += fill(PER_IMU_TEMPLATE, m=m, gwx=gw[0], gwy=gw[1], gwz=gw[2], body=stages["body"],
-                        frame=stages["frame"], sensor=sensor, output=stages["output"], quat=quat,
-                        bias_truth=bias_truth).splitlines()
+        increment = []
+        if increments:
+            from imu_emulator import increments as inc
+            increment = inc.imu_lines(m, sensor, [var for var, owner, _ in plan.slots if owner == m])
+        per_imu += fill(PER_IMU_TEMPLATE, **frame_slots, increment=increment, sensor=sensor,
+                        output=stages["output"], quat=quat, bias_truth=bias_truth).splitlines()
 
     truth_lines = []
     if truth:
@@ -279,10 +291,19 @@ def generate_source(scene: Scene, attitude: bool, truth: bool) -> str:
     attitude_lines = (["qbw, qbx, qby, qbz = matrix_to_quat_scalar(r00, r01, r02, r10, r11, r12, r20, r21, r22)"]
                       if attitude else [])
     imports = [f"from {module} import {', '.join(names)}" for module, names in RUNTIME_IMPORTS.items()]
+    constants = [f"{name} = {value!r}" for name, value in motion.constants.items()]
+    args, integrate = ARGS, []
+    if increments:
+        from imu_emulator import increments as inc
+        args, constants = ARGS + inc.ARGS, constants + inc.constants(increments)
+        node_motion = inc.sampled_at_nodes(motion.lines)   # sampled motion: node rows after the samples'
+        integrate = inc.node_lines(
+            increments, n_imu=len(scene.imus), clock=plan.clock, phase_lines=motion.phase_lines,
+            motion=node_motion + ([] if motion.rotation_given else _rotation_and_rates()), navigation=navigation,
+            imu_frames=frames, t0=float(scene.t0_s), dt=1.0 / scene.rate_hz)
     return fill(
-        KERNEL_TEMPLATE, imports=imports, eps_v2=repr(EPS_SPEED ** 2), chunk=CHUNK,
-        constants=[f"{name} = {value!r}" for name, value in motion.constants.items()],
-        args=", ".join(ARGS), load_state=[f"{var} = state[{i}]" for i, (var, _, _) in enumerate(plan.slots)],
+        KERNEL_TEMPLATE, imports=imports, eps_v2=repr(EPS_SPEED ** 2), chunk=CHUNK, constants=constants,
+        args=", ".join(args), increments=integrate, load_state=[f"{var} = state[{i}]" for i, (var, _, _) in enumerate(plan.slots)],
         store_state=[f"state[{i}] = {var}" for i, (var, _, _) in enumerate(plan.slots)],
         n_phase=max(n_phase, 1), phase_stage=phase_stage, t0=repr(float(scene.t0_s)), dt=repr(1.0 / scene.rate_hz),
         clock=plan.clock, clock_shift=f" + clk * {1.0 / scene.rate_hz!r}" if plan.clock else "",
@@ -366,9 +387,10 @@ def _canonical(value):
     raise TypeError(f"cannot key a {type(value).__name__}")
 
 
-def scene_key(scene: Scene, attitude: bool, truth: bool) -> str:
+def scene_key(scene: Scene, attitude: bool, truth: bool, increments: int = 0) -> str:
     """The whole validated scene (less KEY_EXCLUDES), the outputs and every generator module, hashed."""
-    spec = {"scene": _canonical(scene), "outputs": [attitude, truth], "code": _code_fingerprint(),
+    outputs = [attitude, truth] + ([increments] if increments else [])
+    spec = {"scene": _canonical(scene), "outputs": outputs, "code": _code_fingerprint(),
             "python": list(sys.version_info[:2])}
     return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:32]
 
@@ -394,11 +416,11 @@ def _import(path: Path, key: str):
     return module.kernel
 
 
-def _trial_call(kernel, scene: Scene, attitude: bool, truth: bool) -> None:
+def _trial_call(kernel, scene: Scene, attitude: bool, truth: bool, increments: int) -> None:
     """Compile now (numba compiles on the first call) on one sample, with the argument types the Simulation
     uses, so that an entry is only ever published compiled."""
     from imu_emulator.simulation import Simulation
-    Simulation.trial(kernel, scene, attitude, truth)
+    Simulation.trial(kernel, scene, attitude, truth, increments)
 
 
 def _valid_entry(path: Path) -> bool:
@@ -420,9 +442,9 @@ def _discard(directory: Path) -> None:
     shutil.rmtree(trash, ignore_errors=True)
 
 
-def compile_kernel(scene: Scene, attitude: bool = True, truth: bool = False):
+def compile_kernel(scene: Scene, attitude: bool = True, truth: bool = False, increments: int = 0):
     """The kernel function for this scene's motion, effects and outputs (cached in memory and on disk)."""
-    key = scene_key(scene, attitude, truth)
+    key = scene_key(scene, attitude, truth, increments)
     if key in _loaded:
         return _loaded[key]
     root = cache_dir()
@@ -433,18 +455,18 @@ def compile_kernel(scene: Scene, attitude: bool = True, truth: bool = False):
             if not _valid_entry(entry / "kernel.py"):
                 raise ValueError("checksum")
             kernel = _import(entry / "kernel.py", key)
-            _trial_call(kernel, scene, attitude, truth)
+            _trial_call(kernel, scene, attitude, truth, increments)
             _loaded[key] = kernel
             return kernel
         except Exception:   # truncated, garbage or not compiling: regenerate (never trust it again)
             sys.modules.pop(_module_name(key), None)
             _discard(entry)
-    source = generate_source(scene, attitude, truth)
+    source = generate_source(scene, attitude, truth, increments)
     staging = Path(tempfile.mkdtemp(prefix=f".tmp-{key}-", dir=root))
     try:
         (staging / "kernel.py").write_text(_CHECK + hashlib.sha256(source.encode()).hexdigest() + "\n" + source)
         kernel = _import(staging / "kernel.py", key)
-        _trial_call(kernel, scene, attitude, truth)
+        _trial_call(kernel, scene, attitude, truth, increments)
         try:
             os.rename(staging, entry)    # atomic publish; fails if another process published first
         except OSError:
@@ -458,8 +480,8 @@ def compile_kernel(scene: Scene, attitude: bool = True, truth: bool = False):
     return kernel
 
 
-def cached_kernel(scene: Scene, attitude: bool = True, truth: bool = False) -> tuple[Path, bool]:
+def cached_kernel(scene: Scene, attitude: bool = True, truth: bool = False, increments: int = 0) -> tuple[Path, bool]:
     """Where this scene's kernel lives in the cache, and whether it is there compiled already (numba's index
     beside it), for `check` and the first-run status line; it generates and compiles nothing."""
-    entry = cache_dir() / scene_key(scene, attitude, truth)
+    entry = cache_dir() / scene_key(scene, attitude, truth, increments)
     return entry, (entry / "kernel.py").exists() and any((entry / "__pycache__").glob("*.nbi"))

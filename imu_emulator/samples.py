@@ -24,6 +24,8 @@ class SampleBlock:
                                 # bias of each triad (constant + turn-on + instability + random walk)
     temperature_c: np.ndarray | None = None   # (n_imu, n) each IMU's simulated temperature, degC, with the
                                               # temperature effect on (else None: formats send their default)
+    dtheta: np.ndarray | None = None   # (n_imu, n, 3) integral of the gyro's rate over (t_k-1, t_k], rad, and
+    dvel: np.ndarray | None = None     # of the specific force, m/s (imu_emulator.increments); None unless asked
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
@@ -39,7 +41,9 @@ class SampleBlock:
                            quat=None if self.quat is None else self.quat[:, start:stop],
                            truth=None if self.truth is None else {k: _along_samples(v, start, stop)
                                                                   for k, v in self.truth.items()},
-                           temperature_c=None if self.temperature_c is None else self.temperature_c[:, start:stop])
+                           temperature_c=None if self.temperature_c is None else self.temperature_c[:, start:stop],
+                           dtheta=None if self.dtheta is None else self.dtheta[:, start:stop],
+                           dvel=None if self.dvel is None else self.dvel[:, start:stop])
 
     def time_ns(self, offset_ns: int = 0) -> np.ndarray:
         """Sample times as integer nanoseconds (exact to the ns for any sane t0), plus an offset."""
@@ -61,7 +65,9 @@ def concatenate(blocks: list[SampleBlock]) -> SampleBlock:
                        gyro=np.concatenate([b.gyro for b in blocks], axis=1),
                        quat=None if first.quat is None else np.concatenate([b.quat for b in blocks], axis=1),
                        truth=truth, temperature_c=None if first.temperature_c is None else
-                       np.concatenate([b.temperature_c for b in blocks], axis=1))
+                       np.concatenate([b.temperature_c for b in blocks], axis=1),
+                       dtheta=None if first.dtheta is None else np.concatenate([b.dtheta for b in blocks], axis=1),
+                       dvel=None if first.dvel is None else np.concatenate([b.dvel for b in blocks], axis=1))
 
 
 def counts_text(counts: dict[str, dict[str, int]]) -> str:

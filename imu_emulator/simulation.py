@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from imu_emulator.errors import DataError
+from imu_emulator.increments import check_nodes
 from imu_emulator.kernel import EffectPlan, compile_kernel
 from imu_emulator.run_size import check_memory
 from imu_emulator.samples import SampleBlock
@@ -28,10 +29,12 @@ _REPLAY_BLOCK = 65536
 class Simulation:
     """IMU samples for a scene. `block(k0, n)` gives samples k0 .. k0+n-1 for any k0 >= 0."""
 
-    def __init__(self, scene: Scene, attitude: bool = True, truth: bool = False):
+    def __init__(self, scene: Scene, attitude: bool = True, truth: bool = False, increments: int = 0):
         self.scene = scene
         self.attitude = attitude
         self.truth = truth
+        #: Gauss-Legendre nodes of the integrated outputs dtheta, dvel (imu_emulator.increments); 0: none
+        self.increments = check_nodes(increments)
         # Sampled input is fitted before the kernel compiles: bad data is reported in a second, not after it.
         self._plan = EffectPlan(scene)
         self._keys = self._plan.keys(scene.seed)
@@ -40,7 +43,7 @@ class Simulation:
         self.temperature = "temperature" in scene.effects
         self._position = self._series(scene.trajectory, 3 if scene.attitude_mode == "tangent" else 2, "trajectory")
         self._euler = self._series(scene.attitude, 2, "attitude")
-        self.kernel = compile_kernel(scene, attitude=attitude, truth=truth)
+        self.kernel = compile_kernel(scene, attitude=attitude, truth=truth, increments=self.increments)
         # Tangent attitude holds the last defined heading (cos, sin) and pitch (cos, sin) across blocks.
         h = scene.initial_heading_rad
         self._hold = np.array([np.cos(h), np.sin(h), 1.0, 0.0])
@@ -48,7 +51,7 @@ class Simulation:
 
     def fresh(self) -> "Simulation":
         """A new simulation of the same scene and outputs, at the run's start (the kernel is not recompiled)."""
-        return Simulation(self.scene, attitude=self.attitude, truth=self.truth)
+        return Simulation(self.scene, attitude=self.attitude, truth=self.truth, increments=self.increments)
 
     def _reset_state(self) -> None:
         self._state = self._plan.initial_state(self.scene.seed)
@@ -67,7 +70,7 @@ class Simulation:
         return found
 
     @staticmethod
-    def trial(kernel, scene: Scene, attitude: bool, truth: bool) -> None:
+    def trial(kernel, scene: Scene, attitude: bool, truth: bool, increments: int = 0) -> None:
         """Call a freshly loaded kernel on no sample with the argument types `block` uses (numba compiles on
         the first call; the cache publishes only compiled kernels)."""
         n_imu = len(scene.imus)
@@ -79,7 +82,8 @@ class Simulation:
                plan.keys(0), plan.initial_state(0), np.zeros((n_imu, 0, 3)), np.zeros((n_imu, 0, 3)),
                np.zeros((n_imu, 0, 4)) if attitude else _EMPTY3,
                *([np.zeros((0, 3))] * 5 if truth else [_EMPTY2] * 5),
-               *([np.zeros((n_imu, 0, 3))] * 2 if truth and plan.bias_truth else [_EMPTY3] * 2))
+               *([np.zeros((n_imu, 0, 3))] * 2 if truth and plan.bias_truth else [_EMPTY3] * 2),
+               *([np.zeros((n_imu, 0, 3))] * 2 if increments else []))
 
     @staticmethod
     def _series(part, order: int, where: str):
@@ -119,10 +123,7 @@ class Simulation:
         n_imu = len(self.scene.imus)
         t = self.times(k0, n)
         if out is None:
-            out = SampleBlock(k0=k0, t_s=t, accel=np.empty((n_imu, n, 3)), gyro=np.empty((n_imu, n, 3)),
-                              quat=np.empty((n_imu, n, 4)) if self.attitude else None,
-                              truth=self._new_truth(n) if self.truth else None,
-                              temperature_c=np.empty((n_imu, n)) if self.temperature else None)
+            out = self._new_block(k0, t)
         else:
             out.k0 = k0
             out.t_s[:] = t
@@ -133,6 +134,15 @@ class Simulation:
             for m, imu in enumerate(self.scene.imus):
                 out.temperature_c[m] = profile(imu.values, t)
         return out
+
+    def _new_block(self, k0: int, t: np.ndarray) -> SampleBlock:
+        n_imu, n = len(self.scene.imus), len(t)
+        return SampleBlock(k0=k0, t_s=t, accel=np.empty((n_imu, n, 3)), gyro=np.empty((n_imu, n, 3)),
+                           quat=np.empty((n_imu, n, 4)) if self.attitude else None,
+                           truth=self._new_truth(n) if self.truth else None,
+                           temperature_c=np.empty((n_imu, n)) if self.temperature else None,
+                           dtheta=np.empty((n_imu, n, 3)) if self.increments else None,
+                           dvel=np.empty((n_imu, n, 3)) if self.increments else None)
 
     def _new_truth(self, n: int) -> dict:
         truth = {k: np.empty((n, 3)) for k in TRUTH_KEYS}
@@ -146,8 +156,9 @@ class Simulation:
         quat = out.quat if self.attitude else _EMPTY3
         tr = [out.truth[k] for k in TRUTH_KEYS] if self.truth else [_EMPTY2] * 5
         bias = [out.truth[k] for k in BIAS_TRUTH_KEYS] if self.bias_truth else [_EMPTY3] * 2
+        increments = [out.dtheta, out.dvel] if self.increments else []
         self.kernel(np.int64(k0), np.int64(n), np.int64(s0), mot, att, self._hold, self._keys, self._state,
-                    out.accel, out.gyro, quat, *tr, *bias)
+                    out.accel, out.gyro, quat, *tr, *bias, *increments)
         self._next = s0 + n
 
     def _replay_to(self, s0: int) -> None:
@@ -155,16 +166,11 @@ class Simulation:
         if s0 < self._next:
             self._reset_state()
             self._hold[:] = [np.cos(self.scene.initial_heading_rad), np.sin(self.scene.initial_heading_rad), 1.0, 0.0]
-        n_imu = len(self.scene.imus)
         while self._next < s0:
             n = min(_REPLAY_BLOCK, s0 - self._next)
             k = self._next % self.n_samples    # the motion a looped run had at that run sample
             n = min(n, self.n_samples - k)
-            scratch = SampleBlock(k0=k, t_s=self.times(k, n), accel=np.empty((n_imu, n, 3)),
-                                  gyro=np.empty((n_imu, n, 3)),
-                                  quat=np.empty((n_imu, n, 4)) if self.attitude else None,
-                                  truth=self._new_truth(n) if self.truth else None)
-            self._call(k, n, self._next, scratch)
+            self._call(k, n, self._next, self._new_block(k, self.times(k, n)))
 
     def _evaluate(self, series, k0: int, n: int, s0: int):
         if series is None:
@@ -172,9 +178,17 @@ class Simulation:
         fitted, order = series
         # Relative to the data's first stamp: an absolute t = 1e7 s carries 1.9e-9 s of rounding.
         tau = (self.scene.t0_s - fitted.t_start) + (k0 + np.arange(n, dtype=np.float64)) / self.scene.rate_hz
+        clk = clk_prev = np.zeros(n)
         if "clock" in self.scene.effects:   # the actual sampling instants, as the kernel's clock lines give them
             from imu_emulator.effects.clock import offsets
-            tau = tau + offsets(self.scene, self.scene.seed, k0, s0, n) / self.scene.rate_hz
+            clk = offsets(self.scene, self.scene.seed, k0, s0, n)
+            clk_prev = offsets(self.scene, self.scene.seed, k0 - 1, s0 - 1, n) if self.increments else clk
+        if self.increments:   # the kernel reads node q of sample j at n + j * nodes + q
+            from imu_emulator.increments import node_offsets
+            nodes = tau[:, None] + node_offsets(self.increments, clk, clk_prev) / self.scene.rate_hz
+            tau = np.concatenate([tau + clk / self.scene.rate_hz, nodes.reshape(-1)])
+        else:
+            tau = tau + clk / self.scene.rate_hz
         return np.ascontiguousarray(fitted.evaluate_relative(tau, order))
 
     def _check_finite(self, acc, gyro, k0: int) -> None:
@@ -198,13 +212,8 @@ class Simulation:
     def run(self, block_size: int = 65536, progress=None) -> SampleBlock:
         """The whole scene in one SampleBlock; the kernel writes straight into the full arrays."""
         n_total = self.n_samples
-        n_imu = len(self.scene.imus)
-        check_memory(n_total, n_imu, self.attitude, self.truth, "simulate")
-        whole = SampleBlock(k0=0, t_s=np.empty(n_total), accel=np.empty((n_imu, n_total, 3)),
-                            gyro=np.empty((n_imu, n_total, 3)),
-                            quat=np.empty((n_imu, n_total, 4)) if self.attitude else None,
-                            truth=self._new_truth(n_total) if self.truth else None,
-                            temperature_c=np.empty((n_imu, n_total)) if self.temperature else None)
+        check_memory(n_total, len(self.scene.imus), self.attitude, self.truth, "simulate")
+        whole = self._new_block(0, np.empty(n_total))
         for k0 in range(0, n_total, block_size):
             self.block(k0, min(block_size, n_total - k0), out=whole.view(k0, min(k0 + block_size, n_total)))
             if progress is not None:
@@ -213,6 +222,6 @@ class Simulation:
         return whole
 
 
-def simulate(scene: Scene, truth: bool = False) -> SampleBlock:
-    """Python API: all samples of a scene."""
-    return Simulation(scene, attitude=True, truth=truth).run()
+def simulate(scene: Scene, truth: bool = False, increments: int = 0) -> SampleBlock:
+    """Python API: all samples of a scene (with `increments` Gauss-Legendre nodes: dtheta and dvel too)."""
+    return Simulation(scene, attitude=True, truth=truth, increments=increments).run()
