@@ -152,3 +152,104 @@ def test_kernel_without_increments_is_unchanged_and_with_them_names_the_outputs(
     on = generate_source(sc, True, False, DEFAULT_NODES)
     assert "out_dtheta" not in off and "inc_" not in off
     assert "out_dtheta, out_dvel" in on and f"for q in range({DEFAULT_NODES})" in on
+
+
+# --- sensor errors on the increments (module docstring of imu_emulator.increments) -----------------------
+
+def _pair(effects, gyro=None, accel=None, truth=False, seed=None, **imu):
+    """The same motion without and with the given sensor-stage effects."""
+    clean = Simulation(scene(), attitude=False, increments=DEFAULT_NODES).run()
+    sc = scene(effects=("gravity", "lever_arm", "mounting", *effects), seed=seed,
+               imu={"gyro": dict(gyro or {}), "accel": dict(accel or {}), **imu})
+    return clean, Simulation(sc, attitude=False, truth=truth, increments=DEFAULT_NODES).run()
+
+
+def test_deterministic_errors_apply_to_the_increment_vectors():
+    # closed form: Δθ' = (I + S + M) Δθ + b T + G Δv, Δv' = (I + S + M) Δv + b T, T = 1/rate
+    s_g, mis_g = np.array([500e-6, -300e-6, 1e-3]), np.array([[0, 1e-3, -2e-3], [5e-4, 0, 1.5e-3], [-1e-3, 2e-3, 0]])
+    b_g, b_a, s_a, g_sens = np.array([0.01, -0.02, 0.005]), np.array([0.1, 0.05, -0.2]), 0.003, 2e-3
+    clean, out = _pair(("bias", "scale_factor", "misalignment", "g_sensitivity"),
+                       gyro={"bias": b_g.tolist(), "scale_factor": s_g.tolist(), "misalignment": mis_g.tolist(),
+                             "g_sensitivity": g_sens},
+                       accel={"bias": b_a.tolist(), "scale_factor": s_a})
+    th, dv = clean.dtheta[0], clean.dvel[0]
+    want_th = th @ (np.eye(3) + np.diag(s_g) + mis_g).T + b_g / RATE + g_sens * dv
+    want_dv = dv @ ((1 + s_a) * np.eye(3)).T + b_a / RATE
+    np.testing.assert_allclose(out.dtheta[0], want_th, rtol=0, atol=1e-12 * np.abs(want_th).max())
+    np.testing.assert_allclose(out.dvel[0], want_dv, rtol=0, atol=1e-12 * np.abs(want_dv).max())
+
+
+def test_stateful_errors_add_the_realized_bias_times_the_interval_and_leave_the_samples_alone():
+    gyro = {"bias": 0.01, "turn_on_bias_sd": 0.02, "random_walk": 0.05, "bias_instability": 0.003}
+    accel = {"random_walk": 0.02, "bias_instability": 0.01, "bias_tc": 0.001}
+    effects = ("bias", "random_walk", "bias_instability", "temperature")
+    clean, out = _pair(effects, gyro=gyro, accel=accel, truth=True, seed=11, temperature_c="25 + 10*t")
+    np.testing.assert_allclose(out.dtheta[0] - clean.dtheta[0], out.truth["gyro_bias"][0] / RATE, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(out.dvel[0] - clean.dvel[0], out.truth["accel_bias"][0] / RATE, rtol=0, atol=1e-15)
+    # the increments' pass restores the state it advanced: the samples are those of a run without increments
+    sc = scene(effects=("gravity", "lever_arm", "mounting", *effects), seed=11,
+               imu={"gyro": gyro, "accel": accel, "temperature_c": "25 + 10*t"})
+    plain = Simulation(sc, attitude=False).run()
+    np.testing.assert_array_equal(out.gyro, plain.gyro)
+    np.testing.assert_array_equal(out.accel, plain.accel)
+
+
+def test_white_noise_on_an_increment_has_the_integrated_sigma():
+    n_sec, density = 200.0, 0.01        # 20 000 intervals per axis at 100 Hz
+    sc = scene(effects=("noise",), duration_s=n_sec, x="0", y="0", z="0", roll="0", pitch="0", yaw="0",
+               seed=5, imu={"gyro": {"noise_density": density}, "accel": {"noise_density": 2 * density}})
+    out = Simulation(sc, attitude=False, increments=2).run()
+    # white noise of density N integrated over T has sigma N sqrt(T). The sample standard deviation of n
+    # independent normals has relative standard error 1/sqrt(2(n - 1)) (chi-square); 60 000 values give
+    # 0.29 %, and 5 of those (1.4 %) bound a false failure below 1e-6.
+    tolerance = 5 / math.sqrt(2 * (out.dtheta[0].size - 1))
+    assert np.std(out.dtheta[0]) == pytest.approx(density * math.sqrt(1 / RATE), rel=tolerance)
+    assert np.std(out.dvel[0] - out.dvel[0].mean(axis=0)) == pytest.approx(   # gravity, mounted, is constant
+        2 * density * math.sqrt(1 / RATE), rel=tolerance)
+    # and the rate sample is the same draw: the increment over T divided by T
+    np.testing.assert_allclose(out.dtheta[0] * RATE, out.gyro[0], rtol=1e-12, atol=1e-15)
+
+
+# --- clock and sampled motion ---------------------------------------------------------------------------
+
+W_YAW, A_YAW = 2 * math.pi * 1.3, 0.3
+
+
+def _yaw_integral(t_end, t_start):
+    """∫ gyro z = A (sin w t_end − sin w t_start) for yaw = A sin(w t), 30 digits."""
+    with mpmath.workdps(30):
+        return np.array([float(A_YAW * (mpmath.sin(W_YAW * mpmath.mpf(b)) - mpmath.sin(W_YAW * mpmath.mpf(a))))
+                         for a, b in zip(t_start, t_end)])
+
+
+def _yaw_scene(clock):
+    return scene(effects=("clock",), x="0", y="0", z="0", roll="0", pitch="0", yaw=f"{A_YAW}*sin({W_YAW!r}*t)",
+                 imu={"mounting_rpy_deg": [0, 0, 0], **clock}, seed=3)
+
+
+def test_clock_error_integrates_between_the_actual_instants():
+    from imu_emulator.effects.clock import offsets
+    for clock in ({"clock_ppm": 200.0}, {"clock_jitter_s": 1e-4}):
+        sc = _yaw_scene(clock)
+        out = Simulation(sc, attitude=False, increments=DEFAULT_NODES).run()
+        n = out.dtheta.shape[1]
+        clk = offsets(sc, 3, -1, -1, n + 1)         # instants k = -1 .. n-1, run samples -1 .. n-1
+        instants = (np.arange(-1, n) + clk) / RATE
+        exact = _yaw_integral(instants[1:], instants[:-1])
+        np.testing.assert_allclose(out.dtheta[0, :, 2], exact, rtol=0, atol=1e-12 * A_YAW * W_YAW / RATE)
+        # consecutive intervals tile time: the sum is the integral from the first instant to the last
+        assert float(np.sum(out.dtheta[0, :, 2])) == pytest.approx(
+            float(_yaw_integral(instants[-1:], instants[:1])[0]), abs=1e-12)
+
+
+def test_sampled_motion_increments_follow_the_fitted_curve():
+    # The sampled path is fitted (spline5) to data of the symbolic twin; its rates converge to the twin's,
+    # and so must its increments, to the same accuracy times the interval (they read node rows of `mot`).
+    from test_kinematics import _sampled_scene, _symbolic_twin
+    truth = Simulation(_symbolic_twin(), attitude=False, increments=3).run()
+    sampled = Simulation(_sampled_scene(400, "spline5"), attitude=False, increments=3).run()
+    interior = slice(100, -100)
+    rate_error = np.abs(sampled.accel[0, interior] - truth.accel[0, interior]).max()
+    inc_error = np.abs(sampled.dvel[0, interior] - truth.dvel[0, interior]).max()
+    assert inc_error <= 2 * rate_error / 1000
+    assert np.abs(truth.dvel[0] - truth.accel[0] / 1000).max() > 10 * inc_error   # not the rate times dt
