@@ -31,6 +31,7 @@ class Samples:
     pressure_pa:    (n,) static pressure, pascal                    (optional)
     delta_theta:    (n, 3) integrated rate over the sample period, rad      (optional)
     delta_velocity: (n, 3) integrated specific force over the period, m/s   (optional)
+    delta_time_s:   (n,) the period the two above span, s (the sensor's own clock)  (optional)
     position_llh:   (n, 3) geodetic latitude, longitude (deg), height above the WGS-84 ellipsoid (m)  (optional)
     velocity_ned:   (n, 3) velocity north, east, down, m/s                  (optional)
     linear_accel_ned: (n, 3) acceleration without gravity, north, east, down, m/s^2  (optional)
@@ -48,6 +49,7 @@ class Samples:
     pressure_pa: np.ndarray | None = None
     delta_theta: np.ndarray | None = None
     delta_velocity: np.ndarray | None = None
+    delta_time_s: np.ndarray | None = None
     position_llh: np.ndarray | None = None
     velocity_ned: np.ndarray | None = None
     linear_accel_ned: np.ndarray | None = None
@@ -100,11 +102,31 @@ class Samples:
                 raise EncodeError(f"non-finite value in field '{name}' at {where}")
 
 
+#: the integrated outputs (an encoder whose fields read them says so with `uses_increments = True`)
+INCREMENT_FIELDS = ("delta_theta", "delta_velocity")
+
 _FIELD_WIDTHS = {
     "accel": 3, "gyro": 3, "mag": 3, "quat": 4, "euler": 3,
-    "temperature_c": 0, "pressure_pa": 0, "delta_theta": 3, "delta_velocity": 3,
+    "temperature_c": 0, "pressure_pa": 0, "delta_theta": 3, "delta_velocity": 3, "delta_time_s": 0,
     "position_llh": 3, "velocity_ned": 3, "linear_accel_ned": 3,
 }
+
+
+def integration_intervals(samples: Samples, period_s: float | None, last_time_ns: int | None) -> np.ndarray:
+    """(n, 1) the period each sample's increments span, s: Samples.delta_time_s when given, else a fixed
+    period, else the time since the previous sample (`last_time_ns`, the previous block's last; 0 for the
+    very first sample, which formats define as "no integral")."""
+    n = len(samples)
+    if samples.delta_time_s is not None:
+        return samples.delta_time_s.reshape(n, 1)
+    if period_s is not None:
+        return np.full((n, 1), period_s)
+    interval = np.empty((n, 1))
+    if n:
+        first = samples.time_ns[0] if last_time_ns is None else last_time_ns
+        interval[0, 0] = (samples.time_ns[0] - first) * 1e-9
+        np.multiply(np.diff(samples.time_ns), 1e-9, out=interval[1:, 0])
+    return interval
 
 
 @dataclass

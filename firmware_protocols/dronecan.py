@@ -33,11 +33,13 @@ Wire-level choices, each matching pydronecan (the oracle):
 - The timestamp is floor(time_ns / 1000) µs; negative times saturate to 0 (counted). int64 nanoseconds
   never reach 2^56 µs, so the DSDL's `truncated` (wrapping) cast never applies.
 
-Integrals (RawIMU): integration_interval is the sample period: `sample_period_s` when given, otherwise the
-time since the previous sample of this stream (remembered across encode calls). The first sample of a
-stream without a known period gets interval 0, which the DSDL defines as "integrals not available".
-rate_gyro_integral / accelerometer_integral are Samples.delta_theta / delta_velocity when the block has
-them, otherwise latest × interval (the rate held constant over the period).
+Integrals (RawIMU): integration_interval is Samples.delta_time_s when given (the emulator's streams give
+the nominal sample period with the increments), else `sample_period_s`, else the time since the previous
+sample of this stream (remembered across encode calls). The first sample of a stream without a known period
+gets interval 0, which the DSDL defines as "integrals not available". rate_gyro_integral /
+accelerometer_integral are Samples.delta_theta / delta_velocity when the block has them (the emulator's
+streams always do: imu_emulator.increments), otherwise latest × interval (the rate held constant over the
+period: what a caller without increments gets).
 """
 from __future__ import annotations
 
@@ -47,7 +49,7 @@ import numba
 import numpy as np
 
 from firmware_protocols.base import (CLASSIC_FRAME_DTYPE, FD_FRAME_DTYPE, CanStreamDecoder, DecoderStats, EncodeError,
-                                     Packet, SaturationStats, Samples, empty_frames)
+                                     Packet, SaturationStats, Samples, empty_frames, integration_intervals)
 from firmware_protocols.crc import crc16_ccitt, crc16_ccitt_bytes
 from firmware_protocols.registry import FormatInfo, register
 
@@ -367,6 +369,7 @@ class _DroneCanEncoder:
 
 class RawImuEncoder(_DroneCanEncoder):
     message = RAW_IMU
+    uses_increments = True     # rate_gyro_integral, accelerometer_integral
 
     def __init__(self, sample_period_s: float | None = None, **options):
         super().__init__(**options)
@@ -375,20 +378,11 @@ class RawImuEncoder(_DroneCanEncoder):
         self.sample_period_s = sample_period_s
         self._last_time_ns: int | None = None
 
-    def _intervals(self, time_ns: np.ndarray) -> np.ndarray:
-        if self.sample_period_s is not None:
-            return np.full((time_ns.shape[0], 1), self.sample_period_s)
-        interval = np.empty((time_ns.shape[0], 1))
-        if time_ns.shape[0]:
-            first = time_ns[0] if self._last_time_ns is None else self._last_time_ns
-            interval[0, 0] = (time_ns[0] - first) * 1e-9
-            np.multiply(np.diff(time_ns), 1e-9, out=interval[1:, 0])
-        return interval
-
     def _program(self, samples: Samples):
         given = samples.delta_theta is not None and samples.delta_velocity is not None
         message = RAW_IMU if given else RAW_IMU_FROM_RATES
-        sources = (self._intervals(samples.time_ns), samples.gyro, samples.accel,
+        interval = integration_intervals(samples, self.sample_period_s, self._last_time_ns)
+        sources = (interval, samples.gyro, samples.accel,
                    samples.delta_theta if given else samples.gyro,
                    samples.delta_velocity if given else samples.accel)
         return message, sources

@@ -38,7 +38,7 @@ from itertools import accumulate
 
 import numpy as np
 
-from firmware_protocols.base import DecoderStats, Packet, SaturationStats, Samples, SerialBatch
+from firmware_protocols.base import INCREMENT_FIELDS, DecoderStats, Packet, SaturationStats, Samples, SerialBatch
 from firmware_protocols.registry import FormatInfo, register
 from firmware_protocols.packing import (CHECKSUM_FLETCHER16, FROM_CONSTANT, FROM_FIELD, FROM_TIME_DIV,
                                       FROM_TIME_REM_S, KIND_F32, KIND_F64, KIND_SIZE, KIND_U8, KIND_U16, NEED_MORE,
@@ -120,6 +120,7 @@ class MipEncoder:
         table = DATA_SETS[descriptor_set]
         self.descriptor_set = descriptor_set
         self.fields = parse_names(fields, table, "fields")
+        self.uses_increments = any(table[name].source in INCREMENT_FIELDS for name in self.fields)
         gps_week_offset, gps_flags = as_int(gps_week_offset), as_int(gps_flags)
         if not 0 <= gps_flags <= 0xFFFF:
             raise ValueError(f"gps_flags: must fit in 16 bits, got {gps_flags!r}")

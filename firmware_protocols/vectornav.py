@@ -24,11 +24,18 @@ What the encoder can fill, wire units, and the Samples field each comes from:
     Temp            f32 degC        temperature_c                             default 25
     Pres            f32 kPa         pressure_pa / 1000                        default 101.325
     Common.Imu      UncompAccel + UncompGyro;  Common.MagPres  Mag + Temp + Pres
+    IMU.DeltaTheta  f32 s + 3 x f32 deg   delta_time_s (else `sample_period_s`, else the time since the
+                                    previous sample), delta_theta (required: no rate x dt stand-in)
+    IMU.DeltaVel    3 x f32 m/s     delta_velocity (required)
+    Common.DeltaTheta  IMU.DeltaTheta + IMU.DeltaVel
+
+A real unit resets its integrals at each output, so with an output divider its increments span several IMU
+samples; the encoder sends what it is given, one sample's increments per packet.
 
 The emulator has one accel/gyro/mag measurement, so the "uncompensated" fields carry the same values
 as the compensated ones. Every f32 saturates at +-float32 max (counted per wire field in
 `encoder.saturated`, e.g. "imu.accel"); non-finite input raises EncodeError naming field and sample.
-Fields the table knows but the emulator has no data for (TimeGps, Position, DeltaTheta, ...) can be
+Fields the table knows but the emulator has no data for (TimeGps, Position, Dcm, ...) can be
 decoded (as raw bytes) but not selected for encoding.
 
 ASCII number formats are the device's own, read off published output with valid checksums: VectorNav's
@@ -46,7 +53,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from firmware_protocols.base import DecoderStats, EncodeError, Packet, SaturationStats, Samples, SerialBatch
+from firmware_protocols.base import (DecoderStats, EncodeError, Packet, SaturationStats, Samples, SerialBatch,
+                                     integration_intervals)
 from firmware_protocols.crc import crc16_ccitt, crc16_ccitt_bytes
 from firmware_protocols.registry import FormatInfo, register
 
@@ -62,7 +70,10 @@ _SOURCE_ID = {name: i for i, name in enumerate(_SOURCES)}
 # Navigation and status quantities: packed side by side into the kernel's one "extra" matrix (only when a
 # layout asks for them). Name -> width. Samples fields where Samples has them; the rest are constants.
 _EXTRA_WIDTH = {"position_llh": 3, "velocity_ned": 3, "linear_accel_ned": 3, "ypr_u": 3, "ins_status": 1,
-                "pos_u": 1, "vel_u": 1}
+                "pos_u": 1, "vel_u": 1, "delta_time": 1, "delta_theta": 3, "delta_velocity": 3}
+#: extras without a default: the caller must give them (the integrated outputs; a rate times the period would
+#: be an approximation the field's name does not announce)
+_REQUIRED = {"delta_theta", "delta_velocity"}
 _WIRE_CODE = {"f": 0, "Q": 1, "d": 2, "H": 3}
 # Documented defaults for optional Samples fields a selected wire field needs (one row, broadcast).
 _DEFAULTS = {
@@ -128,6 +139,10 @@ _YPR_U = (_q("ypr_u"),)
 _INS_STATUS = (_q("ins_status", 1, wire="H"),)
 _POS_U = (_q("pos_u", 1),)
 _VEL_U = (_q("vel_u", 1),)
+# DeltaTheta: dtime (s, the period integrated over) then the angles in DEGREES; DeltaVel m/s (vnproglib's
+# VnUartPacket parsing of IMUGROUP_DELTATHETA / DELTAVEL; VectorNav's field description via INSTINCT).
+_DTHETA = (_q("delta_time", 1, label="dtime"), _q("delta_theta", scale=_DEG, label="dtheta"))
+_DVEL = (_q("delta_velocity"),)
 
 
 def _lbl(quantities, label):
@@ -143,14 +158,14 @@ _GROUP_TABLE = (
         ("Quaternion", 16, _QUAT), ("AngularRate", 12, _GYRO), ("Position", 24, ()), ("Velocity", 12, ()),
         ("Accel", 12, _ACCEL), ("Imu", 24, _lbl(_ACCEL, "accel") + _lbl(_GYRO, "gyro")),
         ("MagPres", 20, _lbl(_MAG, "mag") + _lbl(_TEMP, "temperature_c") + _lbl(_PRES, "pressure_pa")),
-        ("DeltaTheta", 28, ()), ("InsStatus", 2, ()), ("SyncInCnt", 4, ()), ("TimeGpsPps", 8, ())]),
+        ("DeltaTheta", 28, _DTHETA + _lbl(_DVEL, "dvel")), ("InsStatus", 2, ()), ("SyncInCnt", 4, ()), ("TimeGpsPps", 8, ())]),
     ("time", 1, [
         ("TimeStartup", 8, _TIME), ("TimeGps", 8, ()), ("GpsTow", 8, ()), ("GpsWeek", 2, ()),
         ("TimeSyncIn", 8, ()), ("TimeGpsPps", 8, ()), ("TimeUtc", 8, ()), ("SyncInCnt", 4, ()),
         ("SyncOutCnt", 4, ()), ("TimeStatus", 1, ())]),
     ("imu", 2, [
         ("ImuStatus", 2, ()), ("UncompMag", 12, _MAG), ("UncompAccel", 12, _ACCEL), ("UncompGyro", 12, _GYRO),
-        ("Temp", 4, _TEMP), ("Pres", 4, _PRES), ("DeltaTheta", 16, ()), ("DeltaVel", 12, ()), ("Mag", 12, _MAG),
+        ("Temp", 4, _TEMP), ("Pres", 4, _PRES), ("DeltaTheta", 16, _DTHETA), ("DeltaVel", 12, _DVEL), ("Mag", 12, _MAG),
         ("Accel", 12, _ACCEL), ("AngularRate", 12, _GYRO), ("SensSat", 2, ()), ("Raw", 40, ())]),
     # Attitude bits 9-11 exist on some units but their names and sizes vary by library version.
     ("attitude", 4, [
@@ -350,8 +365,12 @@ def _pack(out, size, header, items, scales, time_ns, accel, gyro, mag, quat, eul
 class BinaryEncoder:
     """Samples -> VectorNav binary packets for one output configuration (`fields`, see parse_fields)."""
 
-    def __init__(self, fields=None):
+    def __init__(self, fields=None, sample_period_s: float | None = None):
         self.layout = parse_fields(fields)
+        if sample_period_s is not None and not (np.isfinite(sample_period_s) and sample_period_s > 0):
+            raise ValueError(f"sample_period_s must be a positive number, got {sample_period_s}")
+        self.sample_period_s = sample_period_s
+        self._last_time_ns = None
         undecodable = [f.key for f in self.layout.fields if not f.quantities]
         if undecodable:
             raise ValueError(f"VectorNav fields: the emulator has no data for {', '.join(undecodable)}")
@@ -375,6 +394,7 @@ class BinaryEncoder:
         self._header = np.frombuffer(self.layout.header, dtype=np.uint8).copy()
         self._sources = sorted({q.source for f in self.layout.fields for q in f.quantities}
                                - {"time_ns"} - set(_EXTRA_WIDTH))
+        self.uses_increments = bool(_REQUIRED & set(self._extra_base))
         self._defaults = {name: np.array([value], dtype=np.float64) for name, value in _DEFAULTS.items()}
         self._unused = np.zeros((1, 4), dtype=np.float64)
         self._offsets = np.zeros(1, dtype=np.int64)   # reused while block sizes repeat (the live path)
@@ -398,6 +418,11 @@ class BinaryEncoder:
             parts = []
             for name in self._extra_base:
                 value = getattr(samples, name, None)
+                if name == "delta_time":
+                    value = integration_intervals(samples, self.sample_period_s, self._last_time_ns)
+                elif value is None and name in _REQUIRED:
+                    raise EncodeError(f"VectorNav fields {', '.join(self._fields_reading(name))}: the samples "
+                                      f"carry no {name} (integrated outputs: run with increments)")
                 parts.append(self._defaults[name] if value is None else value.reshape(len(samples), -1))
             if any(part.shape[0] != 1 for part in parts):
                 steps[_SOURCE_ID["extra"]] = 1
@@ -420,7 +445,12 @@ class BinaryEncoder:
         if len(self._offsets) != n + 1:
             self._offsets = np.arange(n + 1, dtype=np.int64) * size
             self._offsets.flags.writeable = False
+        if n:
+            self._last_time_ns = int(samples.time_ns[-1])
         return SerialBatch(out.tobytes(), self._offsets)
+
+    def _fields_reading(self, source: str) -> list[str]:
+        return [f.key for f in self.layout.fields if any(q.source == source for q in f.quantities)]
 
 
 # --- binary decoder --------------------------------------------------------------------------

@@ -78,7 +78,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from firmware_protocols.base import (DecoderStats, Packet, SaturationStats, Samples,
+from firmware_protocols.base import (INCREMENT_FIELDS, DecoderStats, Packet, SaturationStats, Samples,
                                      SerialBatch)
 from firmware_protocols.packing import (CHECKSUM_XBUS, FROM_CONSTANT, FROM_COUNTER, FROM_FIELD, FROM_TIME_DIV,
                                         KIND_F32, KIND_F64, KIND_FP1220, KIND_FP1632, KIND_SIZE, KIND_U16, KIND_U32,
@@ -209,6 +209,7 @@ class XsensEncoder:
             columns += self._columns(name, len(header) + offset, kind, width)
         self._packer = FixedPacketPacker(header + bytes(payload) + b"\x00", columns, CHECKSUM_XBUS, _DEFAULTS)
         self._wants_delta_q = "delta_q" in self.items
+        self.uses_increments = self._wants_delta_q or any(ITEMS[n].source in INCREMENT_FIELDS for n in self.items)
 
     def _columns(self, name: str, position: int, kind: int, width: int) -> list:
         if name == "packet_counter":

@@ -13,6 +13,8 @@ from imu_emulator.samples import SampleBlock, concatenate
 CSV_COLUMNS = ("t", "imu", "ax", "ay", "az", "gx", "gy", "gz")
 TRUTH_COLUMNS = ("px", "py", "pz", "vx", "vy", "vz", "roll", "pitch", "yaw", "wbx", "wby", "wbz")
 BIAS_COLUMNS = ("bax", "bay", "baz", "bgx", "bgy", "bgz")   # realized bias of each IMU (sensor errors on)
+#: integrated outputs over (t_k-1, t_k] (imu_emulator.increments), rad and m/s, after the gyro columns
+INCREMENT_COLUMNS = ("dtheta_x", "dtheta_y", "dtheta_z", "dvel_x", "dvel_y", "dvel_z")
 SUFFIXES = (".csv", ".npz", ".mcap")
 
 
@@ -30,8 +32,10 @@ class Writer(FinishOnExit):
     The output file is created at construction (an unwritable path fails before the run), and appears at
     its path on close(); discard() (or close() after an exception) leaves nothing behind."""
 
-    def __init__(self, path: str | Path, imu_names, truth: bool, bias_truth: bool = False, temperature: bool = False):
+    def __init__(self, path: str | Path, imu_names, truth: bool, bias_truth: bool = False, temperature: bool = False,
+                 increments: bool = False):
         self.path = check_path(path)
+        self.increments = increments
         self.imu_names = list(imu_names)
         self.truth = truth
         self.bias_truth = truth and bias_truth
@@ -40,14 +44,16 @@ class Writer(FinishOnExit):
         self.csv = self.path.suffix.lower() == ".csv"
         self._out = AtomicOutput(self.path, "w" if self.csv else "wb")
         if self.csv:
-            self._out.write(",".join(CSV_COLUMNS + (("temp_c",) if temperature else ()) + (TRUTH_COLUMNS if truth else ())
-                                      + (BIAS_COLUMNS if self.bias_truth else ())) + "\n")
+            self._out.write(",".join(CSV_COLUMNS + (INCREMENT_COLUMNS if increments else ())
+                                     + (("temp_c",) if temperature else ()) + (TRUTH_COLUMNS if truth else ())
+                                     + (BIAS_COLUMNS if self.bias_truth else ())) + "\n")
 
     def write(self, block: SampleBlock) -> None:
         if not self.csv:
             self.blocks.append(block)
             return
-        self._out.write(csv_rows(block, self.imu_names, self.truth, self.bias_truth, self.temperature))
+        self._out.write(csv_rows(block, self.imu_names, self.truth, self.bias_truth, self.temperature,
+                                 self.increments))
 
     def close(self) -> None:
         """Finish the file and put it at its path."""
@@ -70,6 +76,8 @@ class Writer(FinishOnExit):
             arrays["quat"] = data.quat
         if data.temperature_c is not None:
             arrays["temperature_c"] = data.temperature_c
+        if self.increments:
+            arrays.update(dtheta=data.dtheta, dvel=data.dvel)
         if self.truth:
             arrays.update(data.truth)
         try:
@@ -78,17 +86,21 @@ class Writer(FinishOnExit):
             raise output_error(self.path, exc) from None
 
 
-def open_writer(path: str | Path, imu_names, truth: bool, bias_truth: bool = False, temperature: bool = False):
+def open_writer(path: str | Path, imu_names, truth: bool, bias_truth: bool = False, temperature: bool = False,
+                increments: bool = False):
     """The writer for the output file's suffix: .mcap is a ROS 2 bag (imu_emulator.output_mcap; it carries no
-    temperature)."""
+    temperature, and no increments: sensor_msgs/Imu has no field for them)."""
     if Path(path).suffix.lower() == ".mcap":
+        if increments:
+            raise ImuEmulatorError(f"{path}: --increments: a ROS 2 bag's sensor_msgs/Imu has no field for "
+                                   "integrated outputs; write .csv or .npz")
         from imu_emulator.output_mcap import McapWriter
         return McapWriter(check_path(path), imu_names, truth)
-    return Writer(path, imu_names, truth, bias_truth=bias_truth, temperature=temperature)
+    return Writer(path, imu_names, truth, bias_truth=bias_truth, temperature=temperature, increments=increments)
 
 
 def csv_rows(block: SampleBlock, imu_names, truth: bool, bias_truth: bool = False,
-             temperature: bool = False) -> str:
+             temperature: bool = False, increments: bool = False) -> str:
     """The CSV rows of one block (no header): one row per IMU per sample, sample k of every IMU before sample k+1.
 
     Numbers are the shortest text that reads back as the same double (pyarrow's CSV writer, double-conversion's
@@ -106,6 +118,8 @@ def csv_rows(block: SampleBlock, imu_names, truth: bool, bias_truth: bool = Fals
                "imu": pa.DictionaryArray.from_arrays(np.tile(np.arange(n_imu, dtype=np.int32), n),
                                                      pa.array(list(imu_names)))}
     numeric = [interleaved(block.accel), interleaved(block.gyro)]
+    if increments:
+        numeric += [interleaved(block.dtheta), interleaved(block.dvel)]
     if temperature:
         numeric.append(interleaved(block.temperature_c[:, :, None]))
     if truth:
@@ -114,7 +128,8 @@ def csv_rows(block: SampleBlock, imu_names, truth: bool, bias_truth: bool = Fals
     if bias_truth:
         numeric += [interleaved(block.truth["accel_bias"]), interleaved(block.truth["gyro_bias"])]
     values = np.hstack(numeric)
-    names = (CSV_COLUMNS[2:] + (("temp_c",) if temperature else ()) + (TRUTH_COLUMNS if truth else ())
+    names = (CSV_COLUMNS[2:] + (INCREMENT_COLUMNS if increments else ()) + (("temp_c",) if temperature else ())
+             + (TRUTH_COLUMNS if truth else ())
              + (BIAS_COLUMNS if bias_truth else ()))
     for i, name in enumerate(names):
         columns[name] = values[:, i]

@@ -33,10 +33,10 @@ class CompileStatus:
     terminal ("compiling kernel for scene X (first run) … 3.5 s", updated in place) and the total when done. Like
     the progress bar, silent when stderr is not a terminal (logs, pipes, tests: errors stay one line) or --quiet."""
 
-    def __init__(self, scene, attitude: bool, truth: bool, quiet: bool = False):
+    def __init__(self, scene, attitude: bool, truth: bool, quiet: bool = False, increments: int = 0):
         from imu_emulator.kernel import cached_kernel
         self.active = (not quiet and sys.stderr.isatty()
-                       and not cached_kernel(scene, attitude=attitude, truth=truth)[1])
+                       and not cached_kernel(scene, attitude=attitude, truth=truth, increments=increments)[1])
         self.label = f"compiling kernel for scene {scene.path or '<in code>'} (first run) …"
         self._stop = None
 

@@ -177,6 +177,7 @@ class Stream:
         self.config = config
         self.imu_index = imu_index
         self.info = info
+        self.period_s = 1.0 / rate_hz
         self.spec = parse_target(config.target)   # malformed specs fail before anything is opened
         check_carries(self.spec, info.kind)
         self.capacity = link_capacity(self.spec, info.kind, config.target_options)
@@ -213,8 +214,13 @@ class Stream:
         i = self.imu_index
         # the simulated temperature (temperature effect) for formats that carry one
         temperature = None if block.temperature_c is None else block.temperature_c[i]
+        increments = {}
+        if block.dtheta is not None:   # over one sample period, by the sensor's own (nominal) clock
+            increments = {"delta_theta": block.dtheta[i], "delta_velocity": block.dvel[i],
+                          "delta_time_s": np.full(len(time_ns), self.period_s)}
         if self.device is None:
-            return Samples(time_ns, block.accel[i], block.gyro[i], quat=block.quat[i], temperature_c=temperature)
+            return Samples(time_ns, block.accel[i], block.gyro[i], quat=block.quat[i], temperature_c=temperature,
+                           **increments)
         # imported here: rotations pulls in numba, which every command would pay for at start-up otherwise
         from imu_emulator.rotations import quat_to_euler, quat_to_matrix
         # A device may be asked for any field its format knows at any moment: give it all we have.
@@ -227,7 +233,7 @@ class Stream:
                    "velocity_ned": to_ned(block.truth["velocity"], frame),
                    "linear_accel_ned": to_ned(specific_force, frame)}
         return Samples(time_ns, block.accel[i], block.gyro[i], quat=block.quat[i], euler=quat_to_euler(block.quat[i]),
-                       temperature_c=temperature, **nav)
+                       temperature_c=temperature, **nav, **increments)
 
     def encode(self, block, time_ns: np.ndarray) -> tuple[list, int]:
         """Per-sample prepared payloads for one block, and the saturation count after it. A device stream
@@ -741,6 +747,21 @@ def needs_truth(configs: list[StreamConfig]) -> bool:
         except KeyError:
             continue
         if config.device and info.device is not None and info.device_navigation:
+            return True
+    return False
+
+
+def needs_increments(configs: list[StreamConfig]) -> bool:
+    """Whether a stream's wire fields carry integrated outputs (then the simulation computes them): an encoder
+    whose selected fields read them, or a device of a format that has such fields (its driver may ask)."""
+    for config in configs:
+        try:
+            info = firmware_protocols.get(config.format)
+            device = config.device and info.device is not None
+            encoder = info.encoder() if device else info.encoder(**config.options)
+        except (KeyError, TypeError, ValueError):
+            continue    # build_streams reports it
+        if getattr(encoder, "uses_increments", False) or (device and hasattr(encoder, "uses_increments")):
             return True
     return False
 

@@ -7,6 +7,7 @@ import sys
 import threading
 
 from imu_emulator.commands.shared import load_scene_with_warnings, number
+from imu_emulator.increments import DEFAULT_NODES, MAX_NODES
 from imu_emulator.progress import CompileStatus, Progress
 
 
@@ -16,6 +17,9 @@ def register(subparsers) -> None:
     gen.add_argument("-o", "--output", required=True, help="output file, .csv, .npz or .mcap (ROS 2 bag)")
     gen.add_argument("--truth", action="store_true", help="add position, velocity, attitude and body rates "
                      "(and each IMU's realized bias when a bias effect is on)")
+    gen.add_argument("--increments", nargs="?", type=number(1, MAX_NODES, integer=True), const=DEFAULT_NODES,
+                     default=0, metavar="NODES", help="add the integrated outputs dtheta and dvel over each sample "
+                     f"interval (Gauss-Legendre quadrature with NODES nodes, default {DEFAULT_NODES})")
     gen.add_argument("--quiet", action="store_true", help="no progress bar or summary (warnings still show)")
     gen.add_argument("--allow-large", action="store_true", help="write a CSV larger than the free disk space")
     gen.add_argument("--block", type=number(1, 10_000_000, integer=True), default=65536, help=argparse.SUPPRESS)
@@ -36,12 +40,12 @@ def cmd_generate(args) -> int:
     from imu_emulator.kernel import EffectPlan
     bias_truth = EffectPlan(scene).bias_truth    # the realized-bias columns, known before compiling
     with open_writer(args.output, scene.imu_names, args.truth, bias_truth=bias_truth,
-                     temperature="temperature" in scene.effects) as writer:
+                     temperature="temperature" in scene.effects, increments=bool(args.increments)) as writer:
         check_output(scene, args.output, args.truth, args.allow_large)
         # a ROS Imu message has an orientation field: fill it from the sensor frame's attitude
         attitude = args.output.lower().endswith(".mcap")
-        with CompileStatus(scene, attitude=attitude, truth=args.truth, quiet=args.quiet):
-            sim = Simulation(scene, attitude=attitude, truth=args.truth)
+        with CompileStatus(scene, attitude=attitude, truth=args.truth, quiet=args.quiet, increments=args.increments):
+            sim = Simulation(scene, attitude=attitude, truth=args.truth, increments=args.increments)
         progress = Progress(args.quiet)
         total = sim.n_samples
         try:

@@ -96,7 +96,9 @@ def cmd_stream(args) -> int:
 def _stream(args, stats) -> None:
     from imu_emulator.progress import CompileStatus
     from imu_emulator.simulation import Simulation
-    from imu_emulator.streaming import RunOptions, StreamConfig, needs_truth, run_streams, streams_from_tables
+    from imu_emulator.increments import DEFAULT_NODES
+    from imu_emulator.streaming import (RunOptions, StreamConfig, needs_increments, needs_truth, run_streams,
+                                        streams_from_tables)
 
     scene = load_scene_with_warnings(args.scene)
     if args.duration is not None and round(args.duration * scene.rate_hz) < 1:
@@ -123,6 +125,7 @@ def _stream(args, stats) -> None:
                          count=args.count, quiet=args.quiet, allow_overload=args.allow_overload,
                          realtime=args.realtime, stats_json=stats)
     truth = needs_truth(configs)
-    with CompileStatus(scene, attitude=True, truth=truth, quiet=args.quiet):
-        sim = Simulation(scene, truth=truth)
+    increments = DEFAULT_NODES if needs_increments(configs) else 0
+    with CompileStatus(scene, attitude=True, truth=truth, quiet=args.quiet, increments=increments):
+        sim = Simulation(scene, truth=truth, increments=increments)
     run_streams(scene, sim, configs, options)

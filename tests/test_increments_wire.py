@@ -1,0 +1,179 @@
+"""Increments on the wire: `stream` compiles them for the formats whose fields carry them, and the fields
+decode (pydronecan; the vendors' layouts unpacked here with struct) to the analytic integrals.
+
+Motion with closed-form integrals (ENU, level): yaw = Ω t + A sin(w t), z = c t³, so the body rate is
+(0, 0, Ω + A w cos w t) and the specific force (0, 0, g + 6 c t):
+    Δθ_z = Ω T + A (sin w t_k − sin w t_k−1),    Δv_z = g T + 3 c (t_k² − t_k−1²),    x and y components 0.
+"""
+from __future__ import annotations
+
+import math
+import struct
+
+import can
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from imu_emulator.cli import main
+
+RATE, N = 200, 40
+OMEGA, A, W, C, G0 = 0.4, 0.3, 2 * math.pi * 1.5, 0.05, 9.80665
+F32 = 2.0 ** -23      # float32 relative rounding, twice over at most
+
+SCENE = f"""
+[scene]
+rate_hz = {RATE}
+duration_s = 1.0
+
+[trajectory]
+x = "0"
+y = "0"
+z = "{C}*t**3"
+
+[attitude]
+mode = "euler"
+roll = "0"
+pitch = "0"
+yaw = "{OMEGA}*t + {A}*sin({W!r}*t)"
+
+[[imu]]
+name = "imu0"
+
+[effects]
+gravity = true
+"""
+
+
+def analytic():
+    t = np.arange(N + 1, dtype=float) / RATE - 1.0 / RATE      # t_-1 .. t_N-1
+    dtheta = np.zeros((N, 3))
+    dvel = np.zeros((N, 3))
+    dtheta[:, 2] = OMEGA / RATE + A * np.diff(np.sin(W * t))
+    dvel[:, 2] = G0 / RATE + 3 * C * np.diff(t ** 2)
+    return dtheta, dvel
+
+
+def stream(tmp_path, fmt, target_suffix, *options):
+    scene = tmp_path / "scene.toml"
+    scene.write_text(SCENE)
+    target = tmp_path / f"out{target_suffix}"
+    args = ["stream", str(scene), "--format", fmt, "--to", f"file:{target}", "--speed", "0", "--count", str(N),
+            "--quiet", "--realtime", "off"]
+    for option in options:
+        args += ["--option", option]
+    assert main(args) == 0
+    return target
+
+
+def assert_f32_close(actual, expected, scale):
+    np.testing.assert_allclose(actual, expected, rtol=0, atol=2 * F32 * scale)
+
+
+def test_dronecan_rawimu_integrals_are_the_increments(tmp_path):
+    import dronecan
+    from dronecan.transport import Frame, Transfer
+    log = stream(tmp_path, "dronecan-rawimu", ".log")
+    frames = [m for m in can.LogReader(str(log))]
+    transfers, current = [], []
+    for message in frames:                           # tail byte: end of transfer bit 0x40
+        current.append(Frame(message.arbitration_id, bytearray(message.data)))
+        if message.data[-1] & 0x40:
+            transfer = Transfer()
+            transfer.from_frames(current)
+            transfers.append(transfer.payload)
+            current = []
+    assert len(transfers) == N
+    assert all(isinstance(p, type(dronecan.uavcan.equipment.ahrs.RawIMU())) for p in transfers)
+    dtheta, dvel = analytic()
+    got_th = np.array([list(p.rate_gyro_integral) for p in transfers])
+    got_dv = np.array([list(p.accelerometer_integral) for p in transfers])
+    assert_f32_close(got_th, dtheta, np.abs(dtheta).max())
+    assert_f32_close(got_dv, dvel, np.abs(dvel).max())
+    # the interval is the sample period from the first sample on (not 0, "no integral")
+    np.testing.assert_allclose([p.integration_interval for p in transfers], 1.0 / RATE, rtol=F32)
+    # the tolerance would see a rate x interval stand-in: the rate at t_k times T misses the yaw's curvature
+    t_k = np.arange(N) / RATE
+    rate_times_t = (OMEGA + A * W * np.cos(W * t_k)) / RATE
+    assert np.abs(rate_times_t - dtheta[:, 2]).max() > 1000 * 2 * F32 * np.abs(dtheta).max()
+
+
+def _vectornav_packets(data: bytes, payload_size: int):
+    """FA, groups, one mask per group, payload, CRC: the layout is fixed, so packets follow each other."""
+    size = 1 + 1 + 2 * bin(data[1]).count("1") + payload_size + 2
+    return [data[i:i + size] for i in range(0, len(data), size)]
+
+
+def test_vectornav_delta_theta_and_delta_vel(tmp_path):
+    # IMU group bits 6 (DeltaTheta: f32 dtime s, 3 x f32 deg) and 7 (DeltaVel: 3 x f32 m/s), little-endian
+    out = stream(tmp_path, "vectornav-binary", ".bin", "fields=imu:deltatheta,deltavel")
+    packets = _vectornav_packets(out.read_bytes(), 16 + 12)
+    assert len(packets) == N
+    assert packets[0][1] == 0x04 and struct.unpack_from("<H", packets[0], 2)[0] == (1 << 6) | (1 << 7)
+    values = np.array([struct.unpack_from("<7f", p, 4) for p in packets])
+    dtheta, dvel = analytic()
+    np.testing.assert_allclose(values[:, 0], 1.0 / RATE, rtol=F32)
+    assert_f32_close(np.radians(values[:, 1:4]), dtheta, np.abs(dtheta).max())
+    assert_f32_close(values[:, 4:7], dvel, np.abs(dvel).max())
+
+
+def test_xsens_delta_q_and_delta_v(tmp_path):
+    out = stream(tmp_path, "xsens-mtdata2", ".bin", "items=delta_q,delta_v")
+    data = out.read_bytes()
+    dq, dv = [], []
+    i = 0
+    while i < len(data):                        # FA FF 36 len payload checksum; items XDI(2, BE) size(1) data
+        length = data[i + 3]
+        payload = data[i + 4:i + 4 + length]
+        j = 0
+        while j < length:
+            xdi, size = struct.unpack_from(">HB", payload, j)
+            values = struct.unpack_from(f">{size // 4}f", payload, j + 3)
+            {0x8030: dq, 0x4010: dv}[xdi & 0xFFF0].append(values)
+            j += 3 + size
+        i += 4 + length + 1
+    dtheta, dvel = analytic()
+    # DeltaQ: the rotation by the increment, scalar first (scipy: scalar last)
+    expected_q = Rotation.from_rotvec(dtheta).as_quat()[:, [3, 0, 1, 2]]
+    assert_f32_close(np.array(dq), expected_q, 1.0)
+    assert_f32_close(np.array(dv), dvel, np.abs(dvel).max())
+
+
+def test_mip_delta_theta_and_delta_velocity(tmp_path):
+    out = stream(tmp_path, "microstrain-mip", ".bin", "fields=delta_theta,delta_velocity")
+    data = out.read_bytes()
+    th, dv = [], []
+    i = 0
+    while i < len(data):          # 75 65 set len fields checksum(2); field: len descriptor data (big-endian)
+        length = data[i + 3]
+        j = i + 4
+        while j < i + 4 + length:
+            field_len, descriptor = data[j], data[j + 1]
+            values = struct.unpack_from(">3f", data, j + 2)
+            {0x07: th, 0x08: dv}[descriptor].append(values)
+            j += field_len
+        i += 4 + length + 2
+    dtheta, dvel = analytic()
+    assert_f32_close(np.array(th), dtheta, np.abs(dtheta).max())
+    assert_f32_close(np.array(dv) * G0, dvel, np.abs(dvel).max())     # 0x08 is in g*s
+
+
+def test_formats_without_increment_fields_do_not_compile_them():
+    from imu_emulator.streaming import StreamConfig, TargetOptions, needs_increments
+    options = TargetOptions()
+
+    def config(fmt, device=False, **kw):
+        return StreamConfig("imu0", fmt, "file:/dev/null", kw, options, device)
+    assert not needs_increments([config("mavlink-highres")])
+    assert not needs_increments([config("vectornav-binary")])       # Accel|AngularRate by default
+    assert needs_increments([config("vectornav-binary", fields="imu:deltatheta")])
+    assert needs_increments([config("dronecan-rawimu")])
+    assert needs_increments([config("xsens-mtdata2", items="delta_v")])
+    assert needs_increments([config("xsens-mtdata2", device=True)])   # its driver may ask for them
+
+
+def test_vectornav_refuses_delta_fields_without_increments():
+    from firmware_protocols.base import EncodeError, Samples
+    from firmware_protocols.vectornav import BinaryEncoder
+    with pytest.raises(EncodeError, match=r"imu\.deltatheta.*no delta_theta"):
+        BinaryEncoder("imu:deltatheta").encode(Samples.single(0, [0, 0, 9.8], [0, 0, 0]))
