@@ -253,3 +253,30 @@ def test_sampled_motion_increments_follow_the_fitted_curve():
     inc_error = np.abs(sampled.dvel[0, interior] - truth.dvel[0, interior]).max()
     assert inc_error <= 2 * rate_error / 1000
     assert np.abs(truth.dvel[0] - truth.accel[0] / 1000).max() > 10 * inc_error   # not the rate times dt
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".npz"])
+def test_generate_writes_the_increments(tmp_path, analytic, suffix):
+    import pyarrow.csv as pa_csv
+
+    from imu_emulator.cli import main
+    path = tmp_path / "scene.toml"
+    lines = ["[scene]", f"rate_hz = {RATE}", f"duration_s = {DURATION}", "[trajectory]"]
+    lines += [f'{a} = "{MOTION[a][0]}"' for a in "xyz"] + ["[attitude]", 'mode = "euler"']
+    lines += [f'{a} = "{MOTION[a][0]}"' for a in ("roll", "pitch", "yaw")]
+    lines += ["[[imu]]", 'name = "imu0"', f"lever_arm_m = {[float(v) for v in LEVER]}",
+              f"mounting_rpy_deg = {list(MOUNT_RPY_DEG)}", "[effects]", "gravity = true", "lever_arm = true",
+              "mounting = true"]
+    path.write_text("\n".join(lines) + "\n")
+    out = tmp_path / f"out{suffix}"
+    assert main(["generate", str(path), "-o", str(out), "--increments", "--quiet"]) == 0
+    if suffix == ".csv":
+        table = pa_csv.read_csv(out).to_pydict()
+        assert list(table)[8:14] == ["dtheta_x", "dtheta_y", "dtheta_z", "dvel_x", "dvel_y", "dvel_z"]
+        dtheta = np.column_stack([table[f"dtheta_{a}"] for a in "xyz"])
+        dvel = np.column_stack([table[f"dvel_{a}"] for a in "xyz"])
+    else:
+        with np.load(out) as data:
+            dtheta, dvel = data["dtheta"][0], data["dvel"][0]
+    assert relative_error(dtheta, analytic[0]) < 1e-12
+    assert relative_error(dvel, analytic[1]) < 1e-12
