@@ -46,6 +46,19 @@ def check_nodes(count) -> int:
     return int(count)
 
 
+def check_integrable(effects) -> None:
+    """The navigation- and body-stage lines run once more per node, at the node's t: an effect there must be a
+    pure function of the variables it reads (no state, no random draws, which would advance or repeat per node).
+    The sample clock is the exception: its lines run for the interval's two ends only."""
+    from imu_emulator.effects import Stage
+    from imu_emulator.errors import ImuEmulatorError
+    for effect in effects:
+        if effect.stage in (Stage.NAVIGATION, Stage.BODY) and not effect.sample_clock and (effect.state or effect.random):
+            raise ImuEmulatorError(f"increments: effect {effect.name!r} keeps state or draws random numbers in the "
+                                   "navigation or body stage, which the quadrature evaluates at several instants "
+                                   "per sample; it cannot be integrated")
+
+
 def nodes(count: int) -> tuple[np.ndarray, np.ndarray]:
     """Gauss–Legendre nodes as fractions of the interval in (0, 1), and weights summing to 1."""
     xi, w = np.polynomial.legendre.leggauss(count)

@@ -295,6 +295,7 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
     args, integrate = ARGS, []
     if increments:
         from imu_emulator import increments as inc
+        inc.check_integrable(plan.active)
         args, constants = ARGS + inc.ARGS, constants + inc.constants(increments)
         node_motion = inc.sampled_at_nodes(motion.lines)   # sampled motion: node rows after the samples'
         integrate = inc.node_lines(
