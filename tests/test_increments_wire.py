@@ -177,3 +177,29 @@ def test_vectornav_refuses_delta_fields_without_increments():
     from firmware_protocols.vectornav import BinaryEncoder
     with pytest.raises(EncodeError, match=r"imu\.deltatheta.*no delta_theta"):
         BinaryEncoder("imu:deltatheta").encode(Samples.single(0, [0, 0, 9.8], [0, 0, 0]))
+
+
+def test_a_divided_device_output_carries_the_increments_since_its_last_packet():
+    # VectorNav: "the integration ... is reset each time the values are polled or sent out" (DeltaTheta's
+    # description). Binary output 1 at divisor 4 of 800 Hz: each packet's increments are the sum of the four
+    # sample intervals since the previous packet, and dtime is four periods.
+    from functools import reduce
+
+    from firmware_protocols import create_device
+    from firmware_protocols.base import Samples
+    device = create_device("vectornav-binary", 800.0)
+    body = b"VNWRG,75,1,4,04,00C0"          # IMU group: DeltaTheta | DeltaVel
+    device.receive(b"$" + body + b"*%02X\r\n" % reduce(lambda a, b: a ^ b, body, 0))
+    n, rng = 16, np.random.default_rng(1)
+    samples = Samples(np.arange(n) * 1_250_000, np.zeros((n, 3)), np.zeros((n, 3)),
+                      delta_theta=rng.normal(size=(n, 3)) * 1e-3, delta_velocity=rng.normal(size=(n, 3)) * 1e-2,
+                      delta_time_s=np.full(n, 1 / 800))
+    packets = [device.output(samples, i) for i in range(n)]
+    sent = [i for i, p in enumerate(packets) if p]
+    assert sent == [0, 4, 8, 12]
+    for previous, i in zip([-1] + sent[:-1], sent):
+        values = struct.unpack_from("<7f", packets[i], 4)
+        span = slice(previous + 1, i + 1)
+        np.testing.assert_allclose(values[0], (i - previous) / 800, rtol=F32)
+        np.testing.assert_allclose(np.radians(values[1:4]), samples.delta_theta[span].sum(axis=0), rtol=4 * F32)
+        np.testing.assert_allclose(values[4:7], samples.delta_velocity[span].sum(axis=0), rtol=4 * F32)

@@ -14,6 +14,8 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from firmware_protocols.base import Samples
 
 
@@ -95,6 +97,42 @@ def single(samples: Samples, i: int) -> Samples:
         value = getattr(samples, name)
         setattr(one, name, None if value is None else value[i:i + 1])
     return one
+
+
+class SinceLastOutput:
+    """The integrated outputs since the device last sent them. Real parts reset their integrals at each output
+    that carries them (VectorNav's DeltaTheta/DeltaVel description; Xsens DeltaQ/DeltaV and MIP delta
+    fields alike), so with an output divider a packet's increments span every sample since the previous one,
+    paused time included. Nothing happens when the samples carry no increments."""
+
+    __slots__ = ("theta", "velocity", "time_s")
+
+    def __init__(self):
+        self.theta = self.velocity = self.time_s = None
+
+    def add(self, samples: Samples, i: int) -> None:
+        if samples.delta_theta is None:
+            return
+        period = 0.0 if samples.delta_time_s is None else float(samples.delta_time_s[i])
+        if self.theta is None:
+            self.theta, self.velocity, self.time_s = samples.delta_theta[i].copy(), samples.delta_velocity[i].copy(), period
+        else:
+            self.theta += samples.delta_theta[i]
+            self.velocity += samples.delta_velocity[i]
+            self.time_s += period
+
+    def attach(self, one: Samples) -> Samples:
+        """`one` (a sample alone) carrying the sums so far instead of its own interval's."""
+        if self.theta is not None and one.delta_theta is not None:
+            one.delta_theta, one.delta_velocity = self.theta[None, :].copy(), self.velocity[None, :].copy()
+            if one.delta_time_s is not None:
+                one.delta_time_s = np.array([self.time_s])
+        return one
+
+    def sent(self, encoder) -> None:
+        """Start over when the packet just encoded carried increments."""
+        if getattr(encoder, "uses_increments", False):
+            self.theta = self.velocity = self.time_s = None
 
 
 class Divider:

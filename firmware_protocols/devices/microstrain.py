@@ -34,7 +34,7 @@ from __future__ import annotations
 import struct
 
 from firmware_protocols.base import Samples
-from firmware_protocols.devices.base import Device, single
+from firmware_protocols.devices.base import Device, SinceLastOutput, single
 from firmware_protocols.microstrain import (DATA_SETS, DEFAULT_FIELDS, FILTER_SET, FILTER_STATE_FULL_NAV, GNSS_SET,
                                            SENSOR_DATA_SET, MipEncoder, fletcher16)
 from firmware_protocols.registry import attach_device
@@ -77,6 +77,7 @@ class MipDevice(Device):
         self.enabled = {k: True for k in DATA_SETS}
         self.idle = False
         self.tick = 0
+        self.increments = SinceLastOutput()
         self._encoders: dict = {}
         self._buf = bytearray()
         self.bytes_per_sample = self._encoder(SENSOR_DATA_SET, tuple(fields)).bytes_per_sample
@@ -94,6 +95,7 @@ class MipDevice(Device):
     def output(self, samples: Samples, i: int) -> bytes:
         tick = self.tick
         self.tick += 1
+        self.increments.add(samples, i)
         if self.idle:
             return b""
         parts, one = [], None
@@ -102,8 +104,10 @@ class MipDevice(Device):
                 continue
             due = tuple(name for name, decimation in entries if tick % decimation == 0)
             if due:
-                one = one or single(samples, i)
-                parts.append(self._encoder(descriptor_set, due).encode(one).data)
+                one = one or self.increments.attach(single(samples, i))
+                encoder = self._encoder(descriptor_set, due)
+                parts.append(encoder.encode(one).data)
+                self.increments.sent(encoder)
         return b"".join(parts)
 
     # - input -

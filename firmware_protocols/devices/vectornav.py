@@ -40,7 +40,7 @@ command line is ignored and counted; a line cut by a new `$` is answered as what
 from __future__ import annotations
 
 from firmware_protocols.base import Samples
-from firmware_protocols.devices.base import Device, LinkRequest, single
+from firmware_protocols.devices.base import Device, LinkRequest, SinceLastOutput, single
 from firmware_protocols.registry import attach_device
 from firmware_protocols.vectornav import (_FIELDS, DEFAULT_FIELDS, DEFAULT_MODEL, AsciiEncoder, BinaryEncoder,
                                           _layout_from_selection, checksum_text, parse_fields, verify_line)
@@ -121,6 +121,7 @@ class VectorNavDevice(Device):
         self._made = []
         self._apply(factory)
         self.tick = 0
+        self.increments = SinceLastOutput()
         self.paused = False
         self._buf = bytearray()
         self.bytes_per_sample = sum(out.layout.packet_size for out in self.binary if out.layout is not None) or (
@@ -158,14 +159,16 @@ class VectorNavDevice(Device):
     def output(self, samples: Samples, i: int) -> bytes:
         tick = self.tick
         self.tick += 1
+        self.increments.add(samples, i)
         if self.paused:
             return b""
         parts = []
         one = None
         for out in self.binary:
             if out.mode and out.encoder is not None and tick % self._samples_per(out.divisor) == 0:
-                one = one or single(samples, i)
+                one = one or self.increments.attach(single(samples, i))
                 parts.append(out.encoder.encode(one).data)
+                self.increments.sent(out.encoder)
         if self.ascii_type and tick % max(1, int(round(self.rate_hz / self.ascii_rate))) == 0:
             parts.append(self._ascii_encoder().encode(one or single(samples, i)).data)
         return b"".join(parts)

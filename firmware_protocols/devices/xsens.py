@@ -36,7 +36,7 @@ from __future__ import annotations
 import struct
 
 from firmware_protocols.base import Samples
-from firmware_protocols.devices.base import Device, single
+from firmware_protocols.devices.base import Device, SinceLastOutput, single
 from firmware_protocols.registry import attach_device
 from firmware_protocols.xsens import (BUS_MASTER, DEFAULT_ITEMS, EXTENDED_LENGTH, FRAMES, ITEMS, PRECISIONS,
                                       PREAMBLE, XsensEncoder)
@@ -104,6 +104,7 @@ class XsensDevice(Device):
         self.plan = plan
         self._encoders = {}
         self.tick = 0
+        self.increments = SinceLastOutput()
         if left_out:
             self.notes.append(f"output configuration: the emulator cannot produce {', '.join(left_out)}; "
                               "acknowledged and left out of MTData2")
@@ -125,6 +126,7 @@ class XsensDevice(Device):
     def output(self, samples: Samples, i: int) -> bytes:
         tick = self.tick
         self.tick += 1
+        self.increments.add(samples, i)
         if not self.measuring or not self.plan:
             return b""
         timed = [j for j, (_, _, every) in enumerate(self.plan) if every and tick % every == 0]
@@ -134,7 +136,9 @@ class XsensDevice(Device):
         encoder = self._encoder(due)
         encoder.packet_counter = self.counter
         self.counter = (self.counter + 1) & 0xFFFF
-        return encoder.encode(single(samples, i)).data
+        data = encoder.encode(self.increments.attach(single(samples, i))).data
+        self.increments.sent(encoder)
+        return data
 
     # - input -
     def _receive(self, data: bytes, now_ns: int) -> list:
