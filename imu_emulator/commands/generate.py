@@ -6,8 +6,7 @@ import signal
 import sys
 import threading
 
-from imu_emulator.commands.shared import load_scene_with_warnings, number
-from imu_emulator.increments import DEFAULT_NODES, MAX_NODES
+from imu_emulator.commands.shared import add_increments_option, load_scene_with_warnings, number
 from imu_emulator.progress import CompileStatus, Progress
 
 
@@ -17,9 +16,7 @@ def register(subparsers) -> None:
     gen.add_argument("-o", "--output", required=True, help="output file, .csv, .npz or .mcap (ROS 2 bag)")
     gen.add_argument("--truth", action="store_true", help="add position, velocity, attitude and body rates "
                      "(and each IMU's realized bias when a bias effect is on)")
-    gen.add_argument("--increments", nargs="?", type=number(1, MAX_NODES, integer=True), const=DEFAULT_NODES,
-                     default=0, metavar="NODES", help="add the integrated outputs dtheta and dvel over each sample "
-                     f"interval (Gauss-Legendre quadrature with NODES nodes, default {DEFAULT_NODES})")
+    add_increments_option(gen)
     gen.add_argument("--quiet", action="store_true", help="no progress bar or summary (warnings still show)")
     gen.add_argument("--allow-large", action="store_true", help="write a CSV larger than the free disk space")
     gen.add_argument("--block", type=number(1, 10_000_000, integer=True), default=65536, help=argparse.SUPPRESS)

@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import sys
 
+from imu_emulator.commands.shared import add_increments_option
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("kernel", help="print the generated kernel source of a scene, or the effects table")
     p.add_argument("scene", nargs="?", help="scene file (TOML)")
     p.add_argument("--truth", action="store_true", help="the kernel with truth outputs, as generate --truth uses")
     p.add_argument("--no-attitude", action="store_true", help="the kernel without quaternion output, as generate uses")
+    add_increments_option(p)
     p.add_argument("--effects", action="store_true", help="print the table of effects and parameters instead")
     p.set_defaults(func=cmd_kernel)
 
@@ -27,5 +30,6 @@ def cmd_kernel(args) -> int:
     scene = load_scene(args.scene)
     for warning in scene.warnings:
         print(f"warning: {warning}", file=sys.stderr)
-    sys.stdout.write(generate_source(scene, attitude=not args.no_attitude, truth=args.truth))
+    sys.stdout.write(generate_source(scene, attitude=not args.no_attitude, truth=args.truth,
+                                     increments=args.increments))
     return 0

@@ -33,3 +33,11 @@ def number(low: float, high: float, integer: bool = False, zero: bool = False):
         raise argparse.ArgumentTypeError(f"expected {allowed}, got {text!r}")
 
     return parse
+
+
+def add_increments_option(parser) -> None:
+    """--increments [NODES]: the integrated outputs dtheta, dvel (imu_emulator.increments); 0 when not given."""
+    from imu_emulator.increments import DEFAULT_NODES, MAX_NODES
+    parser.add_argument("--increments", nargs="?", type=number(1, MAX_NODES, integer=True), const=DEFAULT_NODES,
+                        default=0, metavar="NODES", help="add the integrated outputs dtheta and dvel over each "
+                        f"sample interval (Gauss-Legendre quadrature with NODES nodes, default {DEFAULT_NODES})")
