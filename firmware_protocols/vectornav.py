@@ -158,7 +158,8 @@ _GROUP_TABLE = (
         ("Quaternion", 16, _QUAT), ("AngularRate", 12, _GYRO), ("Position", 24, ()), ("Velocity", 12, ()),
         ("Accel", 12, _ACCEL), ("Imu", 24, _lbl(_ACCEL, "accel") + _lbl(_GYRO, "gyro")),
         ("MagPres", 20, _lbl(_MAG, "mag") + _lbl(_TEMP, "temperature_c") + _lbl(_PRES, "pressure_pa")),
-        ("DeltaTheta", 28, _DTHETA + _lbl(_DVEL, "dvel")), ("InsStatus", 2, ()), ("SyncInCnt", 4, ()), ("TimeGpsPps", 8, ())]),
+        ("DeltaTheta", 28, _DTHETA + _lbl(_DVEL, "dvel")), ("InsStatus", 2, ()), ("SyncInCnt", 4, ()),
+        ("TimeGpsPps", 8, ())]),
     ("time", 1, [
         ("TimeStartup", 8, _TIME), ("TimeGps", 8, ()), ("GpsTow", 8, ()), ("GpsWeek", 2, ()),
         ("TimeSyncIn", 8, ()), ("TimeGpsPps", 8, ()), ("TimeUtc", 8, ()), ("SyncInCnt", 4, ()),

@@ -53,7 +53,8 @@ def check_integrable(effects) -> None:
     from imu_emulator.effects import Stage
     from imu_emulator.errors import ImuEmulatorError
     for effect in effects:
-        if effect.stage in (Stage.NAVIGATION, Stage.BODY) and not effect.sample_clock and (effect.state or effect.random):
+        repeated = effect.stage in (Stage.NAVIGATION, Stage.BODY) and not effect.sample_clock
+        if repeated and (effect.state or effect.random):
             raise ImuEmulatorError(f"increments: effect {effect.name!r} keeps state or draws random numbers in the "
                                    "navigation or body stage, which the quadrature evaluates at several instants "
                                    "per sample; it cannot be integrated")
@@ -132,7 +133,8 @@ def imu_lines(m: int, sensor: list[str], state_vars: list[str]) -> list[str]:
         saved = [v for v in state_vars if any(re.search(rf"\b{v}\b", line) for line in sensor)]
         lines += [f"inc_s{i} = {v}" for i, v in enumerate(saved)]
         lines += ["inc_iT = 1.0 / inc_T"]
-        lines += [f"o{a} = {v} * inc_iT" for a, v in zip("xyz", dv)] + [f"g{a} = {v} * inc_iT" for a, v in zip("xyz", th)]
+        lines += [f"o{a} = {v} * inc_iT" for a, v in zip("xyz", dv)]
+        lines += [f"g{a} = {v} * inc_iT" for a, v in zip("xyz", th)]
         lines += sensor
         lines += [f"{v} = g{a} * inc_T" for a, v in zip("xyz", th)] + [f"{v} = o{a} * inc_T" for a, v in zip("xyz", dv)]
         lines += [f"{v} = inc_s{i}" for i, v in enumerate(saved)]

@@ -304,7 +304,8 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
             imu_frames=frames, t0=float(scene.t0_s), dt=1.0 / scene.rate_hz)
     return fill(
         KERNEL_TEMPLATE, imports=imports, eps_v2=repr(EPS_SPEED ** 2), chunk=CHUNK, constants=constants,
-        args=", ".join(args), increments=integrate, load_state=[f"{var} = state[{i}]" for i, (var, _, _) in enumerate(plan.slots)],
+        args=", ".join(args), increments=integrate,
+        load_state=[f"{var} = state[{i}]" for i, (var, _, _) in enumerate(plan.slots)],
         store_state=[f"state[{i}] = {var}" for i, (var, _, _) in enumerate(plan.slots)],
         n_phase=max(n_phase, 1), phase_stage=phase_stage, t0=repr(float(scene.t0_s)), dt=repr(1.0 / scene.rate_hz),
         clock=plan.clock, clock_shift=f" + clk * {1.0 / scene.rate_hz!r}" if plan.clock else "",

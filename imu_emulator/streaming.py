@@ -757,11 +757,16 @@ def needs_increments(configs: list[StreamConfig]) -> bool:
     for config in configs:
         try:
             info = firmware_protocols.get(config.format)
-            device = config.device and info.device is not None
-            encoder = info.encoder() if device else info.encoder(**config.options)
+            if config.device and info.device is not None:
+                device = info.device(100.0, **config.options)
+                encoders = list(device.encoders())
+                if getattr(device, "carries_increments", False):
+                    return True
+            else:
+                encoders = [info.encoder(**config.options)]
         except (KeyError, TypeError, ValueError):
             continue    # build_streams reports it
-        if getattr(encoder, "uses_increments", False) or (device and hasattr(encoder, "uses_increments")):
+        if any(getattr(encoder, "uses_increments", False) for encoder in encoders):
             return True
     return False
 

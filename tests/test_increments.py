@@ -31,7 +31,8 @@ DURATION = 1.0
 # The motion: text for the scene, and the same as sympy expressions of t (rationals, so nothing is rounded).
 T = sympy.Symbol("t", real=True)
 MOTION = {
-    "x": ("0.5*t**2 + 0.3*sin(2.1*t)", sympy.Rational(1, 2) * T**2 + sympy.Rational(3, 10) * sympy.sin(sympy.Rational(21, 10) * T)),
+    "x": ("0.5*t**2 + 0.3*sin(2.1*t)",
+          sympy.Rational(1, 2) * T**2 + sympy.Rational(3, 10) * sympy.sin(sympy.Rational(21, 10) * T)),
     "y": ("cos(1.3*t)", sympy.cos(sympy.Rational(13, 10) * T)),
     "z": ("0.2*t**3", sympy.Rational(1, 5) * T**3),
     "roll": ("0.7*t", sympy.Rational(7, 10) * T),

@@ -3,7 +3,7 @@ decode (pydronecan; the vendors' layouts unpacked here with struct) to the analy
 
 Motion with closed-form integrals (ENU, level): yaw = Ω t + A sin(w t), z = c t³, so the body rate is
 (0, 0, Ω + A w cos w t) and the specific force (0, 0, g + 6 c t):
-    Δθ_z = Ω T + A (sin w t_k − sin w t_k−1),    Δv_z = g T + 3 c (t_k² − t_k−1²),    x and y components 0.
+    Δθ_z = Ω T + A (sin w t_k − sin w t_k−1),   Δv_z = g T + 3 c (t_k² − t_k−1²),   x and y components 0.
 """
 from __future__ import annotations
 
@@ -170,6 +170,9 @@ def test_formats_without_increment_fields_do_not_compile_them():
     assert needs_increments([config("dronecan-rawimu")])
     assert needs_increments([config("xsens-mtdata2", items="delta_v")])
     assert needs_increments([config("xsens-mtdata2", device=True)])   # its driver may ask for them
+    assert needs_increments([config("vectornav-vnymr", device=True)])  # ASCII now, binary DeltaTheta later
+    assert needs_increments([config("dronecan-rawimu", device=True)])
+    assert not needs_increments([config("mavlink-highres", device=True)])
 
 
 def test_vectornav_refuses_delta_fields_without_increments():

@@ -57,8 +57,9 @@ def main() -> None:
         c = np.array(cpu[label])
         if nodes == 0:
             base = np.median(c)
+        extra = np.median(c) - base
         print(f"  {label:44} {c.min():7.1f} {np.median(c):7.1f} {c.max():7.1f}   wall {np.median(wall[label]):7.1f}"
-              f"   increments {np.median(c) - base:+7.1f}" + (f" ({(np.median(c) - base) / nodes:.1f}/node)" if nodes else ""))
+              f"   increments {extra:+7.1f}" + (f" ({extra / nodes:.1f}/node)" if nodes else ""))
 
 
 if __name__ == "__main__":

@@ -115,7 +115,8 @@ class SinceLastOutput:
             return
         period = 0.0 if samples.delta_time_s is None else float(samples.delta_time_s[i])
         if self.theta is None:
-            self.theta, self.velocity, self.time_s = samples.delta_theta[i].copy(), samples.delta_velocity[i].copy(), period
+            self.theta, self.velocity = samples.delta_theta[i].copy(), samples.delta_velocity[i].copy()
+            self.time_s = period
         else:
             self.theta += samples.delta_theta[i]
             self.velocity += samples.delta_velocity[i]

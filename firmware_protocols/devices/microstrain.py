@@ -61,6 +61,7 @@ def _text(value: str) -> bytes:
 
 
 class MipDevice(Device):
+    carries_increments = True    # a driver may configure the integrated outputs at any time
     def __init__(self, rate_hz: float, fields=DEFAULT_FIELDS, gps_week_offset: int = 0, gps_flags: int = 0x1C,
                  model_name: str = "3DM-GQ7", model_number: str = "6284-4220", serial_number: str = "6284.12345",
                  firmware_version: int = 1100, filter_state: int = FILTER_STATE_FULL_NAV):

@@ -87,6 +87,7 @@ class _BinaryOutput:
 
 
 class VectorNavDevice(Device):
+    carries_increments = True    # a driver may configure the integrated outputs at any time
     def __init__(self, rate_hz: float, fields=None, ascii_type: int = 0, checksum: str = "xor",
                  model: str = DEFAULT_MODEL, preset: str | None = None, base_rate_hz: float | None = None,
                  serial_number: int = 100012345, firmware: str = "2.1.0.0", hardware_revision: int = 2,

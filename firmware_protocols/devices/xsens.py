@@ -60,6 +60,7 @@ def xbus(mid: int, data: bytes = b"") -> bytes:
 
 
 class XsensDevice(Device):
+    carries_increments = True    # a driver may configure the integrated outputs at any time
     def __init__(self, rate_hz: float, items=DEFAULT_ITEMS, precision: str = "float32", frame: str = "ENU",
                  mag_reference_gauss: float = 0.5, status_word: int = 0, packet_counter_start: int = 0,
                  device_id: int = 0x03780123, product_code: str = "MTi-300-2A8G4", firmware: str = "1.8.2"):
