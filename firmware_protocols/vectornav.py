@@ -764,7 +764,9 @@ register(FormatInfo(
     encoder=BinaryEncoder, decoder=BinaryDecoder,
     bytes_per_sample=parse_fields(DEFAULT_FIELDS).packet_size,
     options={"fields": f"groups and fields, e.g. 'common:timestartup,accel;imu:uncompgyro' "
-                       f"(default {DEFAULT_FIELDS!r}, PX4's binary output 1)"},
+                       f"(default {DEFAULT_FIELDS!r}, PX4's binary output 1)",
+             "sample_period_s": "DeltaTheta's dtime in s, > 0, when the samples carry none (None: time since the "
+                                "previous sample)"},
 ))
 for _name in ("VNYMR", "VNIMU"):      # VNYPR only for the device's register 6 (ADOR 1), not a format of its own
     register(FormatInfo(
