@@ -156,6 +156,9 @@ def test_kernel_without_increments_is_unchanged_and_with_them_names_the_outputs(
     on = generate_source(sc, True, False, DEFAULT_NODES)
     assert "out_dtheta" not in off and "inc_" not in off
     assert "out_dtheta, out_dvel" in on and f"for q in range({DEFAULT_NODES})" in on
+    # the module that writes those lines is part of the cache key
+    from imu_emulator.kernel import generator_modules
+    assert any(path.name == "increments.py" for path in generator_modules())
 
 
 # --- sensor errors on the increments (module docstring of imu_emulator.increments) -----------------------
