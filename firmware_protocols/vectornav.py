@@ -8,8 +8,8 @@ Binary frame (wire-formats.md, "VectorNav binary output"):
 CRC-16/XMODEM over groups .. payload, so a receiver's CRC over groups .. crc is 0. Fields appear in
 group-bit, then field-bit order. Field sizes are VectorNav's own `BinaryPacketGroupLengths` table
 (vnproglib 1.1, dawonn/vectornav libvnc/src/vnupack.c; the newer libvnc adds Time bits 8-9,
-SyncOutCnt 4 and TimeStatus 1). GPS and INS groups are left out: their last bits differ between
-library versions, so a frame that sets them is not one this decoder can size and is skipped.
+SyncOutCnt 4 and TimeStatus 1). The GPS groups (3 and 6) follow vnproglib 1.2's upack.c (bit 12 TimeInfo 2,
+bit 13 DOP 28), the layout ArduPilot's VN-300 GNSS packet assumes; older libraries had SvStat at bit 12.
 
 What the encoder can fill, wire units, and the Samples field each comes from:
 
@@ -28,6 +28,11 @@ What the encoder can fill, wire units, and the Samples field each comes from:
                                     previous sample), delta_theta (required: no rate x dt stand-in)
     IMU.DeltaVel    3 x f32 m/s     delta_velocity (required)
     Common.DeltaTheta  IMU.DeltaTheta + IMU.DeltaVel
+    TimeGps         u64 ns          time_ns + gps_week_offset weeks (GPS time); Time.GpsTow u64 ns and
+                                    Time/GPS Week u16 split it
+    GPS, GPS2       NumSats u8, Fix u8, PosLla 3 x f64, VelNed 3 x f32, PosU 3 x f32 (N, E, D m),
+                    VelU f32, Dop 7 x f32: position_llh / velocity_ned (the truth) and GNSS_CONSTANTS
+                    (BinaryEncoder(constants=...), defaults in _DEFAULTS)
 
 A real unit resets its integrals at each output, so with an output divider its increments span several IMU
 samples; the encoder sends what it is given, one sample's increments per packet.
@@ -35,7 +40,7 @@ samples; the encoder sends what it is given, one sample's increments per packet.
 The emulator has one accel/gyro/mag measurement, so the "uncompensated" fields carry the same values
 as the compensated ones. Every f32 saturates at +-float32 max (counted per wire field in
 `encoder.saturated`, e.g. "imu.accel"); non-finite input raises EncodeError naming field and sample.
-Fields the table knows but the emulator has no data for (TimeGps, Position, Dcm, ...) can be
+Fields the table knows but the emulator has no data for (Position, Dcm, GPS UTC, ...) can be
 decoded (as raw bytes) but not selected for encoding.
 
 ASCII number formats are the device's own, read off published output with valid checksums: VectorNav's
@@ -47,14 +52,15 @@ simply widen the field, as printf does; `bytes_per_sample` is the nominal (fixed
 """
 from __future__ import annotations
 
+import math
 import struct
 from dataclasses import dataclass
 
 import numba
 import numpy as np
 
-from firmware_protocols.base import (DecoderStats, EncodeError, Packet, SaturationStats, Samples, SerialBatch,
-                                     integration_intervals)
+from firmware_protocols.base import (_FIELD_WIDTHS, DecoderStats, EncodeError, Packet, SaturationStats, Samples,
+                                     SerialBatch, integration_intervals)
 from firmware_protocols.crc import crc16_ccitt, crc16_ccitt_bytes
 from firmware_protocols.registry import FormatInfo, register
 
@@ -70,11 +76,24 @@ _SOURCE_ID = {name: i for i, name in enumerate(_SOURCES)}
 # Navigation and status quantities: packed side by side into the kernel's one "extra" matrix (only when a
 # layout asks for them). Name -> width. Samples fields where Samples has them; the rest are constants.
 _EXTRA_WIDTH = {"position_llh": 3, "velocity_ned": 3, "linear_accel_ned": 3, "ypr_u": 3, "ins_status": 1,
-                "pos_u": 1, "vel_u": 1, "delta_time": 1, "delta_theta": 3, "delta_velocity": 3}
+                "pos_u": 1, "vel_u": 1, "delta_time": 1, "delta_theta": 3, "delta_velocity": 3,
+                "gnss_num_sats": 1, "gnss_fix": 1, "gnss_pos_u": 3, "gnss_vel_u": 1, "gnss_dop": 7}
 #: extras without a default: the caller must give them (the integrated outputs; a rate times the period would
 #: be an approximation the field's name does not announce)
 _REQUIRED = {"delta_theta", "delta_velocity"}
-_WIRE_CODE = {"f": 0, "Q": 1, "d": 2, "H": 3}
+# Kernel wire codes: value kinds f32, f64, u16, u8; and integer times made from time_ns (+ the GPS offset).
+_WIRE_CODE = {"f": 0, "Q": 1, "d": 2, "H": 3, "B": 4}
+_TIME_CODE = {"startup": 1, "gps": 7, "tow": 5, "week": 6}
+WEEK_NS = 7 * 86400 * 1_000_000_000
+
+
+def _dops(north: float, east: float, vertical: float, time: float) -> tuple:
+    """The seven DOPs VectorNav's DOP field carries, in its order g, p, t, v, h, n, e."""
+    h = math.hypot(north, east)
+    p = math.hypot(h, vertical)
+    return (math.hypot(p, time), p, time, vertical, h, north, east)
+
+
 # Documented defaults for optional Samples fields a selected wire field needs (one row, broadcast).
 _DEFAULTS = {
     "mag": (0.0, 0.0, 0.0),
@@ -93,7 +112,16 @@ _DEFAULTS = {
     "vel_u": (0.05,),
     # INS status: mode 2 (INS tracking, bits 0-1) + GNSS fix (bit 2), no error bits: 0x0006.
     "ins_status": (6.0,),
+    # A healthy receiver under open sky: 3D fix (vnproglib GPSFIX_3D = 3; ArduPilot's pre-arm wants >= 3),
+    # 12 satellites, 1 sigma position N, E, D m and speed m/s, and DOPs consistent with one another
+    # (h^2 = n^2 + e^2, p^2 = h^2 + v^2, g^2 = p^2 + t^2).
+    "gnss_num_sats": (12.0,),
+    "gnss_fix": (3.0,),
+    "gnss_pos_u": (1.0, 1.0, 1.5),
+    "gnss_vel_u": (0.05,),
+    "gnss_dop": _dops(north=0.6, east=0.6, vertical=1.0, time=0.8),
 }
+GNSS_CONSTANTS = ("gnss_num_sats", "gnss_fix", "gnss_pos_u", "gnss_vel_u", "gnss_dop")
 
 
 @dataclass(frozen=True)
@@ -104,7 +132,8 @@ class _Quantity:
     source: str         # Samples attribute
     order: tuple        # Samples component index for each wire slot
     scale: float        # wire value = SI value * scale
-    wire: str           # struct code: "Q" (u64) or "f" (f32)
+    wire: str           # struct code: "Q" (u64), "f" (f32), "d" (f64), "H" (u16), "B" (u8)
+    time: str = ""      # integer time from time_ns: "startup", "gps" (ns), "tow" (ns into the week), "week"
 
 
 @dataclass(frozen=True)
@@ -120,11 +149,21 @@ class _Field:
         return f"{self.group}.{self.name.lower()}"
 
 
-def _q(source, n=3, order=None, scale=1.0, label="", wire="f"):
-    return _Quantity(label, source, tuple(order if order is not None else range(n)), scale, wire)
+def _q(source, n=3, order=None, scale=1.0, label="", wire="f", time=""):
+    return _Quantity(label, source, tuple(order if order is not None else range(n)), scale, wire, time)
 
 
-_TIME = (_q("time_ns", 1, wire="Q"),)
+_TIME = (_q("time_ns", 1, wire="Q", time="startup"),)
+# GPS time: time_ns + gps_week_offset weeks, as u64 ns since the GPS epoch (ArduPilot divides it into week
+# and time of week), the same split as u64 ns into the week and u16 week.
+_GPS_TIME = (_q("time_ns", 1, wire="Q", time="gps"),)
+_GPS_TOW = (_q("time_ns", 1, wire="Q", time="tow"),)
+_GPS_WEEK = (_q("time_ns", 1, wire="H", time="week"),)
+_NUM_SATS = (_q("gnss_num_sats", 1, wire="B"),)
+_GNSS_FIX = (_q("gnss_fix", 1, wire="B"),)
+_GNSS_POS_U = (_q("gnss_pos_u"),)
+_GNSS_VEL_U = (_q("gnss_vel_u", 1),)
+_DOP = (_q("gnss_dop", 7),)
 _YPR = (_q("euler", order=(2, 1, 0), scale=_DEG),)
 _QUAT = (_q("quat", order=(1, 2, 3, 0)),)
 _GYRO = (_q("gyro"),)
@@ -146,7 +185,18 @@ _DVEL = (_q("delta_velocity"),)
 
 
 def _lbl(quantities, label):
-    return tuple(_Quantity(label, q.source, q.order, q.scale, q.wire) for q in quantities)
+    return tuple(_Quantity(label, q.source, q.order, q.scale, q.wire, q.time) for q in quantities)
+
+
+# GPS group (VN-200/300 receiver 1; group 6 is receiver 2, same fields). Bits: vnproglib 1.2 GPSGROUP_*
+# (UTC, Tow, Week, NumSats, Fix, PosLla, PosEcef, VelNed, VelEcef, PosU, VelU, TimeU, TimeInfo, DOP); sizes:
+# its upack.c BinaryPacketGroupLengths row 4 {8, 8, 2, 1, 1, 24, 24, 12, 12, 12, 4, 4, 2, 28}. PosU is N, E, D
+# (ArduPilot reads [0] as horizontal, [2] as vertical accuracy), DOP is g, p, t, v, h, n, e. Position and
+# velocity are the truth the INS group reports too (a receiver without noise), from the same sources.
+_GPS_FIELDS = [
+    ("Utc", 8, ()), ("Tow", 8, _GPS_TOW), ("Week", 2, _GPS_WEEK), ("NumSats", 1, _NUM_SATS), ("Fix", 1, _GNSS_FIX),
+    ("PosLla", 24, _LLA), ("PosEcef", 24, ()), ("VelNed", 12, _VEL_NED), ("VelEcef", 12, ()),
+    ("PosU", 12, _GNSS_POS_U), ("VelU", 4, _GNSS_VEL_U), ("TimeU", 4, ()), ("TimeInfo", 2, ()), ("Dop", 28, _DOP)]
 
 
 # (group name, group bit, [(field name, size, quantities)] in field-bit order). Sizes: vnupack.c
@@ -154,20 +204,21 @@ def _lbl(quantities, label):
 # enums in the same library and PX4/ArduPilot drivers.
 _GROUP_TABLE = (
     ("common", 0, [
-        ("TimeStartup", 8, _TIME), ("TimeGps", 8, ()), ("TimeSyncIn", 8, ()), ("YawPitchRoll", 12, _YPR),
+        ("TimeStartup", 8, _TIME), ("TimeGps", 8, _GPS_TIME), ("TimeSyncIn", 8, ()), ("YawPitchRoll", 12, _YPR),
         ("Quaternion", 16, _QUAT), ("AngularRate", 12, _GYRO), ("Position", 24, ()), ("Velocity", 12, ()),
         ("Accel", 12, _ACCEL), ("Imu", 24, _lbl(_ACCEL, "accel") + _lbl(_GYRO, "gyro")),
         ("MagPres", 20, _lbl(_MAG, "mag") + _lbl(_TEMP, "temperature_c") + _lbl(_PRES, "pressure_pa")),
         ("DeltaTheta", 28, _DTHETA + _lbl(_DVEL, "dvel")), ("InsStatus", 2, ()), ("SyncInCnt", 4, ()),
         ("TimeGpsPps", 8, ())]),
     ("time", 1, [
-        ("TimeStartup", 8, _TIME), ("TimeGps", 8, ()), ("GpsTow", 8, ()), ("GpsWeek", 2, ()),
+        ("TimeStartup", 8, _TIME), ("TimeGps", 8, _GPS_TIME), ("GpsTow", 8, _GPS_TOW), ("GpsWeek", 2, _GPS_WEEK),
         ("TimeSyncIn", 8, ()), ("TimeGpsPps", 8, ()), ("TimeUtc", 8, ()), ("SyncInCnt", 4, ()),
         ("SyncOutCnt", 4, ()), ("TimeStatus", 1, ())]),
     ("imu", 2, [
         ("ImuStatus", 2, ()), ("UncompMag", 12, _MAG), ("UncompAccel", 12, _ACCEL), ("UncompGyro", 12, _GYRO),
         ("Temp", 4, _TEMP), ("Pres", 4, _PRES), ("DeltaTheta", 16, _DTHETA), ("DeltaVel", 12, _DVEL), ("Mag", 12, _MAG),
         ("Accel", 12, _ACCEL), ("AngularRate", 12, _GYRO), ("SensSat", 2, ()), ("Raw", 40, ())]),
+    ("gps", 3, _GPS_FIELDS),
     # Attitude bits 9-11 exist on some units but their names and sizes vary by library version.
     ("attitude", 4, [
         ("VpeStatus", 2, ()), ("YawPitchRoll", 12, _YPR), ("Quaternion", 16, _QUAT), ("Dcm", 36, ()),
@@ -178,6 +229,7 @@ _GROUP_TABLE = (
         ("InsStatus", 2, _INS_STATUS), ("PosLla", 24, _LLA), ("PosEcef", 24, ()), ("VelBody", 12, ()),
         ("VelNed", 12, _VEL_NED), ("VelEcef", 12, ()), ("MagEcef", 12, ()), ("AccelEcef", 12, ()),
         ("LinearAccelEcef", 12, ()), ("PosU", 4, _POS_U), ("VelU", 4, _VEL_U)]),
+    ("gps2", 6, _GPS_FIELDS),
 )
 
 _GROUP_BIT = {name: bit for name, bit, _ in _GROUP_TABLE}
@@ -283,9 +335,11 @@ def parse_fields(fields) -> Layout:
 # --- binary encoder --------------------------------------------------------------------------
 
 @numba.njit(cache=True, nogil=True)
-def _pack(out, size, header, items, scales, time_ns, accel, gyro, mag, quat, euler, temp, pres, extra, steps, sat):
+def _pack(out, size, header, items, scales, time_ns, accel, gyro, mag, quat, euler, temp, pres, extra, steps, sat,
+          gps_offset_ns):
     """Write len(time_ns) packets of `size` bytes into `out`. items[j] = (source id, column, wire type
-    0 f32 / 1 u64 time / 2 f64 / 3 u16) in wire order. Returns the first sample with a non-finite value, or -1."""
+    0 f32 / 1 u64 time / 2 f64 / 3 u16 / 4 u8 / 5 u64 GPS time of week / 6 u16 GPS week / 7 u64 GPS time) in
+    wire order. Returns the first sample with a non-finite value, or -1."""
     scratch = np.empty(1, np.float32)
     bits = scratch.view(np.uint32)
     scratch64 = np.empty(1, np.float64)
@@ -299,11 +353,29 @@ def _pack(out, size, header, items, scales, time_ns, accel, gyro, mag, quat, eul
         p = base + 1 + n_head
         for j in range(items.shape[0]):
             src = items[j, 0]
-            if items[j, 2] == 1:
+            kind = items[j, 2]
+            if kind == 1 or kind >= 5:
                 t = time_ns[i]
                 if t < 0:
                     t = 0
                     sat[j] += 1
+                if kind >= 5:
+                    if t > 9223372036854775807 - gps_offset_ns:
+                        t = 9223372036854775807
+                        sat[j] += 1
+                    else:
+                        t += gps_offset_ns
+                if kind == 6:
+                    week = t // 604800000000000
+                    if week > 65535:
+                        week = 65535
+                        sat[j] += 1
+                    out[p] = week & 0xFF
+                    out[p + 1] = (week >> 8) & 0xFF
+                    p += 2
+                    continue
+                if kind == 5:
+                    t = t % 604800000000000
                 for b in range(8):
                     out[p + b] = (t >> (8 * b)) & 0xFF
                 p += 8
@@ -328,21 +400,24 @@ def _pack(out, size, header, items, scales, time_ns, accel, gyro, mag, quat, eul
             if not np.isfinite(v):
                 return i
             v *= scales[j]
-            if items[j, 2] == 2:
+            if kind == 2:
                 scratch64[0] = v
                 w = bits64[0]
                 for b in range(8):
                     out[p + b] = (w >> np.uint64(8 * b)) & np.uint64(0xFF)
                 p += 8
                 continue
-            if items[j, 2] == 3:
-                if v < 0.0 or v > 65535.0:
+            if kind == 3 or kind == 4:
+                top = 65535.0 if kind == 3 else 255.0
+                if v < 0.0 or v > top:
                     sat[j] += 1
-                    v = min(max(v, 0.0), 65535.0)
-                u16 = int(np.rint(v))
-                out[p] = u16 & 0xFF
-                out[p + 1] = (u16 >> 8) & 0xFF
-                p += 2
+                    v = min(max(v, 0.0), top)
+                word = int(np.rint(v))
+                out[p] = word & 0xFF
+                p += 1
+                if kind == 3:
+                    out[p] = (word >> 8) & 0xFF
+                    p += 1
                 continue
             if v > 3.4028234663852886e38:
                 v = 3.4028234663852886e38
@@ -363,15 +438,34 @@ def _pack(out, size, header, items, scales, time_ns, accel, gyro, mag, quat, eul
     return -1
 
 
+def _constant(name: str, value) -> np.ndarray:
+    """A validated one-row value for a quantity no Samples field carries."""
+    if name not in _EXTRA_WIDTH or name in _FIELD_WIDTHS:
+        raise ValueError(f"VectorNav constants: {name!r} is not a settable quantity "
+                         f"(settable: {', '.join(n for n in _EXTRA_WIDTH if n not in _FIELD_WIDTHS)})")
+    row = np.atleast_1d(np.asarray(value, dtype=np.float64))
+    if row.shape != (_EXTRA_WIDTH[name],) or not np.isfinite(row).all():
+        raise ValueError(f"{name}: expected {_EXTRA_WIDTH[name]} finite number(s), got {value!r}")
+    return row.reshape(1, -1)
+
+
 class BinaryEncoder:
     """Samples -> VectorNav binary packets for one output configuration (`fields`, see parse_fields)."""
 
-    def __init__(self, fields=None, sample_period_s: float | None = None):
+    def __init__(self, fields=None, sample_period_s: float | None = None, gps_week_offset: int = 0,
+                 constants: dict | None = None):
+        """`gps_week_offset`: GPS weeks added to time_ns for the GPS time fields (time_ns counts from the start
+        of week 0 otherwise). `constants`: values for the quantities no Samples field carries (GNSS_CONSTANTS,
+        the INS uncertainties and status), replacing the documented defaults."""
         self.layout = parse_fields(fields)
         if sample_period_s is not None and not (np.isfinite(sample_period_s) and sample_period_s > 0):
             raise ValueError(f"sample_period_s must be a positive number, got {sample_period_s}")
         self.sample_period_s = sample_period_s
         self._last_time_ns = None
+        if isinstance(gps_week_offset, bool) or not isinstance(gps_week_offset, (int, np.integer)) \
+                or not 0 <= gps_week_offset <= 65535:
+            raise ValueError(f"gps_week_offset: a GPS week 0..65535, got {gps_week_offset!r}")
+        self.gps_offset_ns = int(gps_week_offset) * WEEK_NS
         undecodable = [f.key for f in self.layout.fields if not f.quantities]
         if undecodable:
             raise ValueError(f"VectorNav fields: the emulator has no data for {', '.join(undecodable)}")
@@ -387,7 +481,8 @@ class BinaryEncoder:
                             self._extra_base[q.source] = sum(_EXTRA_WIDTH[e] for e in self._extra_base)
                         rows.append((_SOURCE_ID["extra"], self._extra_base[q.source] + col, _WIRE_CODE[q.wire]))
                     else:
-                        rows.append((_SOURCE_ID[q.source], col, _WIRE_CODE[q.wire]))
+                        code = _TIME_CODE[q.time] if q.time else _WIRE_CODE[q.wire]
+                        rows.append((_SOURCE_ID[q.source], col, code))
                     scales.append(q.scale)
                     self._item_field.append(field.key)
         self._items = np.array(rows, dtype=np.int64).reshape(-1, 3)
@@ -397,6 +492,8 @@ class BinaryEncoder:
                                - {"time_ns"} - set(_EXTRA_WIDTH))
         self.uses_increments = bool(_REQUIRED & set(self._extra_base))
         self._defaults = {name: np.array([value], dtype=np.float64) for name, value in _DEFAULTS.items()}
+        for name, value in (constants or {}).items():
+            self._defaults[name] = _constant(name, value)
         self._unused = np.zeros((1, 4), dtype=np.float64)
         self._offsets = np.zeros(1, dtype=np.int64)   # reused while block sizes repeat (the live path)
 
@@ -436,7 +533,8 @@ class BinaryEncoder:
         out = np.empty(n * size, dtype=np.uint8)
         arrays, steps = self._columns(samples)
         sat = np.zeros(len(self._items), dtype=np.int64)
-        bad = _pack(out, size, self._header, self._items, self._scales, samples.time_ns, *arrays, steps, sat)
+        bad = _pack(out, size, self._header, self._items, self._scales, samples.time_ns, *arrays, steps, sat,
+                    self.gps_offset_ns)
         if bad >= 0:
             samples.require_finite(self._sources)     # names field and sample
             raise EncodeError(f"non-finite value at sample {bad}")
@@ -466,7 +564,7 @@ def _field_values(field: _Field, raw: bytes, offset: int) -> dict:
         wire = struct.unpack_from("<" + q.wire * count, raw, offset)
         offset += struct.calcsize(q.wire) * count
         key = f"{field.key}.{q.label}" if q.label else field.key
-        if q.wire == "Q":
+        if q.time:
             values[key] = int(wire[0])
             continue
         si = np.empty(count, dtype=np.float64)

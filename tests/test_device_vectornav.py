@@ -150,6 +150,78 @@ def test_ardupilot_vn100_start_up_sequence_and_the_packets_it_then_parses(tmp_pa
     assert "device: 7 commands answered, 0 error replies" in err
 
 
+# ArduPilot's VN-300 packets (AP_ExternalAHRS_VectorNav.cpp, VN_INS_ekf_packet and VN_INS_gnss_packet headers)
+ARDUPILOT_INS_EKF = bytes([0x31, 0x01, 0x00, 0x06, 0x01, 0x13, 0x06])
+ARDUPILOT_GNSS = bytes([0x49, 0x03, 0x00, 0xB8, 0x26, 0x18, 0x00])
+# VN_INS_gnss_packet: uint64 timeStartup, timeGps; uint8 numSats1, fix1; double posLla1[3]; float velNed1[3],
+# posU1[3], velU1, dop1[7]; uint8 numSats2, fix2 (PACKED, little-endian): 100 bytes + sync, header, CRC = 110
+GNSS_STRUCT = struct.Struct("<QQBB3d3f3ff7fBB")
+
+
+def test_ardupilot_vn300_start_up_sequence_and_its_gnss_packet(tmp_path):
+    """ArduPilot's INS path (model VN-3xx) writes the three binary outputs, the third being the GNSS packet its
+    pre-arm check needs (fix >= 3 on both receivers); each packet is decoded with ArduPilot's own struct layout
+    and its position checked against pymap3d from the scene's truth."""
+    import pymap3d
+
+    from imu_emulator.geodesy import DEFAULT_ORIGIN
+    from imu_emulator.scene import load_scene
+    from imu_emulator.simulation import Simulation
+    rate, week = 400, 2345
+    scene_path = write_scene(tmp_path, rate=rate, duration=60.0)
+    with Emulator(scene_path, "--format", "vectornav-binary", "--to", "pty", "--duration", "40",
+                  "--option", "model=VN-300-CR", "--option", "base_rate_hz=400",
+                  "--option", f"gps_week_offset={week}") as emu:
+        driver = Driver(emu.targets[0])
+        ardupilot_rate = 200            # EAHRS_RATE; a VN-300's IMU runs at 400 Hz: divisor 400 / rate
+        exchange = [
+            ("VNASY,0", "VNASY,0"),
+            ("VNWRG,06,0,1", "VNWRG,06,0,1"),
+            ("VNWRG,06,0,2", "VNWRG,06,0,2"),
+            ("VNRRG,01", "VNRRG,01,VN-300-CR"),
+            (f"VNWRG,75,3,{400 // ardupilot_rate},01,0721", f"VNWRG,75,3,{400 // ardupilot_rate},01,0721"),
+            (f"VNWRG,76,3,{400 // 50},31,0001,0106,0613", f"VNWRG,76,3,{400 // 50},31,0001,0106,0613"),
+            (f"VNWRG,77,3,{400 // 5},49,0003,26B8,0018", f"VNWRG,77,3,{400 // 5},49,0003,26B8,0018"),
+            ("VNASY,1", "VNASY,1"),
+        ]
+        for sent, expected in exchange:
+            assert driver.transact(command(sent)) == reply(expected), sent
+        after = driver.read(2.5)[driver.reply_end:]
+        driver.close()
+        code, err = emu.interrupt()
+    assert code == 0, err
+    ekf_size = 1 + 7 + 8 + 12 + 16 + 12 + 2 + 24 + 12 + 4 + 4 + 2
+    found, stray = packets(after, {ARDUPILOT_IMU: 82, ARDUPILOT_INS_EKF: ekf_size, ARDUPILOT_GNSS: 110})
+    assert stray == 0 and len(found[ARDUPILOT_INS_EKF]) >= 50
+    gnss = [GNSS_STRUCT.unpack_from(p, 8) for p in found[ARDUPILOT_GNSS]]
+    assert len(gnss) >= 8               # 400 / 80 = 5 Hz for 2.5 s
+    t_startup = np.array([g[0] for g in gnss])
+    assert set(np.diff(t_startup)) == {200_000_000}
+    # ArduPilot: gps_week = timeGps / (ms per week * 1e6), ms_tow = timeGps / 1e6 % ms per week
+    week_ns = 7 * 86400 * 10**9
+    for g in gnss:
+        assert g[1] // week_ns == week and g[1] % week_ns == g[0]
+        assert g[3] >= 3 and g[-1] >= 3 and g[2] > 0 and g[-2] > 0         # ArduPilot's pre-arm: fix >= 3
+        assert np.all(np.array(g[10:13]) > 0) and g[13] > 0                 # posU N, E, D and velU
+        dop = np.array(g[14:21], dtype=np.float64)                          # g, p, t, v, h, n, e
+        np.testing.assert_allclose(dop[0] ** 2, dop[1] ** 2 + dop[2] ** 2, rtol=1e-5)
+        np.testing.assert_allclose(dop[1] ** 2, dop[4] ** 2 + dop[3] ** 2, rtol=1e-5)
+    scene = load_scene(scene_path)
+    k = np.rint(t_startup * 1e-9 * rate).astype(int)
+    truth = Simulation(scene, truth=True).block(0, int(k.max()) + 1).truth
+    east, north, up = truth["position"][k].T           # the test scene is ENU
+    lat, lon, h = pymap3d.enu2geodetic(east, north, up, *DEFAULT_ORIGIN)
+    lla = np.array([g[4:7] for g in gnss])
+    np.testing.assert_allclose(lla[:, 0], lat, atol=1e-10)      # deg: ~1e-5 m
+    np.testing.assert_allclose(lla[:, 1], lon, atol=1e-10)
+    np.testing.assert_allclose(lla[:, 2], h, atol=1e-6)
+    ve, vn, vu = truth["velocity"][k].T
+    vel = np.array([g[7:10] for g in gnss])
+    np.testing.assert_allclose(vel, np.stack([vn, ve, -vu], axis=1).astype(np.float32), rtol=1e-6, atol=1e-6)
+    assert np.all(np.abs(np.hypot(vel[:, 0], vel[:, 1]) - 2 * np.pi * 0.5 * 5.0) < 1e-3)   # circle: 2 pi f r
+    assert "device: 8 commands answered, 0 error replies" in err
+
+
 PX4_OUTPUT1 = bytes.fromhex("06") + struct.pack("<2H", 0x0001, 0x0600)
 PX4_OUTPUT2 = bytes.fromhex("36") + struct.pack("<4H", 0x0001, 0x0130, 0x0084, 0x0613)
 
@@ -229,7 +301,7 @@ BAD = [
     (command("VNRRG"), "VNERR,05"),             # truncated: no register
     (command("VNWRG,75,3,4,01"), "VNERR,05"),   # fewer fields than groups
     (command("VNWRG,75,3,4,01,0721,0001"), "VNERR,06"),
-    (command("VNWRG,75,3,4,08,0001"), "VNERR,07"),    # GPS group: no data for it
+    (command("VNWRG,75,3,4,08,0001"), "VNERR,07"),    # GPS group UTC: no data for it
     (command("VNWRG,05,12345"), "VNERR,07"),
     (command("VNWRG,06,2"), "VNERR,07"),        # VNQTN: not produced
     (command("VNASY,2"), "VNERR,07"),

@@ -30,8 +30,10 @@ asynchronous ASCII sentences (replies always use the command's kind); 75-77 bina
 sample rate * rateDivisor^-1 scaled by base_rate_hz (the IMU rate the divisor divides: default the scene's
 rate; ArduPilot writes 800/rate for a VN-100, so set base_rate_hz=800 there), asyncMode 0 turns it off. All
 outputs count samples from one counter, so outputs with related divisors fall on the same samples as on the
-device. Fields the emulator has no data for (GPS groups, ECEF quantities, ...) are error 7, never a packet
-with invented layout.
+device. Fields the emulator has no data for (GPS UTC, ECEF quantities, ...) are error 7, never a packet
+with invented layout. The GPS groups (VN-200/300) carry the truth position and velocity, the configured
+satellite count, fix and uncertainties, and GPS time = sample time + `gps_week_offset` weeks: ArduPilot's
+VN-300 sequence (`$VNWRG,77,3,80,49,0003,26B8,0018`) gets its GNSS packet.
 
 Errors (`$VNERR,<2 digits>`): 03 bad checksum (or none), 04 unknown command, 05 / 06 too few / too many
 parameters, 07 invalid parameter, 08 invalid register (unknown, or read-only on write). Input that is not a
@@ -76,9 +78,9 @@ class _Reject(Exception):
 
 
 class _BinaryOutput:
-    def __init__(self, mode: int = 0, divisor: int = 1, layout=None):
+    def __init__(self, mode: int = 0, divisor: int = 1, layout=None, encoding: dict | None = None):
         self.mode, self.divisor, self.layout = mode, divisor, layout
-        self.encoder = BinaryEncoder(layout) if layout is not None else None
+        self.encoder = BinaryEncoder(layout, **(encoding or {})) if layout is not None else None
 
     def register_text(self) -> str:
         if self.layout is None:
@@ -91,8 +93,15 @@ class VectorNavDevice(Device):
     def __init__(self, rate_hz: float, fields=None, ascii_type: int = 0, checksum: str = "xor",
                  model: str = DEFAULT_MODEL, preset: str | None = None, base_rate_hz: float | None = None,
                  serial_number: int = 100012345, firmware: str = "2.1.0.0", hardware_revision: int = 2,
-                 baud: int = 115200):
+                 baud: int = 115200, gps_week_offset: int = 0, num_sats: int | None = None,
+                 gnss_fix: int | None = None, gnss_pos_u=None, gnss_vel_u: float | None = None):
         super().__init__(rate_hz)
+        constants = {name: value for name, value in (("gnss_num_sats", num_sats), ("gnss_fix", gnss_fix),
+                                                      ("gnss_pos_u", gnss_pos_u), ("gnss_vel_u", gnss_vel_u))
+                     if value is not None}
+        # every binary output's encoder, the configured ones and those a register write makes, encodes so
+        self._encoding = {"gps_week_offset": gps_week_offset, "constants": constants}
+        BinaryEncoder(DEFAULT_FIELDS, **self._encoding)      # bad values fail here, at start
         outputs = ((fields if fields is not None else DEFAULT_FIELDS, 1),) if ascii_type == 0 else ()
         if preset is not None:
             if preset not in PRESETS:
@@ -133,7 +142,8 @@ class VectorNavDevice(Device):
         self.user_tag, self.baud = settings["user_tag"], settings["baud"]
         self.ascii_type, self.ascii_rate = settings["ascii_type"], settings["ascii_rate"]
         self.ints = dict(settings["ints"])
-        self.binary = [_BinaryOutput(mode, divisor, layout) for mode, divisor, layout in settings["binary"]]
+        self.binary = [_BinaryOutput(mode, divisor, layout, self._encoding)
+                       for mode, divisor, layout in settings["binary"]]
         self.binary += [_BinaryOutput() for _ in range(3 - len(self.binary))]
         self._made += [o.encoder for o in self.binary if o.encoder is not None]
 
@@ -308,12 +318,12 @@ class VectorNavDevice(Device):
             _count(values, expected, expected)
             self.ints[register] = tuple(_integer(v) for v in values)
         else:
-            self.binary[register - 75] = output = self._binary_output(values)
+            self.binary[register - 75] = output = self._binary_output(values, self._encoding)
             if output.encoder is not None:
                 self._made.append(output.encoder)
 
     @staticmethod
-    def _binary_output(values: list) -> _BinaryOutput:
+    def _binary_output(values: list, encoding: dict) -> _BinaryOutput:
         _count(values, 3, 3 + 7)
         mode, divisor = _integer(values[0]), _integer(values[1])
         groups = _hex(values[2])
@@ -329,7 +339,7 @@ class VectorNavDevice(Device):
         layout = _layout_from_selection(selection)
         if layout is None or any(not f.quantities for f in layout.fields):
             raise _Reject(ERR_PARAMETER)       # a field the emulator has no data for
-        return _BinaryOutput(mode, divisor, layout)
+        return _BinaryOutput(mode, divisor, layout, encoding)
 
 
 def _count(values: list, least: int, most: int) -> None:
@@ -367,6 +377,11 @@ _OPTIONS = {
     "firmware": "register 4 (default 2.1.0.0)",
     "hardware_revision": "register 2 (default 2)",
     "baud": "register 5 at start (default 115200)",
+    "gps_week_offset": "GPS week added to the sample time for the GPS time fields (default 0)",
+    "num_sats": "GNSS NumSats (default 12)",
+    "gnss_fix": "GNSS Fix: 0 none, 1 time only, 2 2D, 3 3D (default 3)",
+    "gnss_pos_u": "GNSS PosU, 1 sigma north, east, down in m (default [1.0, 1.0, 1.5])",
+    "gnss_vel_u": "GNSS VelU, 1 sigma speed in m/s (default 0.05)",
 }
 _PRESET_LIST = {name: (settings, text) for name, (settings, text) in PRESETS.items()}
 attach_device("vectornav-binary", lambda rate_hz, **options: VectorNavDevice(rate_hz, **options), _OPTIONS,
