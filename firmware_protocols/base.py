@@ -25,8 +25,9 @@ class Samples:
     accel:          (n, 3) specific force, m/s^2
     gyro:           (n, 3) angular rate, rad/s
     mag:            (n, 3) magnetic field, gauss                    (optional)
-    quat:           (n, 4) attitude sensor->nav, scalar FIRST (w, x, y, z)   (optional)
-    euler:          (n, 3) roll, pitch, yaw in rad (z-y-x)          (optional)
+    quat:           (n, 4) attitude sensor->NED, scalar FIRST (w, x, y, z)   (optional; the wire formats'
+                    convention; a format declaring another reference frame converts at its edge)
+    euler:          (n, 3) roll, pitch, yaw in rad (z-y-x) of the same attitude   (optional)
     temperature_c:  (n,) degrees Celsius                            (optional)
     pressure_pa:    (n,) static pressure, pascal                    (optional)
     delta_theta:    (n, 3) integrated rate over the sample period, rad      (optional)

@@ -15,12 +15,13 @@ from firmware_protocols.base import DecoderStats, EncodeError, SaturationStats, 
 # Format-neutral batch packer: fixed-size big-endian packets straight from the sample arrays.
 # ============================================================================================
 
-KIND_U8, KIND_U16, KIND_U32, KIND_F32, KIND_F64, KIND_FP1220, KIND_FP1632 = range(7)
+KIND_U8, KIND_U16, KIND_U32, KIND_F32, KIND_F64, KIND_FP1220, KIND_FP1632, KIND_I32 = range(8)
 CHECKSUM_XBUS, CHECKSUM_FLETCHER16 = 0, 1
 # Where a column's value comes from.
 FROM_FIELD, FROM_COUNTER, FROM_TIME_DIV, FROM_TIME_REM_S, FROM_CONSTANT = range(5)
 
-KIND_SIZE = {KIND_U8: 1, KIND_U16: 2, KIND_U32: 4, KIND_F32: 4, KIND_F64: 8, KIND_FP1220: 4, KIND_FP1632: 6}
+KIND_SIZE = {KIND_U8: 1, KIND_U16: 2, KIND_U32: 4, KIND_F32: 4, KIND_F64: 8, KIND_FP1220: 4, KIND_FP1632: 6,
+             KIND_I32: 4}
 _F32_MAX = float(np.finfo(np.float32).max)
 _F64_MAX = float(np.finfo(np.float64).max)
 
@@ -33,11 +34,12 @@ _KIND_RANGE = {
     KIND_F64: (-_F64_MAX, _F64_MAX),
     KIND_FP1220: (-2.0 ** 31, 2.0 ** 31 - 1),
     KIND_FP1632: (-2.0 ** 47, 2.0 ** 47 - 1),
+    KIND_I32: (-2.0 ** 31, 2.0 ** 31 - 1),      # two's complement: _put_be of a negative int64 writes it
 }
 # Fixed-point kinds carry their LSB inside the column scale, so the range check sees raw integers.
 _KIND_UNIT = {KIND_FP1220: 2.0 ** 20, KIND_FP1632: 2.0 ** 32}
 # Sources are passed as a fixed-length tuple so that one compiled kernel serves every layout.
-_SLOTS = 12
+_SLOTS = 16
 _EMPTY_SOURCE = np.zeros((1, 1), dtype=np.float64)
 
 

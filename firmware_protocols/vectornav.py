@@ -52,7 +52,6 @@ simply widen the field, as printf does; `bytes_per_sample` is the nominal (fixed
 """
 from __future__ import annotations
 
-import math
 import struct
 from dataclasses import dataclass
 
@@ -62,6 +61,7 @@ import numpy as np
 from firmware_protocols.base import (_FIELD_WIDTHS, DecoderStats, EncodeError, Packet, SaturationStats, Samples,
                                      SerialBatch, integration_intervals)
 from firmware_protocols.crc import crc16_ccitt, crc16_ccitt_bytes
+from firmware_protocols.gnss_time import GNSS_DEFAULTS, dops
 from firmware_protocols.registry import FormatInfo, register
 
 SYNC = 0xFA
@@ -87,13 +87,6 @@ _TIME_CODE = {"startup": 1, "gps": 7, "tow": 5, "week": 6}
 WEEK_NS = 7 * 86400 * 1_000_000_000
 
 
-def _dops(north: float, east: float, vertical: float, time: float) -> tuple:
-    """The seven DOPs VectorNav's DOP field carries, in its order g, p, t, v, h, n, e."""
-    h = math.hypot(north, east)
-    p = math.hypot(h, vertical)
-    return (math.hypot(p, time), p, time, vertical, h, north, east)
-
-
 # Documented defaults for optional Samples fields a selected wire field needs (one row, broadcast).
 _DEFAULTS = {
     "mag": (0.0, 0.0, 0.0),
@@ -112,14 +105,13 @@ _DEFAULTS = {
     "vel_u": (0.05,),
     # INS status: mode 2 (INS tracking, bits 0-1) + GNSS fix (bit 2), no error bits: 0x0006.
     "ins_status": (6.0,),
-    # A healthy receiver under open sky: 3D fix (vnproglib GPSFIX_3D = 3; ArduPilot's pre-arm wants >= 3),
-    # 12 satellites, 1 sigma position N, E, D m and speed m/s, and DOPs consistent with one another
-    # (h^2 = n^2 + e^2, p^2 = h^2 + v^2, g^2 = p^2 + t^2).
-    "gnss_num_sats": (12.0,),
-    "gnss_fix": (3.0,),
+    # A healthy receiver under open sky (firmware_protocols.gnss_time): 3D fix (vnproglib GPSFIX_3D = 3;
+    # ArduPilot's pre-arm wants >= 3), satellites, 1 sigma position N, E, D m and speed m/s, consistent DOPs.
+    "gnss_num_sats": (float(GNSS_DEFAULTS["num_sats"]),),
+    "gnss_fix": (float(GNSS_DEFAULTS["fix_type"]),),
     "gnss_pos_u": (1.0, 1.0, 1.5),
     "gnss_vel_u": (0.05,),
-    "gnss_dop": _dops(north=0.6, east=0.6, vertical=1.0, time=0.8),
+    "gnss_dop": dops(GNSS_DEFAULTS["dop_n"], GNSS_DEFAULTS["dop_e"], GNSS_DEFAULTS["dop_v"], GNSS_DEFAULTS["dop_t"]),
 }
 GNSS_CONSTANTS = ("gnss_num_sats", "gnss_fix", "gnss_pos_u", "gnss_vel_u", "gnss_dop")
 

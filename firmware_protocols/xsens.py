@@ -20,7 +20,8 @@ Data identifier low nibble: bits 0-1 precision (0 float32, 1 fixed 12.20, 2 fixe
 bits 2-3 coordinate system (0 ENU, 4 NED, 8 NWU). The SDK names the coordinate-system mask "the
 coordinate system part of the orientation data identifier" (xstypes/xsdataidentifier.h) and sets it only
 on orientation (and velocity/position) items when converting legacy packets, so this encoder declares the
-frame on Quaternion and EulerAngles only. The caller supplies data already expressed in that frame.
+frame on Quaternion, EulerAngles and VelocityXYZ. Samples carry sensor -> NED attitude and NED velocity (as for
+every format); the encoder re-expresses both in the declared frame.
 
 Fixed point (xstypes/xsmessage.c, XsMessage_setDataF1220 / XsMessage_setDataFP1632):
 - 12.20: int32 = value * 2**20, range [-2048, 2048 - 2**-20].
@@ -80,10 +81,12 @@ import numpy as np
 
 from firmware_protocols.base import (INCREMENT_FIELDS, DecoderStats, Packet, SaturationStats, Samples,
                                      SerialBatch)
+from firmware_protocols import attitude
+from firmware_protocols.gnss_time import gnss_pvt_rows, gnss_settings, utc_rows
 from firmware_protocols.packing import (CHECKSUM_XBUS, FROM_CONSTANT, FROM_COUNTER, FROM_FIELD, FROM_TIME_DIV,
-                                        KIND_F32, KIND_F64, KIND_FP1220, KIND_FP1632, KIND_SIZE, KIND_U16, KIND_U32,
-                                        NEED_MORE, NOT_A_FRAME, Column, FixedPacketPacker, FrameScanner, as_int,
-                                        parse_names)
+                                        KIND_F32, KIND_F64, KIND_FP1220, KIND_FP1632, KIND_I32, KIND_SIZE, KIND_U8,
+                                        KIND_U16, KIND_U32, NEED_MORE, NOT_A_FRAME, Column, FixedPacketPacker,
+                                        FrameScanner, as_int, parse_names)
 from firmware_protocols.registry import FormatInfo, register
 
 # ============================================================================================
@@ -134,7 +137,25 @@ ITEMS = {
     "lat_lon": Item(0x5040, 2, True, source="position_llh"),
     "altitude_ellipsoid": Item(0x5020, 1, True, source="position_llh", first=2),
     "velocity_xyz": Item(0xD010, 3, True, has_frame=True, source="velocity_ned"),
+    # Records of mixed integer fields, computed per block (firmware_protocols.gnss_time) into one source row
+    # each; their wire layout is _RECORDS'.
+    "utc_time": Item(0x1010, 8, False, source="utc"),
+    "gnss_pvt_data": Item(0x7010, 35, False, source="gnss_pvt"),
 }
+# UtcTime (xstypes XsUtcTime): nano u32, year u16, month, day, hour, minute, second, flags u8 = 12 bytes.
+# GnssPvtData (xstypes XsRawGnssPvtData, packed, 94 bytes): iTOW u32 ms, year u16, month, day, hour, min, sec,
+# valid u8, tAcc u32 ns, nano i32, fixType, flags, numSv, res1 u8, lon, lat i32 1e-7 deg, height, hMSL i32 mm,
+# hAcc, vAcc u32 mm, velN, velE, velD, gSpeed i32 mm/s, headMot i32 1e-5 deg, sAcc u32 mm/s, headAcc u32
+# 1e-5 deg, headVeh i32 1e-5 deg, gdop, pdop, tdop, vdop, hdop, ndop, edop u16 0.01.
+_RECORDS = {
+    "utc_time": (KIND_U32, KIND_U16) + (KIND_U8,) * 6,
+    "gnss_pvt_data": (KIND_U32, KIND_U16) + (KIND_U8,) * 6 + (KIND_U32, KIND_I32) + (KIND_U8,) * 4
+                     + (KIND_I32,) * 4 + (KIND_U32,) * 2 + (KIND_I32,) * 5 + (KIND_U32,) * 2 + (KIND_I32,)
+                     + (KIND_U16,) * 7,
+}
+assert all(len(kinds) == ITEMS[name].count for name, kinds in _RECORDS.items())
+_RECORD_DTYPES = {name: np.dtype([(f"f{k}", {KIND_U8: ">u1", KIND_U16: ">u2", KIND_U32: ">u4", KIND_I32: ">i4"}[kind])
+                                  for k, kind in enumerate(kinds)]) for name, kinds in _RECORDS.items()}
 # velocity_xyz in each declared frame: (component of NED, sign) per axis
 _VELOCITY_AXES = {"ENU": ((1, 1.0), (0, 1.0), (2, -1.0)), "NED": ((0, 1.0), (1, 1.0), (2, 1.0)),
                   "NWU": ((0, 1.0), (1, -1.0), (2, -1.0))}
@@ -168,8 +189,10 @@ class XsensEncoder:
 
     def __init__(self, items=DEFAULT_ITEMS, precision: str = "float32", frame: str = "ENU",
                  mag_reference_gauss: float = 0.5, status_word: int = 0, packet_counter_start: int = 0,
-                 precisions: dict | None = None):
+                 precisions: dict | None = None, gnss: dict | None = None):
+        """`gnss`: settings of the GnssPvtData record (firmware_protocols.gnss_time.GNSS_DEFAULTS)."""
         self.items = parse_names(items, ITEMS, "items")
+        self.gnss = gnss_settings(gnss)
         precisions = dict(precisions or {})
         for name, value in [("precision", precision)] + [(f"precisions[{k}]", v) for k, v in precisions.items()]:
             if value not in PRECISIONS:
@@ -195,10 +218,11 @@ class XsensEncoder:
             item = ITEMS[name]
             prec_bits, real_kind, real_size = PRECISIONS[precisions.get(name, precision)]
             kind, width = (real_kind, real_size) if item.real else (item.int_kind, KIND_SIZE[item.int_kind])
+            size = sum(KIND_SIZE[k] for k in _RECORDS[name]) if name in _RECORDS else item.count * width
             xdi = item.xdi | (prec_bits if item.real else 0) | (FRAMES[frame] if item.has_frame else 0)
-            payload += bytes((xdi >> 8, xdi & 0xFF, item.count * width))
+            payload += bytes((xdi >> 8, xdi & 0xFF, size))
             placed.append((name, len(payload), kind, width))
-            payload += bytes(item.count * width)
+            payload += bytes(size)
         if len(payload) <= 254:
             header = bytes((PREAMBLE, BUS_MASTER, MID_MTDATA2, len(payload)))
         else:
@@ -210,6 +234,9 @@ class XsensEncoder:
         self._packer = FixedPacketPacker(header + bytes(payload) + b"\x00", columns, CHECKSUM_XBUS, _DEFAULTS)
         self._wants_delta_q = "delta_q" in self.items
         self.uses_increments = self._wants_delta_q or any(ITEMS[n].source in INCREMENT_FIELDS for n in self.items)
+        self._wants_utc = "utc_time" in self.items
+        self._wants_attitude = bool({"quaternion", "euler_angles"} & set(self.items))
+        self._wants_pvt = "gnss_pvt_data" in self.items
 
     def _columns(self, name: str, position: int, kind: int, width: int) -> list:
         if name == "packet_counter":
@@ -220,6 +247,12 @@ class XsensEncoder:
             return [Column(kind, position, name, FROM_TIME_DIV, divisor=1_000_000_000, modulus=1 << 32)]
         if name == "status_word":
             return [Column(kind, position, name, FROM_CONSTANT, constant=float(self.status_word))]
+        if name in _RECORDS:
+            columns = []
+            for c, record_kind in enumerate(_RECORDS[name]):
+                columns.append(Column(record_kind, position, name, FROM_FIELD, ITEMS[name].source, c))
+                position += KIND_SIZE[record_kind]
+            return columns
         item = ITEMS[name]
         if name == "velocity_xyz":
             return [Column(kind, position + c * width, name, FROM_FIELD, item.source, axis, sign)
@@ -233,10 +266,23 @@ class XsensEncoder:
         return self._packer.packet_size
 
     def encode(self, samples: Samples) -> SerialBatch:
-        extra = None
+        extra = {}
         if self._wants_delta_q and samples.delta_theta is not None:
             samples.require_finite(["delta_theta"])     # name the caller's field, not the derived one
-            extra = {"delta_q": rotation_vector_to_quat(samples.delta_theta)}
+            extra["delta_q"] = rotation_vector_to_quat(samples.delta_theta)
+        if self._wants_attitude and self.frame != "NED":
+            # Samples carry sensor -> NED attitude; the XDI declares this encoder's frame, so convert here
+            quat = samples.quat if samples.quat is not None else (
+                attitude.from_euler(samples.euler) if samples.euler is not None
+                else np.broadcast_to(_DEFAULTS["quat"], (len(samples), 4)))
+            extra["quat"] = attitude.from_ned(quat, self.frame)
+            extra["euler"] = attitude.to_euler(extra["quat"])
+        if self._wants_utc:
+            extra["utc"] = utc_rows(samples.time_ns, self.gnss)
+        if self._wants_pvt:
+            samples.require_finite(["position_llh", "velocity_ned"])
+            extra["gnss_pvt"] = gnss_pvt_rows(samples.time_ns, samples.field_or("position_llh", _DEFAULTS["position_llh"]),
+                                              samples.field_or("velocity_ned", _DEFAULTS["velocity_ned"]), self.gnss)
         batch = self._packer.pack(samples, self.saturated, self.packet_counter, extra)
         self.packet_counter = (self.packet_counter + len(samples)) & 0xFFFF
         return batch
@@ -331,6 +377,12 @@ class XsensDecoder:
         if item is None:
             fields.setdefault("unknown", {})[xdi] = data
             return
+        if name in _RECORDS:
+            if len(data) != sum(KIND_SIZE[k] for k in _RECORDS[name]):
+                fields.setdefault("unknown", {})[xdi] = data
+                return
+            fields[name] = tuple(int(v) for v in np.frombuffer(data, dtype=_RECORD_DTYPES[name])[0])
+            return
         if not item.real:
             width = KIND_SIZE[item.int_kind]
             if len(data) != width:
@@ -372,7 +424,8 @@ _OPTIONS = {
              f"known: {', '.join(ITEMS)}",
     "precision": "float32, float64, fp1220 or fp1632 for real-valued items",
     "precisions": "per-item precision overriding `precision`, e.g. {acceleration = 'fp1632'}",
-    "frame": "ENU, NED or NWU: declared in the orientation XDIs; data must already be in it",
+    "frame": "ENU, NED or NWU: declared in the orientation and velocity XDIs; attitude and velocity are "
+             "converted to it",
     "mag_reference_gauss": "field strength in gauss that reads 1.0 arbitrary unit, > 0",
     "status_word": "constant StatusWord value 0..0xFFFFFFFF",
     "packet_counter_start": "first PacketCounter value 0..65535; wraps 65535 -> 0",

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 import firmware_protocols
+from firmware_protocols import attitude
 from firmware_protocols.base import EncodeError, can_bits_worst_case
 from imu_emulator.errors import ImuEmulatorError, SceneError, TargetError
 from imu_emulator.outfile import AtomicOutput
@@ -183,6 +184,7 @@ class Stream:
         self.capacity = link_capacity(self.spec, info.kind, config.target_options)
         self.device = None
         self.navigation = None     # (frame, gravity, origin) when the device reports navigation quantities
+        self.frame = "NED"          # the scene's navigation frame: attitude goes out NED-referenced (run_streams)
         try:
             if config.device and info.device is not None and self.spec.kind not in _ONE_WAY_TARGETS:
                 # The device encodes too: budgets read its bytes_per_sample / frames_per_sample.
@@ -218,8 +220,10 @@ class Stream:
         if block.dtheta is not None:   # over one sample period, by the sensor's own (nominal) clock
             increments = {"delta_theta": block.dtheta[i], "delta_velocity": block.dvel[i],
                           "delta_time_s": np.full(len(time_ns), self.period_s)}
+        # Wire formats reference attitude to NED (Samples.quat is sensor -> NED): an ENU scene's is converted.
+        quat = attitude.to_ned(block.quat[i], self.frame)
         if self.device is None:
-            return Samples(time_ns, block.accel[i], block.gyro[i], quat=block.quat[i], temperature_c=temperature,
+            return Samples(time_ns, block.accel[i], block.gyro[i], quat=quat, temperature_c=temperature,
                            **increments)
         # imported here: rotations pulls in numba, which every command would pay for at start-up otherwise
         from imu_emulator.rotations import quat_to_euler, quat_to_matrix
@@ -232,7 +236,7 @@ class Stream:
             nav = {"position_llh": local_to_geodetic(block.truth["position"], frame, origin),
                    "velocity_ned": to_ned(block.truth["velocity"], frame),
                    "linear_accel_ned": to_ned(specific_force, frame)}
-        return Samples(time_ns, block.accel[i], block.gyro[i], quat=block.quat[i], euler=quat_to_euler(block.quat[i]),
+        return Samples(time_ns, block.accel[i], block.gyro[i], quat=quat, euler=quat_to_euler(quat),
                        temperature_c=temperature, **nav, **increments)
 
     def encode(self, block, time_ns: np.ndarray) -> tuple[list, int]:
@@ -774,6 +778,7 @@ def needs_increments(configs: list[StreamConfig]) -> bool:
 def run_streams(scene, sim, configs: list[StreamConfig], options: RunOptions) -> dict:
     streams = build_streams(configs, tuple(sim.imu_names), float(scene.rate_hz))
     for stream in streams:
+        stream.frame = scene.frame
         if stream.device is not None and stream.info.device_navigation:
             # the scene has no geodetic origin yet: geodesy's documented default stands in for it
             stream.navigation = (scene.frame, float(scene.gravity_mps2), DEFAULT_ORIGIN)

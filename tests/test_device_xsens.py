@@ -71,7 +71,24 @@ ARDUPILOT_XDIS = (0x1020, 0x1060, 0x1010, 0x0810, 0x2010, 0x4020, 0x8020, 0xC020
                   0x5022, 0xD012, 0x7010)
 
 
+# Xsens' XsUtcTime and XsRawGnssPvtData (xstypes, packed), big-endian on the wire
+UTC = struct.Struct(">IHBBBBBB")
+PVT = struct.Struct(">IHBBBBBBIiBBBBiiiiIIiiiiiIIiHHHHHHH")
+
+
 def test_ardupilot_configuration_then_exactly_the_configured_items(tmp_path):
+    """ArduPilot's sequence, every item it asks for present, UtcTime and GnssPvtData decoded with Xsens' own
+    struct layouts and checked against the scene's truth (pymap3d for the geodetic position), and the two
+    alignment rotations ArduPilot sends (local: ENU -> NED, sensor: pi about x) applied: scipy's Rotation
+    gives what the accelerometer and the quaternion must then read."""
+    import datetime
+
+    import pymap3d
+    from scipy.spatial.transform import Rotation
+
+    from imu_emulator.geodesy import DEFAULT_ORIGIN
+    from imu_emulator.scene import load_scene
+    from imu_emulator.simulation import Simulation
     rate = 400
     scene_path = write_scene(tmp_path, rate=rate, duration=60.0)
     scene, _, accel, gyro = reference(scene_path)
@@ -85,10 +102,10 @@ def test_ardupilot_configuration_then_exactly_the_configured_items(tmp_path):
         ap_rate = 100
         config = b"".join(struct.pack(">HH", xdi, ap_rate) for xdi in ARDUPILOT_XDIS)
         assert client.transact(message(0xC0, config), 0xC1) == (0xC1, config)
-        local = bytes([1]) + struct.pack(">4f", 0.0, 0.7071068, 0.7071068, 0.0)
-        sensor = bytes([0]) + struct.pack(">4f", 0.0, 1.0, 0.0, 0.0)
-        assert client.transact(message(0xEC, local), 0xED) == (0xED, b"")
-        assert client.transact(message(0xEC, sensor), 0xED) == (0xED, b"")
+        local_q = (0.0, 0.7071068, 0.7071068, 0.0)
+        sensor_q = (0.0, 1.0, 0.0, 0.0)
+        assert client.transact(message(0xEC, bytes([1]) + struct.pack(">4f", *local_q)), 0xED) == (0xED, b"")
+        assert client.transact(message(0xEC, bytes([0]) + struct.pack(">4f", *sensor_q)), 0xED) == (0xED, b"")
         assert client.transact(message(0x10), 0x11) == (0x11, b"")
         client.data += read_for(client.fd, 1.0)
         after = client.data[client.mark:]
@@ -97,22 +114,51 @@ def test_ardupilot_configuration_then_exactly_the_configured_items(tmp_path):
         code, err = emu.interrupt()
     assert code == 0, err
     assert not [m for m, _ in frames(in_config) if m == 0x36], "MTData2 in config mode"
-    packets = [payload for mid, payload in frames(after) if mid == 0x36]
+    packets = [dict(items(payload)) for mid, payload in frames(after) if mid == 0x36]
     assert len(packets) > 50
-    produced = [x for x in ARDUPILOT_XDIS if x not in (0x1010, 0x7010)]
-    for payload in packets:
-        assert [xdi for xdi, _ in items(payload)] == produced
-    assert "cannot produce 0x1010, 0x7010" in err and "not rotated" in err
+    for packet in packets:
+        assert list(packet) == list(ARDUPILOT_XDIS)
+    assert "cannot produce" not in err
     # 100 Hz of a 400 Hz scene: SampleTimeFine (10 kHz ticks) steps by 100, PacketCounter by 1
-    fine = np.array([struct.unpack(">I", dict(items(p))[0x1060])[0] for p in packets])
-    counter = np.array([struct.unpack(">H", dict(items(p))[0x1020])[0] for p in packets])
+    fine = np.array([struct.unpack(">I", p[0x1060])[0] for p in packets])
+    counter = np.array([struct.unpack(">H", p[0x1020])[0] for p in packets])
     assert set(np.diff(fine)) == {100} and set(np.diff(counter) % 65536) == {1}
     k = np.rint(fine * 1e-4 * rate).astype(int)
-    got_acc = np.array([struct.unpack(">3f", dict(items(p))[0x4020]) for p in packets])
-    np.testing.assert_array_equal(got_acc, accel[k].astype(np.float32))
+    t_ns = k * (10**9 // rate)
+    # Sensor alignment pi about x: the object frame is x, -y, -z of the sensor's
+    got_acc = np.array([struct.unpack(">3f", p[0x4020]) for p in packets])
+    expected = Rotation.from_quat([*sensor_q[1:], sensor_q[0]]).apply(accel[k])
+    np.testing.assert_allclose(got_acc, expected, rtol=1e-6, atol=1e-6)
+    # Quaternion: q_L'O = q_L'L q_LS q_OS*, the scene's ENU attitude turned to NED, body turned to x, -y, -z
+    truth = Simulation(scene, truth=True).block(0, int(k.max()) + 1)
+    q_ls = truth.quat[0][k]
+    want = (Rotation.from_quat([*local_q[1:], local_q[0]]) * Rotation.from_quat(q_ls[:, [1, 2, 3, 0]])
+            * Rotation.from_quat([*sensor_q[1:], sensor_q[0]]).inv())
+    got_q = np.array([struct.unpack(">4f", p[0x2010]) for p in packets])
+    assert np.all((want.inv() * Rotation.from_quat(got_q[:, [1, 2, 3, 0]])).magnitude() < 1e-5)
+    # UtcTime: no --epoch-time, so the sample time counts from the Unix epoch
+    for p, t in zip(packets, t_ns):
+        nano, year, month, day, hour, minute, second, flags = UTC.unpack(p[0x1010])
+        when = datetime.datetime(1970, 1, 1) + datetime.timedelta(microseconds=int(t) // 1000)
+        assert (year, month, day, hour, minute, second) == (when.year, when.month, when.day, when.hour,
+                                                             when.minute, when.second)
+        assert nano == t % 10**9 and flags == 0x07
+    # GnssPvtData: GPS time of week (UTC + 18 leap seconds since the GPS epoch 1980-01-06), a 3D fix, and the
+    # scene's position and NED velocity in u-blox units (1e-7 deg, mm, mm/s)
+    pvt = np.array([PVT.unpack(p[0x7010]) for p in packets], dtype=np.float64)
+    gps_ms = t_ns // 10**6 + (18 - 315964800) * 1000
+    np.testing.assert_array_equal(pvt[:, 0], gps_ms % (7 * 86400 * 1000))
+    assert np.all(pvt[:, 10] == 3) and np.all(pvt[:, 12] > 0)
+    east, north, up = truth.truth["position"][k].T
+    lat, lon, h = pymap3d.enu2geodetic(east, north, up, *DEFAULT_ORIGIN)
+    assert np.all(np.abs(pvt[:, 14] - lon * 1e7) <= 0.5) and np.all(np.abs(pvt[:, 15] - lat * 1e7) <= 0.5)
+    assert np.all(np.abs(pvt[:, 16] - h * 1e3) <= 0.5)
+    ve, vn, vu = truth.truth["velocity"][k].T
+    np.testing.assert_allclose(pvt[:, 20:23], np.stack([vn, ve, -vu], axis=1) * 1e3, atol=0.5)
+    dop = pvt[:, 28:35] / 100      # g, p, t, v, h, n, e: g^2 = p^2 + t^2 (to the 0.01 wire step)
+    np.testing.assert_allclose(dop[:, 0] ** 2, dop[:, 1] ** 2 + dop[:, 2] ** 2, atol=0.05)
     # LatLon in FP16.32: the documented default origin within the scene's 5 m circle
-    latlon = dict(items(packets[0]))[0x5042]
-    frac, whole = struct.unpack_from(">Ih", latlon, 0)
+    frac, whole = struct.unpack_from(">Ih", packets[0][0x5042], 0)
     assert abs(whole + frac / 2**32 - 47.397742) < 1e-4
 
 

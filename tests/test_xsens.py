@@ -139,18 +139,32 @@ def test_common_sample_read_by_spec_decoder(precision, bits):
     assert struct.unpack(">I", items[0xE020]) == (0x00400003,)
 
 
+# Coordinates in each declared frame of NED vectors: ENU swaps north and east and negates down; NWU negates
+# east and down.
+_FROM_NED = {"NED": np.eye(3), "ENU": np.array([[0, 1, 0], [1, 0, 0], [0, 0, -1]]),
+             "NWU": np.diag([1, -1, -1])}
+
+
 @pytest.mark.parametrize("frame, bits", [("ENU", 0x0), ("NED", 0x4), ("NWU", 0x8)])
-def test_frame_bits_declared_on_orientation_only(frame, bits):
+def test_frame_bits_declared_on_orientation_and_attitude_expressed_in_that_frame(frame, bits):
+    """Samples carry sensor -> NED attitude; the packet declares its frame and must carry the same attitude
+    referenced to it: R_frame = C_frame<-NED R_ned (scipy's Rotation as the oracle, Euler z-y-x from it)."""
+    from scipy.spatial.transform import Rotation
     encoder = XsensEncoder(items="quaternion,euler_angles,acceleration", precision="float64", frame=frame)
-    quat = [0.5, 0.5, -0.5, 0.5]
-    packet = encoder.encode(Samples.single(0, [0, 0, 9.8], [0, 0, 0], quat=quat, euler=[0.1, -0.2, 3.0])).packet(0)
+    ned = Rotation.from_euler("ZYX", [3.0, -0.2, 0.1])
+    x, y, z, w = ned.as_quat()
+    packet = encoder.encode(Samples.single(0, [0, 0, 9.8], [0, 0, 0], quat=[w, x, y, z],
+                                           euler=[0.1, -0.2, 3.0])).packet(0)
     items = dict(spec_items(spec_frame(packet)[1]))
     assert list(items) == [0x2013 | bits, 0x2033 | bits, 0x4023]
-    assert spec_reals(items[0x2013 | bits], 3) == quat                               # w first
-    assert spec_reals(items[0x2033 | bits], 3) == pytest.approx([math.degrees(v) for v in (0.1, -0.2, 3.0)])
+    want = Rotation.from_matrix(_FROM_NED[frame]) * ned
+    qw, qx, qy, qz = spec_reals(items[0x2013 | bits], 3)                             # w first
+    assert (want.inv() * Rotation.from_quat([qx, qy, qz, qw])).magnitude() < 1e-12
+    yaw, pitch, roll = want.as_euler("ZYX")
+    assert spec_reals(items[0x2033 | bits], 3) == pytest.approx([math.degrees(v) for v in (roll, pitch, yaw)])
     (decoded,) = XsensDecoder().feed(packet)
     assert decoded.fields["frame"] == frame
-    assert decoded.fields["euler"] == pytest.approx((0.1, -0.2, 3.0))
+    assert decoded.fields["euler"] == pytest.approx((roll, pitch, yaw))
 
 
 def test_extended_length_when_payload_exceeds_254():

@@ -21,20 +21,27 @@ byte sum from FF through the checksum is 0.
   bits choose each real item's precision (float32, FP12.20, FP16.32, float64) and, on orientation and
   velocity items, the frame. A frequency of 0xFFFF (or 0) means "with every packet"; other items go out
   every round(sample rate / frequency) samples; a packet is sent at each sample where some item is due and
-  carries those items (plus the every-packet ones) in the configured order. Items the emulator cannot
-  produce (UtcTime, GnssPvtData, any XDI it does not know) are acknowledged but left out, and a note says
+  carries those items (plus the every-packet ones) in the configured order. UtcTime and GnssPvtData come
+  from the sample time and the truth (firmware_protocols.gnss_time; options num_sats, gnss_fix, leap_seconds).
+  Items the emulator cannot produce (any XDI it does not know) are acknowledged but left out, and a note says
   which, so nothing is dropped silently. A malformed configuration (odd length) is XRV_INVALIDPARAM.
 - SetAlignmentRotation (0xEC: frame byte 0 sensor / 1 local, then a float32 quaternion w, x, y, z) is
-  acknowledged with an empty 0xED and stored; with only the frame byte it is a request, answered with the
-  stored quaternion. The emulator does not rotate its data by it (a note says so when it is not identity).
+  acknowledged with an empty 0xED and applied from the next sample (see `aligned` for the rotations);
+  a quaternion that is not of unit length is XRV_INVALIDPARAM. With only the frame byte it is a request,
+  answered with the stored quaternion.
 - A frame (FA FF ...) with a bad checksum, and any message id not listed here, is answered with Error 0x42
   XRV_INVALIDMSG; bytes outside frames (a preamble not followed by bus id FF included) are ignored and
   counted.
 """
 from __future__ import annotations
 
+import dataclasses
+import math
 import struct
 
+import numpy as np
+
+from firmware_protocols import attitude
 from firmware_protocols.base import Samples
 from firmware_protocols.devices.base import Device, SinceLastOutput, single
 from firmware_protocols.registry import attach_device
@@ -49,6 +56,24 @@ _ITEM_BY_BASE = {item.xdi: name for name, item in ITEMS.items()}
 _PRECISION_BY_BITS = {bits: name for name, (bits, _, _) in PRECISIONS.items()}
 _FRAME_BY_BITS = {bits: name for name, bits in FRAMES.items()}
 _MAX_FRAME = 8192
+_IDENTITY = (1.0, 0.0, 0.0, 0.0)
+
+
+def aligned(one: Samples, sensor, local, frame: str) -> Samples:
+    """One sample as an MTi with alignment rotations outputs it. `sensor` (RotSensor, q_OS) rotates sensor-frame
+    vectors into the object frame O: x_O = q_OS x_S q_OS*, and the orientation becomes q_LO = q_LS (x) q_OS*.
+    `local` (RotLocal, q_L'L) turns the declared reference frame L (ENU, NED or NWU): q_L'O = q_L'L (x) q_LO,
+    done here on the Samples' NED attitude as q_NL (x) q_L'L (x) q_LN. Velocity stays in the unturned frame;
+    an absent attitude is the documented default (identity)."""
+    quat = one.quat if one.quat is not None else np.array([_IDENTITY])
+    changes = {name: attitude.rotate(sensor, getattr(one, name))
+               for name in ("accel", "gyro", "mag", "delta_velocity", "delta_theta") if getattr(one, name) is not None}
+    quat = attitude.multiply(quat, attitude.conjugate(np.array(sensor)))
+    to_frame = attitude.from_ned(np.array(_IDENTITY), frame)            # q_LN
+    local_ned = attitude.multiply(attitude.multiply(attitude.conjugate(to_frame), np.array(local)), to_frame)
+    changes["quat"] = attitude.canonical(attitude.multiply(local_ned, quat))
+    changes["euler"] = attitude.to_euler(changes["quat"])
+    return dataclasses.replace(one, **changes)
 
 
 def xbus(mid: int, data: bytes = b"") -> bytes:
@@ -63,16 +88,20 @@ class XsensDevice(Device):
     carries_increments = True    # a driver may configure the integrated outputs at any time
     def __init__(self, rate_hz: float, items=DEFAULT_ITEMS, precision: str = "float32", frame: str = "ENU",
                  mag_reference_gauss: float = 0.5, status_word: int = 0, packet_counter_start: int = 0,
-                 device_id: int = 0x03780123, product_code: str = "MTi-300-2A8G4", firmware: str = "1.8.2"):
+                 device_id: int = 0x03780123, product_code: str = "MTi-300-2A8G4", firmware: str = "1.8.2",
+                 num_sats: int | None = None, gnss_fix: int | None = None, leap_seconds: int | None = None):
         super().__init__(rate_hz)
-        self._encoder_options = {"mag_reference_gauss": mag_reference_gauss, "status_word": status_word}
+        gnss = {name: value for name, value in (("num_sats", num_sats), ("fix_type", gnss_fix),
+                                                 ("leap_seconds", leap_seconds)) if value is not None}
+        self._encoder_options = {"mag_reference_gauss": mag_reference_gauss, "status_word": status_word,
+                                 "gnss": gnss}
         encoder = XsensEncoder(items, precision, frame, **self._encoder_options)   # validates the options
         self.counter = int(packet_counter_start) & 0xFFFF
         self.device_id = int(device_id) & 0xFFFFFFFF
         self.product_code = str(product_code).encode("ascii")
         self.firmware = bytes(int(p) & 0xFF for p in str(firmware).split("."))[:3].ljust(3, b"\0")
         self.measuring = True
-        self.alignment = {0: (1.0, 0.0, 0.0, 0.0), 1: (1.0, 0.0, 0.0, 0.0)}
+        self.alignment = {0: _IDENTITY, 1: _IDENTITY}
         # The configuration as the client would read it back: XDI with precision/frame bits, frequency.
         every = [n for n in encoder.items if n in ("packet_counter", "sample_time_fine", "sample_time_coarse")]
         self.config = [(self._xdi(n, precision, frame), 0xFFFF if n in every else min(0xFFFE, int(round(rate_hz))))
@@ -137,7 +166,10 @@ class XsensDevice(Device):
         encoder = self._encoder(due)
         encoder.packet_counter = self.counter
         self.counter = (self.counter + 1) & 0xFFFF
-        data = encoder.encode(self.increments.attach(single(samples, i))).data
+        one = self.increments.attach(single(samples, i))
+        if self.alignment[0] != _IDENTITY or self.alignment[1] != _IDENTITY:
+            one = aligned(one, self.alignment[0], self.alignment[1], self.frame)
+        data = encoder.encode(one).data
         self.increments.sent(encoder)
         return data
 
@@ -239,15 +271,18 @@ class XsensDevice(Device):
         if self.measuring:
             return ERROR, bytes([XRV_INVALIDMSG])
         quat = struct.unpack(">4f", data[1:])
+        norm = math.sqrt(sum(v * v for v in quat))
+        if not 0.99 < norm < 1.01:      # finite, and a rotation (float32 rounding allowed)
+            return ERROR, bytes([XRV_INVALIDPARAM])
         self.alignment[data[0]] = quat
-        if quat != (1.0, 0.0, 0.0, 0.0):
-            self.notes.append(f"alignment rotation {'local' if data[0] else 'sensor'} {quat} stored; "
-                              "the emulated data are not rotated by it")
         return SET_ALIGNMENT_ROTATION + 1, b""
 
 
 attach_device("xsens-mtdata2", lambda rate_hz, **options: XsensDevice(rate_hz, **options),
               {"device_id": "DeviceID answered to ReqDID (default 0x03780123)",
                "product_code": "answered to ReqProductCode (default MTi-300-2A8G4)",
-               "firmware": "major.minor.revision answered to ReqFWRev (default 1.8.2)"},
+               "firmware": "major.minor.revision answered to ReqFWRev (default 1.8.2)",
+               "num_sats": "GnssPvtData numSv (default 12)",
+               "gnss_fix": "GnssPvtData fixType: 0 none ... 3 3D fix (default 3)",
+               "leap_seconds": "GPS - UTC in seconds for GnssPvtData's iTOW (default 18)"},
               navigation=True)

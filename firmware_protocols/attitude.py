@@ -1,0 +1,81 @@
+"""Quaternion arithmetic the formats need at their edge (frame changes, alignment rotations), in numpy on
+blocks: scalar-first unit quaternions (w, x, y, z), Hamilton product, q rotating vectors v -> q v q*.
+
+firmware_protocols stands below the simulation in the import order, so it keeps these few lines of its own
+rather than reaching up into imu_emulator.rotations.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+# ENU <-> NED: x_ned = (y_enu, x_enu, -z_enu), the rotation by pi about (1, 1, 0)/sqrt(2): its own inverse.
+Q_NED_FROM_ENU = np.array([0.0, 1.0, 1.0, 0.0]) / np.sqrt(2.0)
+
+
+def multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product a (x) b of (n, 4) or (4,) quaternions (broadcast)."""
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    aw, ax, ay, az = np.moveaxis(a, -1, 0)
+    bw, bx, by, bz = np.moveaxis(b, -1, 0)
+    return np.stack([aw * bw - ax * bx - ay * by - az * bz,
+                     aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw], axis=-1)
+
+
+def conjugate(q: np.ndarray) -> np.ndarray:
+    return np.asarray(q, dtype=np.float64) * np.array([1.0, -1.0, -1.0, -1.0])
+
+
+def matrix(q) -> np.ndarray:
+    """The rotation matrix of one unit quaternion (normalised first: wire values are float32)."""
+    w, x, y, z = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def to_euler(q: np.ndarray) -> np.ndarray:
+    """(n, 4) body -> navigation quaternions -> (n, 3) roll, pitch, yaw (z-y-x Tait-Bryan, rad)."""
+    w, x, y, z = np.moveaxis(np.asarray(q, dtype=np.float64), -1, 0)
+    roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = np.arcsin(np.clip(2 * (w * y - x * z), -1.0, 1.0))
+    yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return np.stack([roll, pitch, yaw], axis=-1)
+
+
+def from_euler(euler: np.ndarray) -> np.ndarray:
+    """(n, 3) roll, pitch, yaw (z-y-x, rad) -> (n, 4) quaternions, the inverse of to_euler."""
+    half = 0.5 * np.asarray(euler, dtype=np.float64)
+    cr, cp, cy = np.cos(half).T
+    sr, sp, sy = np.sin(half).T
+    return np.stack([cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
+                     cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy], axis=-1)
+
+
+def rotate(q, vectors: np.ndarray) -> np.ndarray:
+    """(n, 3) vectors rotated by the one quaternion q: q v q*."""
+    return np.asarray(vectors, dtype=np.float64) @ matrix(q).T
+
+
+def canonical(q: np.ndarray) -> np.ndarray:
+    """The sign of each quaternion with w >= 0 (q and -q are one rotation; readers compare values)."""
+    return q * np.where(q[..., :1] < 0, -1.0, 1.0)
+
+
+def to_ned(quat: np.ndarray, frame: str) -> np.ndarray:
+    """Sensor -> navigation attitude in the scene's frame ("ENU" or "NED") -> sensor -> NED. Only the
+    reference side changes: the sensor frame is the one the accelerometer and gyro data are expressed in,
+    so f_ned = R(q_ned) f_sensor holds for what goes on the wire."""
+    if frame == "NED":
+        return quat
+    return canonical(multiply(Q_NED_FROM_ENU, quat))
+
+
+def from_ned(quat: np.ndarray, frame: str) -> np.ndarray:
+    """Sensor -> NED attitude -> sensor -> `frame` ("NED", "ENU" or "NWU"), for formats that declare another
+    reference frame (Xsens)."""
+    if frame == "NED":
+        return quat
+    reference = Q_NED_FROM_ENU if frame == "ENU" else np.array([0.0, 1.0, 0.0, 0.0])  # both are their own inverse
+    return canonical(multiply(reference, quat))
