@@ -94,6 +94,38 @@ def test_heartbeat_every_second_of_samples_and_acks_that_change_the_rate(tmp_pat
     assert "device: 3 commands answered, 2 error replies" in err
 
 
+def test_get_message_interval_answers_message_interval_then_ack(tmp_path):
+    """MAV_CMD_GET_MESSAGE_INTERVAL (510) and REQUEST_MESSAGE for MESSAGE_INTERVAL (512, param1 244): pymavlink
+    decodes a MESSAGE_INTERVAL with common.xml's meanings (> 0 the interval, -1 disabled, 0 not available),
+    then the COMMAND_ACK."""
+    rate = 200
+    scene_path = write_scene(tmp_path, rate=rate, duration=30.0)
+    with Emulator(scene_path, "--format", "mavlink-highres", "--to", "pty", "--duration", "20") as emu:
+        fd = _open(emu.targets[0])
+        mav = _gcs()
+        default = _converse(fd, mav, mav.command_long_encode(1, 1, 510, 0, 105, 0, 0, 0, 0, 0, 0))
+        _converse(fd, mav, mav.command_long_encode(1, 1, 511, 0, 105, 25_000, 0, 0, 0, 0, 0))
+        changed = _converse(fd, mav, mav.command_long_encode(1, 1, 510, 0, 105, 0, 0, 0, 0, 0, 0))
+        heartbeat = _converse(fd, mav, mav.command_long_encode(1, 1, 512, 0, 244, 0, 0, 0, 0, 0, 0))
+        other = _converse(fd, mav, mav.command_long_encode(1, 1, 510, 0, 30, 0, 0, 0, 0, 0, 0))
+        _converse(fd, mav, mav.command_long_encode(1, 1, 511, 0, 105, -1, 0, 0, 0, 0, 0))
+        off = _converse(fd, mav, mav.command_long_encode(1, 1, 512, 0, 244, 105, 0, 0, 0, 0, 0))
+        os.close(fd)
+        code, err = emu.interrupt()
+    assert code == 0, err
+
+    def answer(data):
+        replies = [m for m in _messages(_gcs(), data) if m.get_type() in ("MESSAGE_INTERVAL", "COMMAND_ACK")]
+        return [(m.get_type(), m.message_id, m.interval_us) if m.get_type() == "MESSAGE_INTERVAL"
+                else (m.get_type(), m.command, m.result) for m in replies]
+
+    assert answer(default) == [("MESSAGE_INTERVAL", 105, 1_000_000 // rate), ("COMMAND_ACK", 510, 0)]
+    assert answer(changed) == [("MESSAGE_INTERVAL", 105, 25_000), ("COMMAND_ACK", 510, 0)]
+    assert answer(heartbeat) == [("MESSAGE_INTERVAL", 0, 1_000_000), ("COMMAND_ACK", 512, 0)]
+    assert answer(other) == [("MESSAGE_INTERVAL", 30, 0), ("COMMAND_ACK", 510, 0)]
+    assert answer(off) == [("MESSAGE_INTERVAL", 105, -1), ("COMMAND_ACK", 512, 0)]
+
+
 def test_signed_link_answers_only_signed_commands_and_signs_everything(tmp_path):
     scene_path = write_scene(tmp_path, rate=100, duration=30.0)
     with Emulator(scene_path, "--format", "mavlink-scaled-imu", "--to", "pty", "--duration", "20",

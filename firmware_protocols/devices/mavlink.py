@@ -20,6 +20,11 @@ MAV_RESULT ACCEPTED 0 / DENIED 2 / UNSUPPORTED 3).
   period the same way. Other message ids: DENIED (we cannot stream them).
 - REQUEST_MESSAGE for the IMU message or HEARTBEAT: ACCEPTED and the message is sent once with the next
   sample; others: DENIED. Any other command: UNSUPPORTED.
+- GET_MESSAGE_INTERVAL (510, param1 message id), and REQUEST_MESSAGE for MESSAGE_INTERVAL (param1 244,
+  param2 message id) that replaces it: MESSAGE_INTERVAL (msg 244, CRC_EXTRA 95: interval_us i32, message_id
+  u16) goes out at once, then COMMAND_ACK ACCEPTED (ArduPilot's order). interval_us is the divider in
+  sample periods (rounded to whole microseconds), -1 for a stream turned off, 0 for a message this
+  component does not stream (the values common.xml gives MESSAGE_INTERVAL).
 - Signing as configured: with a signing key every frame we send (HEARTBEAT and COMMAND_ACK too) is signed on
   the encoder's SigningLink, so timestamps stay increasing across all of them; incoming commands must
   then carry a valid signature with that key (unsigned or forged ones are counted as errors and not
@@ -41,9 +46,9 @@ from firmware_protocols.mavlink import (EPOCH_2015_NS, HEADER_LEN, INCOMPAT_SIGN
                                         P_SYSID, SIGNATURE_LEN, STX_V1, STX_V2, MavlinkEncoder)
 from firmware_protocols.registry import attach_device
 
-HEARTBEAT, COMMAND_LONG, COMMAND_ACK = 0, 76, 77
-_CRC_EXTRA = {HEARTBEAT: 50, COMMAND_LONG: 152, COMMAND_ACK: 143}
-MAV_CMD_SET_MESSAGE_INTERVAL, MAV_CMD_REQUEST_MESSAGE = 511, 512
+HEARTBEAT, COMMAND_LONG, COMMAND_ACK, MESSAGE_INTERVAL = 0, 76, 77, 244
+_CRC_EXTRA = {HEARTBEAT: 50, COMMAND_LONG: 152, COMMAND_ACK: 143, MESSAGE_INTERVAL: 95}
+MAV_CMD_GET_MESSAGE_INTERVAL, MAV_CMD_SET_MESSAGE_INTERVAL, MAV_CMD_REQUEST_MESSAGE = 510, 511, 512
 MAV_RESULT_ACCEPTED, MAV_RESULT_DENIED, MAV_RESULT_UNSUPPORTED = 0, 2, 3
 MAV_TYPE_IMU, MAV_AUTOPILOT_INVALID, MAV_STATE_ACTIVE = 40, 8, 4
 MAVLINK_VERSION = 3
@@ -178,7 +183,12 @@ class MavlinkDevice(Device):
             if self.link is not None and not self._authentic(signed, sysid, compid):
                 self.stats.errors += 1
                 continue
-            result = self._command(command, params)
+            interval = self._interval_request(command, params)
+            if interval is not None:
+                replies.append(self._frame(MESSAGE_INTERVAL, struct.pack("<iH", *interval)))
+                result = MAV_RESULT_ACCEPTED
+            else:
+                result = self._command(command, params)
             if result == MAV_RESULT_ACCEPTED:
                 self.stats.commands += 1
             else:
@@ -219,6 +229,23 @@ class MavlinkDevice(Device):
             self._once.add(msgid)
             return MAV_RESULT_ACCEPTED
         return MAV_RESULT_UNSUPPORTED
+
+    def _interval_request(self, command: int, params) -> tuple | None:
+        """(interval_us, message id) when the command asks for a MESSAGE_INTERVAL, else None."""
+        if command == MAV_CMD_GET_MESSAGE_INTERVAL:
+            asked = params[0]
+        elif command == MAV_CMD_REQUEST_MESSAGE and params[0] == MESSAGE_INTERVAL:
+            asked = params[1]
+        else:
+            return None
+        msgid = int(asked) if np.isfinite(asked) and 0 <= asked <= 0xFFFF and asked == int(asked) else None
+        if msgid == self.spec.msgid:
+            samples = self.imu.divider
+        elif msgid == HEARTBEAT:
+            samples = self.heartbeat.period_samples
+        else:
+            return 0, (0 if msgid is None else msgid)        # interval 0: not available from this component
+        return (-1 if samples <= 0 else int(round(samples * 1e6 / self.rate_hz))), msgid
 
     def _divider(self, interval_us: float) -> int:
         """Interval in us -> samples between messages; 0 = off, 1 = every sample (interval 0 = default)."""
