@@ -37,8 +37,13 @@ _SPIN_NS = 200_000
 # RT throttling (95 % of each second) would stall an unbounded SCHED_FIFO spin for tens of milliseconds.
 _SPIN_SHARE = 0.4
 # Answering a command costs tens to hundreds of microseconds in Python: none is started this close to a
-# deadline (a command then waits at most one sample period).
+# deadline (a command then waits at most one sample period). Until answers have been timed the margin is
+# _SERVE_MARGIN_NS; then twice the dearest answer's CPU time plus _SERVE_SLACK_NS, within
+# [_MIN_SERVE_MARGIN_NS, _SERVE_MARGIN_NS]: input that arrives in the margin waits for the next send, so a
+# margin sized to what answers really cost (a register read: ~20 us) shortens that wait for most commands.
 _SERVE_MARGIN_NS = 300_000
+_MIN_SERVE_MARGIN_NS = 50_000
+_SERVE_SLACK_NS = 30_000
 FIFO_PRIORITY = 1
 # A sender this late (or a period, if longer) gives up SCHED_FIFO until it next sleeps: it cannot keep up, and
 # catching up under SCHED_FIFO would take the CPU from the reader. Shorter stalls (the shared host takes the
@@ -146,6 +151,7 @@ class Pacer:
         self._spaced = not fifo      # catch up spaced out (normal scheduling from the start)
         self._behind_cpu_ns = 0      # thread CPU time at the previous sample, while behind and spaced
         self.serve_margin_ns = _SERVE_MARGIN_NS
+        self.serve_cost_ns = 0       # the dearest answer's thread CPU time so far
         # When the descriptors were last looked at: at high rates the whole period may be spin and margin,
         # and the caller then polls them itself after a send (see streaming).
         self.watched_ns = 0
@@ -163,7 +169,7 @@ class Pacer:
     def sleep_until(self, wake_ns: int, fds=(), on_ready=None) -> None:
         """Sleep until `wake_ns` (monotonic) or a little after, but while any of `fds` is readable call
         on_ready(readable fds) at once (it returns whether it found any input) and go back to sleep: replies go out between two deadlines.
-        Input arriving within _SERVE_MARGIN_NS of the wake time waits in the kernel until after the
+        Input arriving within serve_margin_ns of the wake time waits in the kernel until after the
         deadline's send, so answering never makes a sample late. select() rather than poll/epoll because its
         timeout has microsecond resolution (theirs is ms)."""
         early = wake_ns - time.monotonic_ns()
@@ -176,11 +182,21 @@ class Pacer:
                 return
             ready, _, _ = select.select(fds, (), (), (early - self.serve_margin_ns) / 1e9)
             self.watched_ns = time.monotonic_ns()
-            if ready and not on_ready(ready):
-                # Readable but nothing to read: a hang-up (a pty whose reader has gone away stays readable).
-                # Stop watching until this deadline instead of spinning on select.
-                fds = ()
+            if ready:
+                cpu = time.thread_time_ns()
+                if not on_ready(ready):
+                    # Readable but nothing to read: a hang-up (a pty whose reader has gone away stays
+                    # readable). Stop watching until this deadline instead of spinning on select.
+                    fds = ()
+                self._answered(time.thread_time_ns() - cpu)
             early = wake_ns - time.monotonic_ns()
+
+    def _answered(self, cpu_ns: int) -> None:
+        """Size the serve margin to the dearest answer so far (CPU time: a preemption is not its cost)."""
+        if cpu_ns > self.serve_cost_ns or self.serve_margin_ns == _SERVE_MARGIN_NS:
+            self.serve_cost_ns = max(self.serve_cost_ns, cpu_ns)
+            self.serve_margin_ns = min(_SERVE_MARGIN_NS, max(_MIN_SERVE_MARGIN_NS,
+                                                             2 * self.serve_cost_ns + _SERVE_SLACK_NS))
 
     def wait_until(self, deadline_ns: int, fds=(), on_ready=None) -> int:
         """Returns the time we woke (ns, monotonic), at or after the deadline; input on `fds` is handed to

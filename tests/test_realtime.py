@@ -258,3 +258,20 @@ def _read_until_closed(fd, timeout=60.0) -> bytes:
             chunks.append(data)
     os.close(fd)
     return b"".join(chunks)
+
+
+def test_serve_margin_follows_the_dearest_answer_within_its_bounds():
+    """Input is not served within serve_margin_ns of a wake-up; the margin is twice the dearest answer's CPU time
+    plus 30 us of slack, never under 50 us nor over the 300 us it starts at (module constants)."""
+    from imu_emulator import realtime
+    pacer = Pacer(fifo=False, period_ns=1_000_000)
+    assert pacer.serve_margin_ns == realtime._SERVE_MARGIN_NS == 300_000
+    pacer._answered(20_000)
+    assert pacer.serve_margin_ns == 2 * 20_000 + 30_000
+    pacer._answered(5_000)          # a cheaper answer later does not shrink it: the dearest one counts
+    assert pacer.serve_margin_ns == 70_000
+    pacer._answered(400_000)
+    assert pacer.serve_margin_ns == 300_000
+    fresh = Pacer(fifo=False)
+    fresh._answered(1_000)
+    assert fresh.serve_margin_ns == 50_000

@@ -12,7 +12,11 @@ The reader runs in Python on the same machine (under SCHED_FIFO below the emulat
 what a driver in C would see. A third kind of run, "off", streams with
 --device off (encoded ahead in the producer process) as the baseline the sender-side encoding is compared to.
 
-    .venv/bin/python tools/bench_device.py [--rate 1000] [--seconds 5] [--pairs 3]
+With --baseline PATH (another checkout of the project, e.g. /work/main) a fourth kind, "commands@base",
+runs that checkout's emulator the same way, interleaved with the others, so a change to the reply path is
+measured against its predecessor under the same load. The load average is printed at the start and end.
+
+    .venv/bin/python tools/bench_device.py [--rate 1000] [--seconds 5] [--pairs 3] [--baseline /work/main]
 """
 from __future__ import annotations
 
@@ -36,8 +40,41 @@ from bench_stream import SCENE  # noqa: E402  (a 1 s circle, streamed with --loo
 
 
 # off: --device off, encoded ahead by the producer (the baseline); quiet: the device encodes each sample in
-# the sender, no commands; commands: the same with $VNRRG,01 every 10 ms.
-KINDS = ("off", "quiet", "commands")
+# the sender, no commands; commands: the same with $VNRRG,01 every 10 ms; floor: not the emulator but the
+# smallest program that does the same on a pty (ECHO below), so its reply latency is what the kernel's pty
+# and the scheduler cost under the machine's load at that moment.
+KINDS = ("off", "quiet", "commands", "floor")
+# A 1 kHz writer of 42-byte packets on a pty master that answers each `$VNRRG,01...` line at once, under the
+# emulator's scheduling (SCHED_FIFO 1, 1 ns timer slack): select() until the next deadline or input.
+ECHO = r"""
+import ctypes, os, select, sys, time, tty
+master, slave = os.openpty(); tty.setraw(slave); print("floor -> " + os.ttyname(slave), flush=True)
+ctypes.CDLL(None).prctl(29, 1, 0, 0, 0)
+os.set_blocking(master, False)
+os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+period, end = 1_000_000, time.monotonic_ns() + int(float(sys.argv[1]) * 1e9)
+reply, packet, deadline, buf = b"$VNRRG,01,VN-100T-CR*32\r\n", b"\xfa" + bytes(41), time.monotonic_ns(), b""
+while time.monotonic_ns() < end:
+    wait = deadline - time.monotonic_ns()
+    if wait <= 0:
+        try:
+            os.write(master, packet)
+        except BlockingIOError:
+            pass
+        deadline += period
+        continue
+    if select.select([master], [], [], wait / 1e9)[0]:
+        try:
+            buf += os.read(master, 4096)
+        except OSError:
+            continue
+        while b"\n" in buf:
+            line, buf = buf.split(b"\n", 1)
+            try:
+                os.write(master, reply)
+            except BlockingIOError:
+                pass
+"""
 _READER_FIFO = True
 
 
@@ -50,13 +87,20 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def one_run(scene: Path, rate: float, seconds: float, kind: str) -> dict:
-    with_commands = kind == "commands"
+def one_run(scene: Path, rate: float, seconds: float, kind: str, repo: Path = REPO) -> dict:
+    with_commands = kind.startswith("commands")
     stats = Path(tempfile.mkstemp(suffix=".json")[1])
-    proc = subprocess.Popen([sys.executable, "-m", "imu_emulator", "stream", str(scene), "--format",
-                             "vectornav-binary", "--to", "pty", "--quiet", "--loop", "--duration", str(seconds + 3),
-                             "--stats-json", str(stats), "--device", "off" if kind == "off" else "on"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, cwd=REPO)
+    if kind == "floor":
+        with_commands = True
+        proc = subprocess.Popen([sys.executable, "-c", ECHO, str(seconds + 3)], stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True)
+    else:
+        proc = subprocess.Popen([sys.executable, "-m", "imu_emulator", "stream", str(scene), "--format",
+                                 "vectornav-binary", "--to", "pty", "--quiet", "--loop", "--duration",
+                                 str(seconds + 3), "--stats-json", str(stats),
+                                 "--device", "off" if kind == "off" else "on"],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True, cwd=repo)      # `-m` imports the package of the working directory
     path = re.search(r"-> (\S+)", proc.stdout.readline()).group(1)
     if _READER_FIFO:     # after the fork: the emulator sets its own scheduling
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
@@ -99,9 +143,9 @@ def one_run(scene: Path, rate: float, seconds: float, kind: str) -> dict:
     os.close(fd)
     proc.send_signal(2)
     proc.communicate(timeout=30)
-    summary = json.loads(stats.read_text())
+    late = json.loads(stats.read_text())["lateness"] if kind != "floor" else {"p50_us": 0.0, "p99_us": 0.0,
+                                                                             "missed": 0}
     stats.unlink()
-    late = summary["lateness"]
     out = {"kind": kind, "late_p50_us": late["p50_us"],
            "late_p99_us": late["p99_us"], "missed": late["missed"], "cpu_per_s": cpu,
            "unanswered": len(pending)}
@@ -139,27 +183,38 @@ def main() -> None:
     parser.add_argument("--reader-normal", action="store_true",
                         help="read at normal priority (default: SCHED_FIFO 10, below the emulator's 20, so the "
                              "reader's own wake-up delay under load weighs less in the reply latency)")
+    parser.add_argument("--baseline", type=Path, help="another checkout whose emulator answers commands too "
+                                                          "(kind commands@base), interleaved with these runs")
     args = parser.parse_args()
     global _READER_FIFO
     _READER_FIFO = not args.reader_normal
+    kinds = KINDS + (("commands@base",) if args.baseline else ())
+    print(f"load average at start: {' '.join(Path('/proc/loadavg').read_text().split()[:3])}", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         scene = Path(tmp) / "scene.toml"
         scene.write_text(SCENE.format(rate=args.rate))
         runs = []
         for _ in range(args.pairs):
-            for kind in KINDS:
-                run = one_run(scene, args.rate, args.seconds, kind)
+            for kind in kinds:
+                run = one_run(scene, args.rate, args.seconds, kind,
+                              args.baseline if kind == "commands@base" else REPO)
                 runs.append(run)
                 print(json.dumps({k: round(v, 1) if isinstance(v, float) else v for k, v in run.items()}),
                       flush=True)
     def listed(sel, key):
         return ", ".join(f"{r[key]:.0f}" for r in sel)
 
-    for kind in KINDS:
+    print(f"load average at end: {' '.join(Path('/proc/loadavg').read_text().split()[:3])}")
+    for kind in kinds:
         sel = [r for r in runs if r["kind"] == kind]
+        if kind == "floor":
+            print(f"{kind:9}: bare pty echo at 1 kHz, reply latency p50 "
+                  f"{np.median([r['reply_p50_us'] for r in sel]):.0f} us, p99 "
+                  f"{np.median([r['reply_p99_us'] for r in sel]):.0f} us (per run p99: {listed(sel, 'reply_p99_us')})")
+            continue
         line = (f"{kind:9}: stream lateness p99 median of runs {np.median([r['late_p99_us'] for r in sel]):.0f} us "
                 f"(runs: {listed(sel, 'late_p99_us')}), emulator CPU {np.median([r['cpu_per_s'] for r in sel]) * 100:.0f} %")
-        if kind == "commands":
+        if kind.startswith("commands"):
             line += (f"; reply latency p50 {np.median([r['reply_p50_us'] for r in sel]):.0f} us, p99 "
                      f"{np.median([r['reply_p99_us'] for r in sel]):.0f} us (median of runs; per run p99: "
                      f"{listed(sel, 'reply_p99_us')}), unanswered {sum(r['unanswered'] for r in sel)}")
