@@ -1,5 +1,5 @@
 """VectorNav (VN-100/200/300) serial output: user-configured binary packets, $VNYMR / $VNIMU ASCII
-sentences, stream decoders for both, and the replies a driver waits for while it configures the unit.
+sentences and stream decoders for both (the replies a driver waits for: firmware_protocols.devices.vectornav).
 
 Binary frame (wire-formats.md, "VectorNav binary output"):
 
@@ -813,38 +813,9 @@ class AsciiDecoder:
         return packets
 
 
-# --- command replies -------------------------------------------------------------------------
+# --- the device's defaults (its conversation is firmware_protocols.devices.vectornav) -----------
 
 DEFAULT_MODEL = "VN-100T-CR"
-# VectorNav error codes (vnproglib sensors.h): the ones a command parser can raise.
-_ERR_INVALID_CHECKSUM, _ERR_INVALID_COMMAND, _ERR_INVALID_REGISTER = 3, 4, 8
-
-
-def respond_to_command(line: bytes, model: str = DEFAULT_MODEL) -> bytes | None:
-    """The device's reply to one command line, or None when it would not answer.
-
-    Reads of register 1 (model number) answer `$VNRRG,01,<model>`; `$VNWRG,...` and `$VNASY,...` are
-    echoed, which is the acknowledgement drivers wait for (VectorNav's library example shows
-    `$VNWRG,07,2*6F` answering a write of 2 to register 7). The reply uses the command's checksum kind;
-    a command sent with the `*XX` wildcard gets an 8-bit checksum. A bad checksum answers $VNERR,03.
-    """
-    line = line.strip(b"\r\n")
-    if not line.startswith(b"$"):
-        return None
-    body, star, cs = line[1:].partition(b"*")
-    kind = "crc" if len(cs) == 4 else "xor"
-    if star and cs.upper() != b"XX" and verify_line(line) is None:
-        return sentence(b"VNERR,%02d" % _ERR_INVALID_CHECKSUM, kind)
-    command, _, args = body.partition(b",")
-    if command == b"VNRRG":
-        register_id = args.split(b",")[0]
-        if register_id.isdigit() and int(register_id) == 1:
-            return sentence(b"VNRRG,%02d," % 1 + model.encode("ascii"), kind)
-        return sentence(b"VNERR,%02d" % _ERR_INVALID_REGISTER, kind)
-    if command in (b"VNWRG", b"VNASY"):
-        return sentence(body, kind)
-    return sentence(b"VNERR,%02d" % _ERR_INVALID_COMMAND, kind)
-
 
 # --- registry --------------------------------------------------------------------------------
 

@@ -12,8 +12,9 @@ from hypothesis import strategies as st
 
 from firmware_protocols import registry
 from firmware_protocols.base import EncodeError, Samples
+from firmware_protocols.devices.vectornav import VectorNavDevice
 from firmware_protocols.vectornav import (AsciiDecoder, AsciiEncoder, BinaryDecoder, BinaryEncoder, _BY_NAME,
-                                          parse_fields, respond_to_command)
+                                          parse_fields)
 
 SETTINGS = settings(derandomize=True, deadline=None, max_examples=60,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
@@ -325,19 +326,19 @@ def test_bad_checksum_option_is_rejected():
     (b"$VNWRG,75,3,16,01,0721*D415\r\n", b"$VNWRG,75,3,16,01,0721*D415\r\n"),
     (b"$VNWRG,76,3,80,4E,0002,0010,20B8,0018*63\r\n", b"$VNWRG,76,3,80,4E,0002,0010,20B8,0018*63\r\n"),
 ])
-def test_respond_to_documented_commands(command, reply):
-    assert respond_to_command(command, model="VN-200T-CR") == reply
+def test_device_answers_documented_commands(command, reply):
+    assert VectorNavDevice(400.0, model="VN-200T-CR").receive(command) == [reply]
 
 
-def test_respond_defaults_and_errors():
-    model_reply = respond_to_command(b"$VNRRG,1*XX")
+def test_device_defaults_and_errors():
+    device = VectorNavDevice(400.0)
+    (model_reply,) = device.receive(b"$VNRRG,1*XX\r\n")
     body, cs = split_line(model_reply)
     assert body.split(b",")[2].startswith(b"VN-") and cs == b"%02X" % xor8(body)
-    asy = respond_to_command(b"$VNASY,0*XX")
-    assert split_line(asy)[0] == b"VNASY,0"
-    assert split_line(respond_to_command(b"$VNWRG,07,2*00"))[0] == b"VNERR,03"
-    assert split_line(respond_to_command(b"$VNRRG,99*XX"))[0] == b"VNERR,08"
-    assert respond_to_command(b"garbage") is None
+    assert split_line(device.receive(b"$VNASY,0*XX\r\n")[0])[0] == b"VNASY,0"
+    assert split_line(device.receive(b"$VNWRG,07,2*00\r\n")[0])[0] == b"VNERR,03"
+    assert split_line(device.receive(b"$VNRRG,99*XX\r\n")[0])[0] == b"VNERR,08"
+    assert device.receive(b"garbage") == []
 
 
 @pytest.mark.parametrize("name, option", [("vectornav-binary", "fields"), ("vectornav-vnymr", "checksum"),

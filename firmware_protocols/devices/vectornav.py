@@ -45,7 +45,7 @@ from firmware_protocols.base import Samples
 from firmware_protocols.devices.base import Device, LinkRequest, SinceLastOutput, single
 from firmware_protocols.registry import attach_device
 from firmware_protocols.vectornav import (_FIELDS, DEFAULT_FIELDS, DEFAULT_MODEL, AsciiEncoder, BinaryEncoder,
-                                          _layout_from_selection, checksum_text, parse_fields, verify_line)
+                                          _layout_from_selection, parse_fields, sentence, verify_line)
 
 ERR_CHECKSUM, ERR_COMMAND, ERR_FEW, ERR_MANY, ERR_PARAMETER, ERR_REGISTER = 3, 4, 5, 6, 7, 8
 ASCII_TYPES = {0: None, 1: "VNYPR", 14: "VNYMR", 19: "VNIMU"}
@@ -226,9 +226,9 @@ class VectorNavDevice(Device):
             reply = self._command(command, args)
         except _Reject as reject:
             self.stats.errors += 1
-            return _sentence(f"VNERR,{reject.code:02d}", kind)
+            return sentence(f"VNERR,{reject.code:02d}".encode("ascii"), kind)
         self.stats.commands += 1
-        return _sentence(reply, kind)
+        return sentence(reply.encode("ascii"), kind)
 
     def _command(self, command: str, args: list) -> str:
         if command == "VNRRG":
@@ -362,11 +362,6 @@ def _hex(text: str) -> int:
         return int(text, 16)
     except ValueError:
         raise _Reject(ERR_PARAMETER) from None
-
-
-def _sentence(body: str, kind: str) -> bytes:
-    raw = body.encode("ascii")
-    return b"$" + raw + b"*" + checksum_text(raw, kind) + b"\r\n"
 
 
 _OPTIONS = {

@@ -17,18 +17,20 @@ def _write_error(path: str, exc: OSError) -> TargetError:
     return _open_error(path, exc, "cannot write")
 
 
-class RawFileTransport(Transport):
+class _CaptureFile(Transport):
+    """What both capture writers share: one line naming the file for any OS error while writing or closing."""
 
-    def __init__(self, path: str):
-        try:
-            self.file = open(path, "wb")
-        except OSError as exc:
-            raise _open_error(path, exc) from None
-        self.path = path
+    path: str
 
-    def send(self, payload: bytes) -> bool:
+    def _write(self, payload) -> None:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def _finish(self) -> None:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def send(self, payload) -> bool:
         try:
-            self.file.write(payload)
+            self._write(payload)
         except OSError as exc:
             raise _write_error(self.path, exc) from None
         return True
@@ -38,12 +40,28 @@ class RawFileTransport(Transport):
 
     def close(self) -> None:
         try:
-            self.file.close()
+            self._finish()
         except OSError as exc:
             raise _write_error(self.path, exc) from None
 
 
-class CanLogTransport(Transport):
+class RawFileTransport(_CaptureFile):
+
+    def __init__(self, path: str):
+        try:
+            self.file = open(path, "wb")
+        except OSError as exc:
+            raise _open_error(path, exc) from None
+        self.path = path
+
+    def _write(self, payload: bytes) -> None:
+        self.file.write(payload)
+
+    def _finish(self) -> None:
+        self.file.close()
+
+
+class CanLogTransport(_CaptureFile):
 
     def __init__(self, path: str):
         # here, not at import: python-can costs ~0.2 s of start-up that raw captures do not need
@@ -66,19 +84,9 @@ class CanLogTransport(Transport):
         # The log's time stamps are the samples' times on the declared time base, not wall clock.
         return self._to_messages(payload, timestamp=time_ns / 1e9)
 
-    def send(self, messages) -> bool:
-        try:
-            for message in messages:
-                self.writer.on_message_received(message)
-        except OSError as exc:
-            raise _write_error(self.path, exc) from None
-        return True
+    def _write(self, messages) -> None:
+        for message in messages:
+            self.writer.on_message_received(message)
 
-    def describe(self) -> str:
-        return f"file {self.path}"
-
-    def close(self) -> None:
-        try:
-            self.writer.stop()
-        except OSError as exc:
-            raise _write_error(self.path, exc) from None
+    def _finish(self) -> None:
+        self.writer.stop()
