@@ -191,13 +191,13 @@ def fletcher16(data: bytes) -> tuple[int, int]:
     return sum(data) & 0xFF, sum(accumulate(data)) & 0xFF
 
 
-def _mip_length(buf: bytearray, j: int) -> int:
+def mip_length(buf: bytearray, j: int) -> int:
     if len(buf) - j < 4:
         return NEED_MORE
     return 4 + buf[j + 3] + 2
 
 
-def _mip_checksum_ok(frame: bytes) -> bool:
+def mip_checksum_ok(frame: bytes) -> bool:
     return fletcher16(frame[:-2]) == (frame[-2], frame[-1])
 
 
@@ -208,7 +208,7 @@ class MipDecoder:
 
     def __init__(self, gps_week_offset: int = 0):
         self.gps_week_offset = as_int(gps_week_offset)
-        self._scanner = FrameScanner(SYNC, _mip_length, _mip_checksum_ok)
+        self._scanner = FrameScanner(SYNC, mip_length, mip_checksum_ok)
 
     @property
     def stats(self) -> DecoderStats:

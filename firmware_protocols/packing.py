@@ -243,6 +243,11 @@ class FrameScanner:
         self._buf = bytearray()
 
     def frames(self, chunk: bytes) -> list[bytes]:
+        return [frame for frame, ok in self.candidates(chunk) if ok]
+
+    def candidates(self, chunk: bytes) -> list[tuple[bytes, bool]]:
+        """Complete candidates in stream order with whether their checksum held: a device answers a damaged
+        command (Xsens Error, MIP NACK) where a decoder only counts it."""
         buf = self._buf
         buf += chunk
         found = []
@@ -269,9 +274,10 @@ class FrameScanner:
             frame = bytes(buf[j:j + total])
             if not self.checksum_ok(frame):
                 self.stats.bad_checksum += 1
+                found.append((frame, False))
                 search = j + 1
                 continue
-            found.append(frame)
+            found.append((frame, True))
             pos = search = j + total
         del buf[:pos]
         return found

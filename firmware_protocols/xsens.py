@@ -290,7 +290,7 @@ class XsensEncoder:
 
 # --- decoding --------------------------------------------------------------------------------
 
-def _xbus_length(buf: bytearray, j: int) -> int:
+def xbus_length(buf: bytearray, j: int) -> int:
     if len(buf) - j < 4:
         return NEED_MORE
     length = buf[j + 3]
@@ -304,7 +304,7 @@ def _xbus_length(buf: bytearray, j: int) -> int:
     return 6 + length + 1
 
 
-def _xbus_checksum_ok(frame: bytes) -> bool:
+def xbus_checksum_ok(frame: bytes) -> bool:
     if len(frame) > 512:
         # An extended header may promise 8 KiB; a flood of such false headers costs one sum per byte of
         # input, which numpy does 6x faster than sum() (and sum() is faster on the usual short frames).
@@ -337,7 +337,7 @@ class XsensDecoder:
 
     def __init__(self, mag_reference_gauss: float = 0.5):
         self.mag_reference_gauss = float(mag_reference_gauss)
-        self._scanner = FrameScanner(bytes((PREAMBLE, BUS_MASTER)), _xbus_length, _xbus_checksum_ok)
+        self._scanner = FrameScanner(bytes((PREAMBLE, BUS_MASTER)), xbus_length, xbus_checksum_ok)
 
     @property
     def stats(self) -> DecoderStats:

@@ -36,7 +36,8 @@ import struct
 from firmware_protocols.base import Samples
 from firmware_protocols.devices.base import Device, SinceLastOutput, single
 from firmware_protocols.microstrain import (DATA_SETS, DEFAULT_FIELDS, FILTER_SET, FILTER_STATE_FULL_NAV, GNSS_SET,
-                                           SENSOR_DATA_SET, MipEncoder, fletcher16)
+                                           SENSOR_DATA_SET, MipEncoder, fletcher16, mip_checksum_ok, mip_length)
+from firmware_protocols.packing import FrameScanner
 from firmware_protocols.registry import attach_device
 
 BASE_SET, DM_SET = 0x01, 0x0C
@@ -80,7 +81,7 @@ class MipDevice(Device):
         self.tick = 0
         self.increments = SinceLastOutput()
         self._encoders: dict = {}
-        self._buf = bytearray()
+        self._scanner = FrameScanner(b"\x75\x65", mip_length, mip_checksum_ok)   # as the decoder finds packets
         self.bytes_per_sample = self._encoder(SENSOR_DATA_SET, tuple(fields)).bytes_per_sample
 
     def _encoder(self, descriptor_set: int, names: tuple) -> MipEncoder:
@@ -113,33 +114,17 @@ class MipDevice(Device):
 
     # - input -
     def _receive(self, data: bytes, now_ns: int) -> list:
-        buf = self._buf
-        buf += data
-        replies, pos = [], 0
-        while True:
-            start = buf.find(b"\x75\x65", pos)
-            if start < 0:
-                keep = 1 if buf[-1:] == b"\x75" else 0
-                self.stats.ignored_bytes += len(buf) - pos - keep
-                pos = len(buf) - keep
-                break
-            self.stats.ignored_bytes += start - pos
-            pos = start
-            if len(buf) - pos < 4:
-                break
-            total = 4 + buf[pos + 3] + 2
-            if len(buf) - pos < total:
-                break
-            frame = bytes(buf[pos:pos + total])
-            if bytes(fletcher16(frame[:-2])) != frame[-2:]:
+        replies = []
+        skipped = self._scanner.stats.skipped_bytes
+        for frame, ok in self._scanner.candidates(data):
+            if not ok:
+                # NACK the command it claims to be (a packet may begin inside it: the scanner hunts on)
                 first = frame[5] if len(frame) > 6 else 0
                 replies.append(packet(frame[2], [(ACK_FIELD, bytes([first, NACK_CHECKSUM]))]))
                 self.stats.errors += 1
-                pos += 2             # a packet may begin inside what looked like this one
                 continue
-            pos += total
             replies.append(self._command_packet(frame[2], frame[4:-2]))
-        del buf[:pos]
+        self.stats.ignored_bytes += self._scanner.stats.skipped_bytes - skipped
         return replies
 
     def _command_packet(self, descriptor_set: int, payload: bytes) -> bytes:

@@ -45,8 +45,9 @@ from firmware_protocols import attitude
 from firmware_protocols.base import Samples
 from firmware_protocols.devices.base import Device, SinceLastOutput, single
 from firmware_protocols.registry import attach_device
+from firmware_protocols.packing import FrameScanner
 from firmware_protocols.xsens import (BUS_MASTER, DEFAULT_ITEMS, EXTENDED_LENGTH, FRAMES, ITEMS, PRECISIONS,
-                                      PREAMBLE, XsensEncoder)
+                                      PREAMBLE, XsensEncoder, xbus_checksum_ok, xbus_length)
 
 WAKEUP, GOTO_CONFIG, GOTO_MEASUREMENT, REQ_DID, REQ_PRODUCT_CODE, REQ_FW_REV = 0x3E, 0x30, 0x10, 0x00, 0x1C, 0x12
 SET_OUTPUT_CONFIGURATION, SET_ALIGNMENT_ROTATION, RESET, ERROR = 0xC0, 0xEC, 0x40, 0x42
@@ -55,7 +56,6 @@ EVERY_PACKET = (0xFFFF, 0)
 _ITEM_BY_BASE = {item.xdi: name for name, item in ITEMS.items()}
 _PRECISION_BY_BITS = {bits: name for name, (bits, _, _) in PRECISIONS.items()}
 _FRAME_BY_BITS = {bits: name for name, bits in FRAMES.items()}
-_MAX_FRAME = 8192
 _IDENTITY = (1.0, 0.0, 0.0, 0.0)
 
 
@@ -107,7 +107,9 @@ class XsensDevice(Device):
         self.config = [(self._xdi(n, precision, frame), 0xFFFF if n in every else min(0xFFFE, int(round(rate_hz))))
                        for n in encoder.items]
         self._apply(self.config)
-        self._buf = bytearray()
+        # Frames as the decoder finds them (preamble FA, bus id FF, length, byte-sum checksum, the SDK's
+        # extended-length bounds); bytes outside them are ignored and counted.
+        self._scanner = FrameScanner(bytes((PREAMBLE, BUS_MASTER)), xbus_length, xbus_checksum_ok)
 
     @staticmethod
     def _xdi(name: str, precision: str, frame: str) -> int:
@@ -175,45 +177,17 @@ class XsensDevice(Device):
 
     # - input -
     def _receive(self, data: bytes, now_ns: int) -> list:
-        buf = self._buf
-        buf += data
-        replies, pos = [], 0
-        while True:
-            start = buf.find(PREAMBLE, pos)
-            if start < 0:
-                self.stats.ignored_bytes += len(buf) - pos
-                pos = len(buf)
-                break
-            self.stats.ignored_bytes += start - pos
-            pos = start
-            if len(buf) - pos < 4:
-                break
-            if buf[pos + 1] != BUS_MASTER:      # a preamble byte inside noise: not a message to us
-                self.stats.ignored_bytes += 1
-                pos += 1
-                continue
-            length, head = buf[pos + 3], 4
-            if length == EXTENDED_LENGTH:
-                if len(buf) - pos < 6:
-                    break
-                length, head = buf[pos + 4] << 8 | buf[pos + 5], 6
-            total = head + length + 1
-            if total > _MAX_FRAME:
-                self.stats.ignored_bytes += 1
-                pos += 1
-                continue
-            if len(buf) - pos < total:
-                break
-            frame = bytes(buf[pos:pos + total])
-            if sum(frame[1:]) & 0xFF:
-                # A damaged frame, or a false preamble: say so, and hunt on from the next byte.
+        replies = []
+        skipped = self._scanner.stats.skipped_bytes
+        for frame, ok in self._scanner.candidates(data):
+            if not ok:
+                # A damaged frame, or a false preamble: say so; the scanner hunts on from the next byte.
                 self.stats.errors += 1
                 replies.append(xbus(ERROR, bytes([XRV_INVALIDMSG])))
-                pos += 1
                 continue
-            pos += total
-            replies.extend(self._message(frame[2], frame[head:head + length]))
-        del buf[:pos]
+            head = 6 if frame[3] == EXTENDED_LENGTH else 4
+            replies.extend(self._message(frame[2], frame[head:-1]))
+        self.stats.ignored_bytes += self._scanner.stats.skipped_bytes - skipped
         return replies
 
     def _message(self, mid: int, data: bytes) -> list:
