@@ -57,6 +57,13 @@ class Driver:
                     return line
         raise AssertionError(f"no reply to {sent!r}")
 
+    def replay(self, exchange, then_read: float) -> bytes:
+        """Each (command body, expected reply body) in turn, as the driver sends it; then what follows the
+        last reply for `then_read` seconds."""
+        for sent, expected in exchange:
+            assert self.transact(command(sent)) == reply(expected), sent
+        return self.read(then_read)[self.reply_end:]
+
     def send_all(self, data: bytes) -> None:
         """Write everything, reading meanwhile (a pty's buffer holds a few KB; a driver waits for room)."""
         view = memoryview(data)
@@ -96,6 +103,16 @@ def packets(data: bytes, layouts: dict) -> tuple[dict, int]:
     return found, stray
 
 
+def echoed(*bodies) -> list:
+    """Commands whose reply is their echo."""
+    return [(body, body) for body in bodies]
+
+
+def ardupilot_start(model: str) -> list:
+    """AP_ExternalAHRS_VectorNav::initialize() up to the model read: async off, ASCII off on both ports."""
+    return echoed("VNASY,0", "VNWRG,06,0,1", "VNWRG,06,0,2") + [("VNRRG,01", f"VNRRG,01,{model}")]
+
+
 ARDUPILOT_IMU = bytes.fromhex("012107")        # TimeStartup, AngularRate, Accel, Imu, MagPres: 82 bytes
 ARDUPILOT_AHRS = bytes.fromhex("1101000601")   # TimeStartup; YawPitchRoll, Quaternion, YprU: 56 bytes
 
@@ -108,17 +125,9 @@ def test_ardupilot_vn100_start_up_sequence_and_the_packets_it_then_parses(tmp_pa
                   "--option", "base_rate_hz=800") as emu:
         driver = Driver(emu.targets[0])
         ardupilot_rate = 200            # AP's EAHRS_RATE: it writes 800 / rate as the divisor
-        exchange = [
-            ("VNASY,0", "VNASY,0"),
-            ("VNWRG,06,0,1", "VNWRG,06,0,1"),
-            ("VNWRG,06,0,2", "VNWRG,06,0,2"),
-            ("VNRRG,01", "VNRRG,01,VN-100T-CR"),
-            (f"VNWRG,75,3,{800 // ardupilot_rate},01,0721", f"VNWRG,75,3,{800 // ardupilot_rate},01,0721"),
-            ("VNWRG,76,3,16,11,0001,0106", "VNWRG,76,3,16,11,0001,0106"),
-        ]
-        for sent, expected in exchange:
-            assert driver.transact(command(sent)) == reply(expected), sent
-        paused = driver.read(0.3)[driver.reply_end:]
+        exchange = ardupilot_start("VN-100T-CR") + echoed(f"VNWRG,75,3,{800 // ardupilot_rate},01,0721",
+                                                           "VNWRG,76,3,16,11,0001,0106")
+        paused = driver.replay(exchange, then_read=0.3)
         assert driver.transact(command("VNASY,1")) == reply("VNASY,1")
         after = driver.read(1.5)[driver.reply_end:]
         driver.close()
@@ -174,19 +183,10 @@ def test_ardupilot_vn300_start_up_sequence_and_its_gnss_packet(tmp_path):
                   "--option", f"gps_week_offset={week}") as emu:
         driver = Driver(emu.targets[0])
         ardupilot_rate = 200            # EAHRS_RATE; a VN-300's IMU runs at 400 Hz: divisor 400 / rate
-        exchange = [
-            ("VNASY,0", "VNASY,0"),
-            ("VNWRG,06,0,1", "VNWRG,06,0,1"),
-            ("VNWRG,06,0,2", "VNWRG,06,0,2"),
-            ("VNRRG,01", "VNRRG,01,VN-300-CR"),
-            (f"VNWRG,75,3,{400 // ardupilot_rate},01,0721", f"VNWRG,75,3,{400 // ardupilot_rate},01,0721"),
-            (f"VNWRG,76,3,{400 // 50},31,0001,0106,0613", f"VNWRG,76,3,{400 // 50},31,0001,0106,0613"),
-            (f"VNWRG,77,3,{400 // 5},49,0003,26B8,0018", f"VNWRG,77,3,{400 // 5},49,0003,26B8,0018"),
-            ("VNASY,1", "VNASY,1"),
-        ]
-        for sent, expected in exchange:
-            assert driver.transact(command(sent)) == reply(expected), sent
-        after = driver.read(2.5)[driver.reply_end:]
+        exchange = ardupilot_start("VN-300-CR") + echoed(f"VNWRG,75,3,{400 // ardupilot_rate},01,0721",
+                                                          f"VNWRG,76,3,{400 // 50},31,0001,0106,0613",
+                                                          f"VNWRG,77,3,{400 // 5},49,0003,26B8,0018", "VNASY,1")
+        after = driver.replay(exchange, then_read=2.5)
         driver.close()
         code, err = emu.interrupt()
     assert code == 0, err
@@ -249,9 +249,7 @@ def test_px4_start_up_sequence_registers_baud_echo_and_binary_outputs(tmp_path):
             ("VNWRG,76,1,8,36,1,130,84,613", "VNWRG,76,1,8,36,1,130,84,613"),
             ("VNRRG,76", "VNRRG,76,1,8,36,0001,0130,0084,0613"),
         ]
-        for sent, expected in exchange:
-            assert driver.transact(command(sent)) == reply(expected), sent
-        after = driver.read(1.0)[driver.reply_end:]
+        after = driver.replay(exchange, then_read=1.0)
         driver.close()
         code, err = emu.interrupt()
     assert code == 0, err
