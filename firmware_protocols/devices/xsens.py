@@ -64,7 +64,10 @@ def aligned(one: Samples, sensor, local, frame: str) -> Samples:
     vectors into the object frame O: x_O = q_OS x_S q_OS*, and the orientation becomes q_LO = q_LS (x) q_OS*.
     `local` (RotLocal, q_L'L) turns the declared reference frame L (ENU, NED or NWU): q_L'O = q_L'L (x) q_LO,
     done here on the Samples' NED attitude as q_NL (x) q_L'L (x) q_LN. Velocity stays in the unturned frame;
-    an absent attitude is the documented default (identity)."""
+    an absent attitude is the documented default (identity). UNVERIFIED: which way each quaternion turns
+    (q_OS or q_SO) is this module's reading, not checked against Xsens' manual; ArduPilot's two rotations
+    (local (0, 1/sqrt 2, 1/sqrt 2, 0): ENU -> NED; sensor (0, 1, 0, 0): FLU -> FRD) are half-turns, the same
+    either way, and give the NED/FRD output its EKF expects."""
     quat = one.quat if one.quat is not None else np.array([_IDENTITY])
     changes = {name: attitude.rotate(sensor, getattr(one, name))
                for name in ("accel", "gyro", "mag", "delta_velocity", "delta_theta") if getattr(one, name) is not None}
