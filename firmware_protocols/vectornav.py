@@ -827,7 +827,10 @@ register(FormatInfo(
     options={"fields": f"groups and fields, e.g. 'common:timestartup,accel;imu:uncompgyro' "
                        f"(default {DEFAULT_FIELDS!r}, PX4's binary output 1)",
              "sample_period_s": "DeltaTheta's dtime in s, > 0, when the samples carry none (None: time since the "
-                                "previous sample)"},
+                                "previous sample)",
+             "gps_week_offset": "GPS week added to time_ns for the GPS time fields, 0..65535",
+             "constants": "values for quantities no sample carries: " + ", ".join(
+                 n for n in _EXTRA_WIDTH if n not in _FIELD_WIDTHS) + " (e.g. {gnss_num_sats = 9})"},
 ))
 for _name in ("VNYMR", "VNIMU"):      # VNYPR only for the device's register 6 (ADOR 1), not a format of its own
     register(FormatInfo(

@@ -429,6 +429,7 @@ _OPTIONS = {
     "mag_reference_gauss": "field strength in gauss that reads 1.0 arbitrary unit, > 0",
     "status_word": "constant StatusWord value 0..0xFFFFFFFF",
     "packet_counter_start": "first PacketCounter value 0..65535; wraps 65535 -> 0",
+    "gnss": "GnssPvtData / UtcTime settings (firmware_protocols.gnss_time.GNSS_DEFAULTS), e.g. {num_sats = 9}",
 }
 
 register(FormatInfo(
