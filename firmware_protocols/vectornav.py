@@ -81,6 +81,8 @@ _EXTRA_WIDTH = {"position_llh": 3, "velocity_ned": 3, "linear_accel_ned": 3, "yp
 #: extras without a default: the caller must give them (the integrated outputs; a rate times the period would
 #: be an approximation the field's name does not announce)
 _REQUIRED = {"delta_theta", "delta_velocity"}
+#: the constants a caller may set (BinaryEncoder(constants=...)): what neither Samples nor the time base carries
+_SETTABLE = tuple(n for n in _EXTRA_WIDTH if n not in _FIELD_WIDTHS and n not in _REQUIRED and n != "delta_time")
 # Kernel wire codes: value kinds f32, f64, u16, u8; and integer times made from time_ns (+ the GPS offset).
 _WIRE_CODE = {"f": 0, "Q": 1, "d": 2, "H": 3, "B": 4}
 _TIME_CODE = {"startup": 1, "gps": 7, "tow": 5, "week": 6}
@@ -432,9 +434,8 @@ def _pack(out, size, header, items, scales, time_ns, accel, gyro, mag, quat, eul
 
 def _constant(name: str, value) -> np.ndarray:
     """A validated one-row value for a quantity no Samples field carries."""
-    if name not in _EXTRA_WIDTH or name in _FIELD_WIDTHS:
-        raise ValueError(f"VectorNav constants: {name!r} is not a settable quantity "
-                         f"(settable: {', '.join(n for n in _EXTRA_WIDTH if n not in _FIELD_WIDTHS)})")
+    if name not in _SETTABLE:
+        raise ValueError(f"VectorNav constants: {name!r} is not a settable quantity (settable: {', '.join(_SETTABLE)})")
     row = np.atleast_1d(np.asarray(value, dtype=np.float64))
     if row.shape != (_EXTRA_WIDTH[name],) or not np.isfinite(row).all():
         raise ValueError(f"{name}: expected {_EXTRA_WIDTH[name]} finite number(s), got {value!r}")
@@ -829,8 +830,8 @@ register(FormatInfo(
              "sample_period_s": "DeltaTheta's dtime in s, > 0, when the samples carry none (None: time since the "
                                 "previous sample)",
              "gps_week_offset": "GPS week added to time_ns for the GPS time fields, 0..65535",
-             "constants": "values for quantities no sample carries: " + ", ".join(
-                 n for n in _EXTRA_WIDTH if n not in _FIELD_WIDTHS) + " (e.g. {gnss_num_sats = 9})"},
+             "constants": "values for quantities no sample carries: " + ", ".join(_SETTABLE)
+                          + " (e.g. {gnss_num_sats = 9})"},
 ))
 for _name in ("VNYMR", "VNIMU"):      # VNYPR only for the device's register 6 (ADOR 1), not a format of its own
     register(FormatInfo(
