@@ -397,6 +397,12 @@ def scene_key(scene: Scene, attitude: bool, truth: bool, increments: int = 0) ->
     return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:32]
 
 
+
+def scene_digest(scene: Scene) -> str:
+    """The validated scene (less KEY_EXCLUDES: no seed, path or streams) hashed alone, without the generator's
+    code: what output files record as the scene they came from."""
+    return hashlib.sha256(json.dumps(_canonical(scene), sort_keys=True).encode()).hexdigest()
+
 _loaded: dict[str, object] = {}
 _CHECK = "# sha256 "
 

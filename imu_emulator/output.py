@@ -15,7 +15,7 @@ TRUTH_COLUMNS = ("px", "py", "pz", "vx", "vy", "vz", "roll", "pitch", "yaw", "wb
 BIAS_COLUMNS = ("bax", "bay", "baz", "bgx", "bgy", "bgz")   # realized bias of each IMU (sensor errors on)
 #: integrated outputs over (t_k-1, t_k] (imu_emulator.increments), rad and m/s, after the gyro columns
 INCREMENT_COLUMNS = ("dtheta_x", "dtheta_y", "dtheta_z", "dvel_x", "dvel_y", "dvel_z")
-SUFFIXES = (".csv", ".npz", ".mcap")
+SUFFIXES = (".csv", ".npz", ".mcap", ".parquet")
 
 
 def check_path(path: str | Path) -> Path:
@@ -87,9 +87,14 @@ class Writer(FinishOnExit):
 
 
 def open_writer(path: str | Path, imu_names, truth: bool, bias_truth: bool = False, temperature: bool = False,
-                increments: bool = False):
+                increments: bool = False, metadata: dict | None = None):
     """The writer for the output file's suffix: .mcap is a ROS 2 bag (imu_emulator.output_mcap; it carries no
-    temperature, and no increments: sensor_msgs/Imu has no field for them)."""
+    temperature, and no increments: sensor_msgs/Imu has no field for them); .parquet is a table with `metadata`
+    (scene hash, seed, versions) in its footer (imu_emulator.output_parquet)."""
+    if Path(path).suffix.lower() == ".parquet":
+        from imu_emulator.output_parquet import ParquetWriter
+        return ParquetWriter(check_path(path), imu_names, truth, bias_truth=bias_truth, temperature=temperature,
+                             increments=increments, metadata=metadata)
     if Path(path).suffix.lower() == ".mcap":
         if increments:
             raise ImuEmulatorError(f"{path}: --increments: a ROS 2 bag's sensor_msgs/Imu has no field for "
@@ -109,12 +114,27 @@ def csv_rows(block: SampleBlock, imu_names, truth: bool, bias_truth: bool = Fals
     import pyarrow as pa
     import pyarrow.csv as pa_csv
 
+    columns = block_columns(block, imu_names, truth, bias_truth, temperature, increments)
+    # pyarrow's "needed" quotes every string; plain names go unquoted, as they always did.
+    plain = not any(ch in name for name in imu_names for ch in '"\r\n')
+    sink = pa.BufferOutputStream()
+    pa_csv.write_csv(pa.table(columns), sink, write_options=pa_csv.WriteOptions(
+        include_header=False, quoting_style="none" if plain else "needed"))
+    return sink.getvalue().to_pybytes().decode()
+
+
+def block_columns(block: SampleBlock, imu_names, truth: bool, bias_truth: bool = False, temperature: bool = False,
+                  increments: bool = False, time_ns: bool = False) -> dict:
+    """The columns of one block, one row per IMU per sample (sample k of every IMU before sample k+1): "t" in
+    seconds (or "t_ns", integer nanoseconds), "imu" (a pyarrow dictionary of the names), then float64 columns."""
+    import pyarrow as pa
+
     n_imu, n = len(imu_names), len(block)
 
     def interleaved(per_imu):      # (n_imu, n, k) -> (n * n_imu, k), IMU index fastest
         return np.ascontiguousarray(per_imu.transpose(1, 0, 2)).reshape(n * n_imu, -1)
 
-    columns = {"t": np.repeat(block.t_s, n_imu),
+    columns = {"t_ns" if time_ns else "t": np.repeat(block.time_ns() if time_ns else block.t_s, n_imu),
                "imu": pa.DictionaryArray.from_arrays(np.tile(np.arange(n_imu, dtype=np.int32), n),
                                                      pa.array(list(imu_names)))}
     numeric = [interleaved(block.accel), interleaved(block.gyro)]
@@ -133,9 +153,4 @@ def csv_rows(block: SampleBlock, imu_names, truth: bool, bias_truth: bool = Fals
              + (BIAS_COLUMNS if bias_truth else ()))
     for i, name in enumerate(names):
         columns[name] = values[:, i]
-    # pyarrow's "needed" quotes every string; plain names go unquoted, as they always did.
-    plain = not any(ch in name for name in imu_names for ch in '"\r\n')
-    sink = pa.BufferOutputStream()
-    pa_csv.write_csv(pa.table(columns), sink, write_options=pa_csv.WriteOptions(
-        include_header=False, quoting_style="none" if plain else "needed"))
-    return sink.getvalue().to_pybytes().decode()
+    return columns

@@ -17,15 +17,24 @@ class Progress:
     def __call__(self, done: int, total: int) -> None:
         if self.quiet or time.monotonic() - self.start < self.min_seconds:
             return
-        width = 40
-        filled = int(width * done / max(total, 1))
-        sys.stderr.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} samples")
+        sys.stderr.write("\r" + bar(done, total, time.monotonic() - self.start, "samples") + "\x1b[K")
         sys.stderr.flush()
         self.shown = True
 
     def close(self) -> None:
         if self.shown:
             sys.stderr.write("\n")
+
+
+def bar(done: int, total: int, elapsed: float, what: str, width: int = 40) -> str:
+    """"[#####.....] 1200/5000 samples, 3.1e+04 samples/s, 2:03 left": the rate is the mean since the start."""
+    filled = int(width * done / max(total, 1))
+    text = f"[{'#' * filled}{'.' * (width - filled)}] {done}/{total} {what}"
+    if done > 0 and elapsed > 0:
+        rate = done / elapsed
+        left = int(round((total - done) / rate))
+        text += f", {rate:.3g} {what}/s, {left // 3600}:{left // 60 % 60:02d}:{left % 60:02d} left"
+    return text
 
 
 class CompileStatus:

@@ -11,9 +11,11 @@ from imu_emulator.progress import CompileStatus, Progress
 
 
 def register(subparsers) -> None:
-    gen = subparsers.add_parser("generate", help="write the samples of a scene to CSV or NPZ")
+    gen = subparsers.add_parser("generate", help="write the samples of a scene to Parquet, CSV, NPZ or MCAP")
     gen.add_argument("scene", help="scene file (TOML)")
-    gen.add_argument("-o", "--output", required=True, help="output file, .csv, .npz or .mcap (ROS 2 bag)")
+    gen.add_argument("-o", "--output", required=True, help="output file: .parquet or .csv (written block by "
+                     "block: memory stays flat for any duration), .npz (held whole: runs that fit in memory) or "
+                     ".mcap (ROS 2 bag)")
     gen.add_argument("--truth", action="store_true", help="add position, velocity, attitude and body rates "
                      "(and each IMU's realized bias when a bias effect is on)")
     add_increments_option(gen)
@@ -25,6 +27,7 @@ def register(subparsers) -> None:
 
 def cmd_generate(args) -> int:
     from imu_emulator.output import check_path, open_writer
+    from imu_emulator.output_parquet import run_metadata
     from imu_emulator.run_size import check_output
     from imu_emulator.samples import counts_text
     from imu_emulator.simulation import Simulation
@@ -37,7 +40,8 @@ def cmd_generate(args) -> int:
     from imu_emulator.kernel import EffectPlan
     bias_truth = EffectPlan(scene).bias_truth    # the realized-bias columns, known before compiling
     with open_writer(args.output, scene.imu_names, args.truth, bias_truth=bias_truth,
-                     temperature="temperature" in scene.effects, increments=bool(args.increments)) as writer:
+                     temperature="temperature" in scene.effects, increments=bool(args.increments),
+                     metadata=run_metadata(scene)) as writer:
         check_output(scene, args.output, args.truth, args.allow_large)
         # a ROS Imu message has an orientation field: fill it from the sensor frame's attitude
         attitude = args.output.lower().endswith(".mcap")
