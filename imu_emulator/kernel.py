@@ -488,6 +488,11 @@ def compile_kernel(scene: Scene, attitude: bool = True, truth: bool = False, inc
     return kernel
 
 
+def is_loaded(scene: Scene, attitude: bool = True, truth: bool = False, increments: int = 0) -> bool:
+    """Whether this process has this scene's kernel loaded already (compile_kernel returns it at once)."""
+    return scene_key(scene, attitude, truth, increments) in _loaded
+
+
 def cached_kernel(scene: Scene, attitude: bool = True, truth: bool = False, increments: int = 0) -> tuple[Path, bool]:
     """Where this scene's kernel lives in the cache, and whether it is there compiled already (numba's index
     beside it), for `check` and the first-run status line; it generates and compiles nothing."""

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import platform
+from functools import lru_cache
 from importlib import metadata as importlib_metadata
 from pathlib import Path
 
@@ -17,8 +18,9 @@ from imu_emulator.samples import SampleBlock
 METADATA_KEY = b"imu_emulator"
 
 
+@lru_cache(maxsize=1)
 def versions() -> dict[str, str]:
-    """The versions whose code shaped the samples."""
+    """The versions whose code shaped the samples (read once per process: a batch writes many files)."""
     found = {"python": platform.python_version()}
     for package in ("imu-emulator", "numpy", "numba", "pyarrow"):
         try:
@@ -33,7 +35,7 @@ def run_metadata(scene, **extra) -> dict:
     from imu_emulator.kernel import scene_digest
     return {"scene_sha256": scene_digest(scene), "scene_path": scene.path, "seed": scene.seed,
             "rate_hz": scene.rate_hz, "t0_s": scene.t0_s, "n_samples": scene.n_samples,
-            "imu_names": list(scene.imu_names), "versions": versions(), **extra}
+            "imu_names": list(scene.imu_names), "versions": dict(versions()), **extra}
 
 
 def read_metadata(path: str | Path) -> dict:

@@ -3,9 +3,9 @@ sets `func`; heavy imports (numba, sympy) happen inside the command function, no
 A new subcommand is a module here and its name in COMMANDS (the order is the order of `--help`)."""
 from __future__ import annotations
 
-from imu_emulator.commands import align, check, formats, generate, kernel, models, plot, replay, stream, targets
+from imu_emulator.commands import align, batch, check, formats, generate, kernel, models, plot, replay, stream, targets
 
-COMMANDS = (generate, replay, stream, check, plot, formats, targets, align, kernel, models)
+COMMANDS = (generate, batch, replay, stream, check, plot, formats, targets, align, kernel, models)
 
 
 def register_all(subparsers) -> None:

@@ -1,0 +1,101 @@
+"""`imu-emulator batch`: Monte Carlo realizations of a scene on a Dask cluster (a local one by default)."""
+from __future__ import annotations
+
+import os
+import sys
+import time
+
+from imu_emulator.commands.shared import number
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("batch", help="Monte Carlo: N realizations of a scene (seeds, drawn parameters) on "
+                              "Dask, one Parquet file each and a summary table")
+    p.add_argument("scene", help="scene file (TOML)")
+    p.add_argument("--runs", required=True, type=number(1, 10_000_000, integer=True), help="realizations")
+    p.add_argument("-o", "--output", required=True, help="output directory (created if missing; a rerun skips "
+                   "the realizations whose files are there)")
+    p.add_argument("--seed", type=number(0, 2 ** 64 - 1, integer=True), default=None,
+                   help="root seed S (default: the scene's seed); realization i uses SeedSequence(S).spawn()[i]")
+    p.add_argument("--vary", action="append", default=[], metavar="KEY=DIST",
+                   help="draw a scene value per realization: uniform(LOW,HIGH) or normal(MEAN,SIGMA), optionally "
+                   "with a unit, e.g. 'imu0.gyro.bias_instability=uniform(1,5) deg/h' (repeatable)")
+    p.add_argument("--truth", action="store_true", help="add the truth columns to every file")
+    p.add_argument("--only", type=number(0, 10_000_000, integer=True), action="append", default=None,
+                   metavar="I", help="run realization I only (repeatable): the same file as in the whole batch")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                       help="an existing Dask scheduler (default: $DASK_SCHEDULER_ADDRESS, else a local cluster)")
+    where.add_argument("--workers", type=number(0, 4096, integer=True), default=None,
+                       help="local cluster's worker processes (default: the machine's cores); 0 runs in this process")
+    p.add_argument("--quiet", action="store_true", help="no progress line")
+    p.set_defaults(func=cmd_batch)
+
+
+def cmd_batch(args) -> int:
+    from imu_emulator import batch
+    from imu_emulator.commands.shared import load_scene_with_warnings
+    from imu_emulator.progress import bar
+
+    scene = load_scene_with_warnings(args.scene)
+    seed = scene.seed if args.seed is None else args.seed
+    # the tasks are made (and a --vary checked) before any cluster starts
+    batch.tasks_for(args.scene, args.runs, seed, args.output, vary=args.vary, truth=args.truth, indices=args.only)
+    show = not args.quiet and sys.stderr.isatty()
+    start = time.monotonic()
+
+    def progress(done, total, failed):
+        if show:
+            sys.stderr.write("\r" + bar(done, total, time.monotonic() - start, "realizations")
+                             + (f", {failed} failed" if failed else "") + "\x1b[K")
+            sys.stderr.flush()
+
+    with _executor(args) as executor:
+        result = batch.run(args.scene, args.runs, seed, args.output, executor=executor, vary=args.vary,
+                           truth=args.truth, indices=args.only, progress=progress)
+    if show:
+        sys.stderr.write("\n")
+    found = sum(row["skipped"] for row in result.rows)
+    if not args.quiet:
+        print(f"{len(result.rows) - found} realization(s) computed, {found} found complete, "
+              f"{len(result.failures)} failed; summary: {result.summary}", file=sys.stderr)
+    batch.report(result)
+    return 0 if result.ok else 1
+
+
+class _executor:
+    """The Dask client for the batch (and its local cluster), or None for --workers 0; closed on exit."""
+
+    def __init__(self, args):
+        self.args = args
+        self.client = self.cluster = None
+
+    def __enter__(self):
+        address = self.args.scheduler or (None if self.args.workers is not None
+                                          else os.environ.get("DASK_SCHEDULER_ADDRESS"))
+        if self.args.workers == 0:
+            return None
+        try:
+            from distributed import Client, LocalCluster
+        except ImportError:
+            from imu_emulator.errors import ImuEmulatorError
+            raise ImuEmulatorError("batch: Dask is not installed (pip install 'imu-emulator[batch]'), or run "
+                                   "in this process with --workers 0") from None
+        if address:
+            self.client = Client(address)
+        else:
+            # one thread per worker process: the kernel is single-threaded, and numba's compile is not
+            # something to run twice in one process at once
+            import logging
+            self.cluster = LocalCluster(n_workers=self.args.workers or os.cpu_count() or 1, threads_per_worker=1,
+                                        processes=True, silence_logs=logging.ERROR)
+            self.client = Client(self.cluster)
+        if not self.args.quiet:
+            print(f"dask dashboard: {self.client.dashboard_link}", file=sys.stderr, flush=True)
+        return self.client
+
+    def __exit__(self, *exc):
+        if self.client is not None:
+            self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()
