@@ -90,6 +90,7 @@ KERNEL_LOADS: dict[str, float] = {}
 def realize(task: Task) -> dict:
     """Compute one realization (or find it done) and return its summary row. Runs on a worker."""
     from imu_emulator.output_parquet import read_metadata
+    cpu_start = time.thread_time()
     path = run_file(Path(task.out), task.index)
     identity = {"index": task.index, "seed": task.seed, "batch_seed": task.root_seed, "drawn": task.drawn()}
     row = {**identity, "file": path.name, "worker": f"{socket.gethostname()}:{os.getpid()}",
@@ -103,6 +104,7 @@ def realize(task: Task) -> dict:
     else:
         row["kernel_load_s"] = _write(task, path, identity)
     row["stats"] = summarize(path)
+    row["cpu_s"] = time.thread_time() - cpu_start
     return row
 
 
@@ -285,11 +287,13 @@ def _remove_stale_parts(out: Path) -> None:
 
 
 def summary_columns(tasks, result: BatchResult) -> dict:
-    """One row per realization: index, seed, each drawn value, the file, status and error, summary statistics."""
+    """One row per realization: index, seed, status, error, file, the worker that computed it, the seconds its
+    first load of the kernel took there (empty when the worker had it), the realization's CPU seconds on the
+    worker's thread, each drawn value, summary statistics."""
     by_index = {r["index"]: r for r in result.rows}
     failed = {f["index"]: f for f in result.failures}
     columns: dict[str, list] = {"index": [], "seed": [], "status": [], "error": [], "file": [], "worker": [],
-                                "kernel_load_s": []}
+                                "kernel_load_s": [], "cpu_s": []}
     variations = tasks[0].variations if tasks else ()
     for v in variations:
         for j in (range(v.count) if v.count > 1 else [None]):
@@ -306,6 +310,7 @@ def summary_columns(tasks, result: BatchResult) -> dict:
         columns["file"].append("" if failure else row["file"])
         columns["worker"].append("" if failure else row["worker"])
         columns["kernel_load_s"].append(None if failure else row["kernel_load_s"])
+        columns["cpu_s"].append(None if failure else row["cpu_s"])
         drawn = (failure or row)["drawn"]
         for v in variations:
             values = drawn[v.key] if v.count > 1 else [drawn[v.key]]
@@ -325,7 +330,8 @@ def write_summary(out: Path, tasks, result: BatchResult) -> Path:
     from imu_emulator.outfile import AtomicOutput
     columns = summary_columns(tasks, result)
     columns["seed"] = pa.array(columns["seed"], pa.uint64())     # seeds use all 64 bits
-    columns["kernel_load_s"] = pa.array(columns["kernel_load_s"], pa.float64())
+    for name in ("kernel_load_s", "cpu_s"):
+        columns[name] = pa.array(columns[name], pa.float64())
     table = pa.table(columns)
     target = out / f"{SUMMARY_NAME}.parquet"
     with AtomicOutput(target, "wb") as file:

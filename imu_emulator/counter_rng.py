@@ -119,7 +119,7 @@ def normal(key, counter):
     return _slow_path(z, idx, rabs, x)
 
 
-@numba.njit
+@numba.njit(cache=True)   # every new process draws initial states: compiling it cost each batch worker seconds
 def normals(key, first, n):
     """n consecutive normals of one stream (tests, initial state draws)."""
     out = np.empty(n)
