@@ -3,7 +3,7 @@ and a long `generate` to Parquet (wall time, peak RSS).
 
     .venv/bin/python tools/bench_batch.py [--runs 32] [--minutes 10] [--repeat 2] [--generate-hours 24]
 
-Batch: a one-IMU scene with sensor noise and bias instability at 1 kHz; `imu_emulator.batch.run` on a LocalCluster
+Batch: a one-IMU figure-eight scene with sensor noise and bias instability at 1 kHz; `imu_emulator.batch.run` on a LocalCluster
 (one thread per worker process) started before the clock starts. The first trial uses an empty kernel cache (its
 kernel loads are compiles); the trials alternate 1 and 2 workers so machine load falls on both alike. Wall time,
 and the CPU seconds the realizations took on the workers' threads (time.thread_time), are printed per trial.
@@ -32,9 +32,10 @@ SCENE = """
 [scene]
 rate_hz = 1000
 duration_s = {duration}
-[trajectory]
-shape = "circle"
-radius_m = 20.0
+[trajectory]      # a car-sized figure eight, heading along the path
+shape = "figure8"
+length_m = 40.0
+width_m = 16.0
 frequency_hz = 0.05
 [attitude]
 mode = "tangent"
