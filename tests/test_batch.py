@@ -76,7 +76,7 @@ def test_serial_and_two_worker_cluster_give_identical_files(tmp_path, cache):
     scene = _scene(tmp_path)
     serial = batch.run(scene, 16, ROOT_SEED, tmp_path / "serial")
     assert serial.ok and len(serial.rows) == 16
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster, \
             Client(cluster) as client:
         parallel = batch.run(scene, 16, ROOT_SEED, tmp_path / "dask", executor=client)
     assert parallel.ok and len({row["worker"] for row in parallel.rows}) == 2

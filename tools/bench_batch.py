@@ -58,7 +58,7 @@ def scene_text(duration_s: float, imus: int) -> str:
 
 def batch_trial(scene: Path, runs: int, workers: int, out: Path) -> dict:
     from distributed import Client, LocalCluster
-    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
                       silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
         client.wait_for_workers(workers)
         start = time.perf_counter()
