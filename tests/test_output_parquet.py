@@ -117,3 +117,16 @@ def test_generate_memory_stays_flat_while_it_runs(tmp_path, monkeypatch, suffix,
     # the two with room for allocator noise.
     growth_if_held = 0.75 * memory_bytes(320_000, 4, quat=False, truth=False)
     assert (at_end - at_quarter < growth_if_held / 3) == flat, (at_quarter, at_end, trace[::10])
+
+
+def test_parquet_carries_the_increments_as_npz_does(tmp_path, monkeypatch):
+    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
+    scene = str(EXAMPLES / "two_imus.toml")
+    for suffix in (".parquet", ".npz"):
+        assert main(["generate", scene, "-o", str(tmp_path / f"o{suffix}"), "--quiet", "--increments"]) == 0
+    table = pq.read_table(tmp_path / "o.parquet")
+    whole = np.load(tmp_path / "o.npz")
+    for m in range(2):
+        for i, axis in enumerate("xyz"):
+            assert np.array_equal(table.column(f"dtheta_{axis}").to_numpy()[m::2], whole["dtheta"][m, :, i])
+            assert np.array_equal(table.column(f"dvel_{axis}").to_numpy()[m::2], whole["dvel"][m, :, i])
