@@ -296,3 +296,12 @@ def test_align_json_that_cannot_be_written_is_one_line_after_the_report(tmp_path
                           "--json", "/proc/x.json")
     _ends_with_one_error_line(code, err, "/proc/x.json", "cannot create")
     assert out.strip(), "the results are shown before the JSON fails"
+
+
+def test_generate_in_process_gives_the_signal_handlers_back(tmp_path, capsys):
+    import signal
+    before = {s: signal.getsignal(s) for s in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT)}
+    scene = _scene_ignoring_a_mounting(tmp_path)
+    code, _, _ = _cli(capsys, "generate", scene, "-o", tmp_path / "o.csv", "--quiet")
+    assert code == 0
+    assert {s: signal.getsignal(s) for s in before} == before

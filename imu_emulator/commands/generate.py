@@ -26,15 +26,24 @@ def register(subparsers) -> None:
 
 
 def cmd_generate(args) -> int:
-    from imu_emulator.output import check_path, open_writer
+    from imu_emulator.output import check_path
+
+    check_path(args.output)
+    scene = load_scene_with_warnings(args.scene)
+    stopped, restore = _exit_cleanly_on(signal.SIGTERM, signal.SIGHUP, signal.SIGINT)
+    try:
+        return _generate(args, scene, stopped)
+    finally:
+        restore()   # a caller in the same process (the Python API, tests) gets its own handlers back
+
+
+def _generate(args, scene, stopped) -> int:
+    from imu_emulator.output import open_writer
     from imu_emulator.output_parquet import run_metadata
     from imu_emulator.run_size import check_output
     from imu_emulator.samples import counts_text
     from imu_emulator.simulation import Simulation
 
-    check_path(args.output)
-    scene = load_scene_with_warnings(args.scene)
-    stopped = _exit_cleanly_on(signal.SIGTERM, signal.SIGHUP, signal.SIGINT)
     # The output file is created before the kernel compiles: an unwritable path fails at once. It appears
     # at its path only when every block is written (a failed run leaves nothing behind).
     from imu_emulator.kernel import EffectPlan
@@ -66,8 +75,9 @@ def cmd_generate(args) -> int:
 
 def _exit_cleanly_on(*signals):
     """Interrupt, kill and hang-up signals unwind the run, so the unfinished output file is removed. Returns a
-    check for the block loop: an exception raised in a signal handler can be swallowed by C code that
-    was running (seen while the CSV rows were formatted), so the signal is also remembered and raised there."""
+    check for the block loop (an exception raised in a signal handler can be swallowed by C code that
+    was running, seen while the CSV rows were formatted, so the signal is also remembered and raised there)
+    and a function that puts the previous handlers back."""
     received = []
 
     def leave(signum, frame):
@@ -78,7 +88,12 @@ def _exit_cleanly_on(*signals):
         if received:
             raise SystemExit(128 + received[0])
 
+    previous = {}
     if threading.current_thread() is threading.main_thread():
         for sig in signals:
-            signal.signal(sig, leave)
-    return check
+            previous[sig] = signal.signal(sig, leave)
+
+    def restore():
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    return check, restore
