@@ -1,0 +1,113 @@
+"""The Earth under the navigation stage: the geometry the Earth effects share, printed once per kernel.
+
+With the Earth model on (frame ECEF, or any of effects.earth_rate, effects.coriolis, effects.gravity with
+gravity_model = "wgs84"), the trajectory is Cartesian in the scene's frame: ENU/NED is the tangent frame fixed
+to the Earth at [scene] origin, ECEF is ECEF. The attitude is relative to the local level frame at the current
+position (NED, or ENU when the scene's frame is ENU), so the navigation stage works in that frame: the
+prelude converts the position to geodetic (latitude, longitude, height), and resolves velocity and
+acceleration in local NED (e_vn.., e_an..); f then starts as the Earth-fixed acceleration in the level frame.
+
+The formulas are written once, in NED (Groves 2nd ed. §2.4, §5.4); `level` maps NED components to the scene's
+level axes (ENU: x = E, y = N, z = -D). Variables the prelude defines, for the effects:
+    e_sl e_cl (sin, cos latitude), e_so e_co (longitude), e_h (height, m), e_w = sqrt(1 - e2 sin^2 L),
+    e_rn e_re (R_N + h, R_E + h), e_vn e_ve e_vd (Earth-referenced velocity, local NED).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from imu_emulator import wgs84
+
+EARTH_EFFECTS = ("earth_rate", "coriolis")
+#: fixed-point iterations of the geodetic latitude: each shrinks the error by about 2 e^4 = 1e-4, and the
+#: start (tan L = z / (p (1 - e2))) is exact at h = 0 and within e2 h / R of it elsewhere (1e-5 at 10 km,
+#: 1e-2 in orbit), so 4 reach the rounding floor from the ground to beyond geostationary height
+GEODETIC_ITERATIONS = 4
+_DONE = "_earth_prelude_emitted"
+
+
+def model_on(scene) -> bool:
+    """Whether the navigation stage follows the Earth (see the module's docstring)."""
+    return (scene.frame == "ECEF" or any(name in scene.effects for name in EARTH_EFFECTS)
+            or ("gravity" in scene.effects and scene.gravity_model == "wgs84"))
+
+
+def level(scene, n: str, e: str, d: str) -> tuple[str, str, str]:
+    """NED components as the scene's level axes (ENU for an ENU scene, NED otherwise)."""
+    return (e, n, f"-({d})") if scene.frame == "ENU" else (n, e, d)
+
+
+def tangent_to_ecef(frame: str, origin) -> tuple[np.ndarray, np.ndarray]:
+    """(r0, C): ECEF position of the frame's origin and the matrix whose columns are its axes in ECEF."""
+    if frame == "ECEF":
+        return np.zeros(3), np.eye(3)
+    lat, lon = np.radians(origin[0]), np.radians(origin[1])
+    sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
+    north, east, down = (-sl * co, -sl * so, cl), (-so, co, 0.0), (-cl * co, -cl * so, -sl)
+    columns = (east, north, tuple(-x for x in down)) if frame == "ENU" else (north, east, down)
+    n = wgs84.A / np.sqrt(1.0 - wgs84.E2 * sl * sl)
+    h = origin[2]
+    r0 = np.array([(n + h) * cl * co, (n + h) * cl * so, (n * (1.0 - wgs84.E2) + h) * sl])
+    return r0, np.array(columns).T
+
+
+def _affine(out: str, r0, c, names) -> list[str]:
+    """out{x,y,z} = r0 + C @ names, printed without the exact zeros (0 * x is not folded: x may be inf)."""
+    lines = []
+    for i, axis in enumerate("xyz"):
+        terms = [repr(float(r0[i]))] if r0 is not None and r0[i] != 0.0 else []
+        terms += [f"{float(c[i, j])!r} * {names[j]}" if c[i, j] != 1.0 else names[j]
+                  for j in range(3) if c[i, j] != 0.0]
+        lines.append(f"{out}{axis} = {' + '.join(terms) or '0.0'}")
+    return lines
+
+
+def prelude(ctx) -> list[str]:
+    """The shared geometry, the first time an Earth effect asks in this kernel; nothing after that."""
+    if getattr(ctx.plan, _DONE, False):
+        return []
+    setattr(ctx.plan, _DONE, True)
+    scene = ctx.scene
+    r0, c = tangent_to_ecef(scene.frame, scene.origin)
+    a, e2 = repr(wgs84.A), repr(wgs84.E2)
+    lines = _affine("e_r", r0, c, ("px", "py", "pz")) + _affine("e_v", None, c, ("vx", "vy", "vz"))
+    lines += _affine("e_a", None, c, ("ax", "ay", "az"))
+    lines += [
+        "e_p = math.sqrt(e_rx * e_rx + e_ry * e_ry)",
+        "if e_p > 0.0:",
+        "    e_co = e_rx / e_p",
+        "    e_so = e_ry / e_p",
+        "else:",     # on the axis longitude is undefined: take 0
+        "    e_co = 1.0",
+        "    e_so = 0.0",
+        # tan L = z / (p (1 - e2 N / (N + h))), iterated from h = 0; h = p cos L + z sin L - a w (no 1/cos L)
+        f"e_c = e_p * (1.0 - {e2})",
+    ]
+    for i in range(GEODETIC_ITERATIONS + 1):
+        lines += [
+            "e_ir = 1.0 / math.sqrt(e_c * e_c + e_rz * e_rz)",
+            "e_sl = e_rz * e_ir",
+            "e_cl = e_c * e_ir",
+            f"e_w = math.sqrt(1.0 - {e2} * e_sl * e_sl)",
+            f"e_h = e_p * e_cl + e_rz * e_sl - {a} * e_w",
+        ]
+        if i < GEODETIC_ITERATIONS:
+            lines.append(f"e_c = e_p * (1.0 - {e2} * {a} / ({a} + e_h * e_w))")
+    lines += [
+        f"e_re = {a} / e_w + e_h",
+        f"e_rn = {repr(wgs84.A * (1.0 - wgs84.E2))} / (e_w * e_w * e_w) + e_h",
+    ]
+    # local NED at the current position: rows of C_e^n
+    rows = {"n": ("-e_sl * e_co", "-e_sl * e_so", "e_cl"), "e": ("-e_so", "e_co", None),
+            "d": ("-e_cl * e_co", "-e_cl * e_so", "-e_sl")}
+    for vec in ("v", "a"):
+        for axis, row in rows.items():
+            terms = [f"({r}) * e_{vec}{c}" for r, c in zip(row, "xyz") if r is not None]
+            lines.append(f"e_{vec}{axis} = {' + '.join(terms)}")
+    fx, fy, fz = level(scene, "e_an", "e_ae", "e_ad")
+    return lines + [f"fnx = {fx}", f"fny = {fy}", f"fnz = {fz}"]
+
+
+def add(scene, target: str, n: str, e: str, d: str) -> list[str]:
+    """Lines adding a NED vector to the level-axes variables target{x,y,z} (fn or wn)."""
+    return [f"{target}{axis} += {value}" for axis, value in zip("xyz", level(scene, n, e, d)) if value != "0.0"]
