@@ -22,7 +22,7 @@ def _origin(head: Mapping):
 
 
 def earth_keys(head: Mapping, frame: str, effects: frozenset[str], attitude_mode: str, shape: bool,
-               warnings: list[str]):
+               expressions: bool, warnings: list[str]):
     """(origin or None, gravity model), validated against the frame and the effects named."""
     from imu_emulator.effects._earth import EARTH_EFFECTS
     origin = _origin(head)
@@ -35,15 +35,23 @@ def earth_keys(head: Mapping, frame: str, effects: frozenset[str], attitude_mode
             earth.append("gravity")
             if "gravity_mps2" in head:
                 warnings.append("scene.gravity_mps2 is ignored: gravity_model = \"wgs84\" computes gravity")
-    if frame == "ECEF":
+    if frame in ("ECEF", "ECI"):
         if shape:
-            raise SceneError("trajectory.shape: shapes are built in a local frame; with frame = \"ECEF\" give "
-                             "x, y, z expressions or a file in ECEF metres")
+            raise SceneError(f"trajectory.shape: shapes are built in a local frame; with frame = \"{frame}\" give "
+                             f"x, y, z expressions{' or a file' if frame == 'ECEF' else ''} in {frame} metres")
+        if frame == "ECI" and not expressions:
+            raise SceneError("trajectory: frame = \"ECI\" takes x, y, z expressions of t (sampled ECI "
+                             "trajectories are not built yet)")
         if attitude_mode == "tangent":
-            raise SceneError("attitude.mode: 'tangent' is not built for frame = \"ECEF\" yet (it assumes the "
+            raise SceneError(f"attitude.mode: 'tangent' is not built for frame = \"{frame}\" yet (it assumes the "
                              "frame's z axis is vertical); give roll, pitch, yaw relative to local NED")
+        if frame == "ECI":
+            missing = [name for name in EARTH_EFFECTS if name not in effects]
+            if missing:
+                raise SceneError(f"effects.{missing[0]}: frame = \"ECI\" needs it (an inertial trajectory seen "
+                                 "from the rotating Earth: name effects.earth_rate and effects.coriolis)")
         if origin is not None:
-            warnings.append("scene.origin is ignored with frame = \"ECEF\" (positions are ECEF already)")
+            warnings.append(f"scene.origin is ignored with frame = \"{frame}\" (positions are {frame} already)")
             origin = None
     elif earth and origin is None:
         # a default, said out loud: the devices have always used it for their GNSS fields

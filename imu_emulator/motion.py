@@ -145,10 +145,14 @@ def translational_parts(exprs: Expressions, scene: Scene, order: int):
     """sympy expressions of s, v, a[, j] for x, y, z."""
     import sympy
     t = sympy.Symbol("t", real=True)
+    given = [expressions.to_sympy(expressions.check(text, f"trajectory.{axis}", scene.params), scene.params, t)
+             for axis, text in zip(AXES, exprs.texts)]
+    if scene.frame == "ECI":
+        from imu_emulator.earth_motion import eci_to_ecef
+        given = eci_to_ecef(given, t)
     parts = []
-    for axis, text in zip(AXES, exprs.texts):
+    for axis, text, e in zip(AXES, exprs.texts, given):
         where = f"trajectory.{axis}"
-        e = expressions.to_sympy(expressions.check(text, where, scene.params), scene.params, t)
         for d, prefix in enumerate("pva" + ("j" if order >= 3 else "")):
             expressions.check_symbolic(e, where, text, DERIVATIVE_NAMES[d])
             parts.append((f"{prefix}{axis}", e))

@@ -21,7 +21,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-FRAMES = ("ENU", "NED", "ECEF")
+FRAMES = ("ENU", "NED", "ECEF", "ECI")
 GRAVITY_MODELS = ("constant", "wgs84")
 ATTITUDE_MODES = ("euler", "tangent", "file")
 DEFAULT_DERIVATIVE = "spline5c"   # see README "What accuracy costs in time"
@@ -544,7 +544,8 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
 
     effects = _effects(raw)
     from imu_emulator.earth_scene import earth_keys
-    origin, gravity_model = earth_keys(head, frame, effects, mode, "shape" in traj_table, warnings)
+    origin, gravity_model = earth_keys(head, frame, effects, mode, "shape" in traj_table,
+                                       isinstance(trajectory, Expressions), warnings)
     imu_list = raw.get("imu", [])
     if isinstance(imu_list, Mapping):
         imu_list = [imu_list]

@@ -129,3 +129,64 @@ def test_effects_off_add_nothing_and_a_missing_origin_is_said():
         earth_scene("NED", 91.0)
     with pytest.raises(SceneError, match=r"scene.gravity_model: 'egm96' is not one of"):
         earth_scene("NED", gravity_model="egm96")
+
+
+# --- the same motion in several frames -----------------------------------------------------------------
+
+MOTION_NED = ("30*t + 2*sin(0.5*t)", "-12*t + 0.02*t**2", "-3*cos(0.2*t) - 0.5*t")   # north, east, down (m)
+ATTITUDE = {"roll": "0.1*sin(0.7*t)", "pitch": "0.05 + 0.02*t", "yaw": "0.3*t"}       # w.r.t. local NED
+ORIGIN = (-33.9, 151.2, 45.0)
+
+
+def _ecef_expressions(north, east, down, origin=ORIGIN):
+    """ECEF x, y, z expressions of a motion given in NED at `origin` (pymap3d: an independent r0 and axes)."""
+    pymap3d = pytest.importorskip("pymap3d")
+    r0 = pymap3d.geodetic2ecef(*origin)
+    axes = [pymap3d.ned2ecef(*unit, *origin) for unit in np.eye(3)]   # the origin's N, E, D as ECEF points
+    columns = [np.subtract(point, r0) for point in axes]
+    return [f"{float(r0[i])!r} + {float(columns[0][i])!r}*({north}) + {float(columns[1][i])!r}*({east}) + "
+            f"{float(columns[2][i])!r}*({down})"
+            for i in range(3)]
+
+
+def test_same_motion_in_ned_enu_and_ecef_gives_the_same_outputs():
+    """Attitude is w.r.t. the local level frame at the current position in every frame, so the three scenes
+    are one motion; f and omega agree to 1e-9 (the ECEF expressions round the position to ~1e-9 m)."""
+    north, east, down = MOTION_NED
+    common = dict(lat=ORIGIN[0], lon=ORIGIN[1], h=ORIGIN[2], rate_hz=50, duration_s=20.0)
+    f_ned, w_ned = run(earth_scene("NED", trajectory=dict(zip("xyz", MOTION_NED)), attitude=ATTITUDE, **common))
+    x, y, z = _ecef_expressions(north, east, down)
+    f_ecef, w_ecef = run(earth_scene("ECEF", trajectory={"x": x, "y": y, "z": z}, attitude=ATTITUDE, **common))
+    # ENU: x = east, y = north, z = up; body forward-left-up; yaw from east
+    enu_att = {"roll": ATTITUDE["roll"], "pitch": f"-({ATTITUDE['pitch']})", "yaw": f"pi/2 - ({ATTITUDE['yaw']})"}
+    f_enu, w_enu = run(earth_scene("ENU", trajectory={"x": east, "y": north, "z": f"-({down})"}, attitude=enu_att,
+                                   **common))
+    flip = np.array([1.0, -1.0, -1.0])     # forward-right-down from forward-left-up
+    assert np.max(np.abs(f_ecef - f_ned)) < 1e-9 and np.max(np.abs(w_ecef - w_ned)) < 1e-9
+    assert np.max(np.abs(f_enu * flip - f_ned)) < 1e-9 and np.max(np.abs(w_enu * flip - w_ned)) < 1e-9
+    # and the Earth terms are really there: the motion differs from the flat, non-rotating answer
+    flat_f, flat_w = run(scene_from_dict({"scene": {"rate_hz": 50, "duration_s": 20.0, "frame": "NED"},
+                                          "trajectory": dict(zip("xyz", MOTION_NED)), "attitude": ATTITUDE,
+                                          "imu": [{"name": "a"}], "effects": {"gravity": True}}))
+    assert np.max(np.abs(flat_w - w_ned)) > 5e-5 and np.max(np.abs(flat_f - f_ned)) > 1e-3
+
+
+@pytest.mark.parametrize("t0", [0.0, 3.0e7])
+def test_eci_point_fixed_on_the_earth_is_static(t0):
+    """A point fixed on the Earth, given in ECI (it turns with the Earth at omega_ie about z), reads like the
+    static ECEF point, also at t = 3e7 s (omega t = 2188 rad), to 1e-12 relative."""
+    pymap3d = pytest.importorskip("pymap3d")
+    x0, y0, z0 = (float(v) for v in pymap3d.geodetic2ecef(*ORIGIN))
+    w = "7.292115e-5*t"
+    eci = {"x": f"{x0!r}*cos({w}) - {y0!r}*sin({w})", "y": f"{x0!r}*sin({w}) + {y0!r}*cos({w})", "z": repr(z0)}
+    f, g = run(earth_scene("ECI", trajectory=eci, t0_s=t0, duration_s=0.5))
+    f_ref, g_ref = run(earth_scene("NED", *ORIGIN, t0_s=t0, duration_s=0.5))
+    np.testing.assert_allclose(f, f_ref, rtol=0, atol=1e-12 * 9.8)
+    np.testing.assert_allclose(g, g_ref, rtol=0, atol=1e-12 * 7.3e-5)
+
+
+def test_frames_refuse_what_is_not_built():
+    with pytest.raises(SceneError, match=r"trajectory.shape: shapes are built in a local frame"):
+        earth_scene("ECEF")
+    with pytest.raises(SceneError, match=r"effects.coriolis: frame = \"ECI\" needs it"):
+        earth_scene("ECI", trajectory={"x": "7e6", "y": "0", "z": "0"}, effects={"earth_rate": True})

@@ -2,7 +2,8 @@
 
 With the Earth model on (frame ECEF, or any of effects.earth_rate, effects.coriolis, effects.gravity with
 gravity_model = "wgs84"), the trajectory is Cartesian in the scene's frame: ENU/NED is the tangent frame fixed
-to the Earth at [scene] origin, ECEF is ECEF. The attitude is relative to the local level frame at the current
+to the Earth at [scene] origin, ECEF is ECEF, and an ECI trajectory arrives here rewritten as ECEF (exactly, in
+sympy: imu_emulator.motion). The attitude is relative to the local level frame at the current
 position (NED, or ENU when the scene's frame is ENU), so the navigation stage works in that frame: the
 prelude converts the position to geodetic (latitude, longitude, height), and resolves velocity and
 acceleration in local NED (e_vn.., e_an..); f then starts as the Earth-fixed acceleration in the level frame.
@@ -28,7 +29,7 @@ _DONE = "_earth_prelude_emitted"
 
 def model_on(scene) -> bool:
     """Whether the navigation stage follows the Earth (see the module's docstring)."""
-    return (scene.frame == "ECEF" or any(name in scene.effects for name in EARTH_EFFECTS)
+    return (scene.frame in ("ECEF", "ECI") or any(name in scene.effects for name in EARTH_EFFECTS)
             or ("gravity" in scene.effects and scene.gravity_model == "wgs84"))
 
 
@@ -39,7 +40,7 @@ def level(scene, n: str, e: str, d: str) -> tuple[str, str, str]:
 
 def tangent_to_ecef(frame: str, origin) -> tuple[np.ndarray, np.ndarray]:
     """(r0, C): ECEF position of the frame's origin and the matrix whose columns are its axes in ECEF."""
-    if frame == "ECEF":
+    if frame in ("ECEF", "ECI"):     # ECI trajectories reach the kernel as ECEF (imu_emulator.motion)
         return np.zeros(3), np.eye(3)
     lat, lon = np.radians(origin[0]), np.radians(origin[1])
     sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
