@@ -42,14 +42,9 @@ def tangent_to_ecef(frame: str, origin) -> tuple[np.ndarray, np.ndarray]:
     """(r0, C): ECEF position of the frame's origin and the matrix whose columns are its axes in ECEF."""
     if frame in ("ECEF", "ECI"):     # ECI trajectories reach the kernel as ECEF (imu_emulator.motion)
         return np.zeros(3), np.eye(3)
-    lat, lon = np.radians(origin[0]), np.radians(origin[1])
-    sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
-    north, east, down = (-sl * co, -sl * so, cl), (-so, co, 0.0), (-cl * co, -cl * so, -sl)
-    columns = (east, north, tuple(-x for x in down)) if frame == "ENU" else (north, east, down)
-    n = wgs84.A / np.sqrt(1.0 - wgs84.E2 * sl * sl)
-    h = origin[2]
-    r0 = np.array([(n + h) * cl * co, (n + h) * cl * so, (n * (1.0 - wgs84.E2) + h) * sl])
-    return r0, np.array(columns).T
+    from imu_emulator import frames   # numba (rotations) only when a kernel is generated
+    local = frames.enu_from_ecef_matrix if frame == "ENU" else frames.ned_from_ecef_matrix
+    return frames.geodetic_to_ecef(*origin), local(origin[0], origin[1]).T
 
 
 def _affine(out: str, r0, c, names) -> list[str]:
