@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from imu_emulator.frames import ecef_to_geodetic, local_to_ecef
+from imu_emulator.frames import ecef_to_geodetic, local_to_ecef, ned_from_ecef_matrix
 
 DEFAULT_ORIGIN = (47.397742, 8.545594, 488.0)     # lat deg, lon deg, height m
 
@@ -25,3 +25,24 @@ def local_to_geodetic(position: np.ndarray, frame: str, origin=None) -> np.ndarr
     """(n, 3) positions in the scene's frame (ENU or NED tangent at `origin`, default DEFAULT_ORIGIN, or
     ECEF) -> (n, 3) lat deg, lon deg, height m."""
     return ecef_to_geodetic(local_to_ecef(position, frame, DEFAULT_ORIGIN if origin is None else origin))
+
+
+def device_navigation(position, velocity, specific_force, frame: str, gravity: float, origin=None,
+                      gravity_model: str = "constant") -> dict:
+    """What a device reports about where it is, from the run's truth: geodetic position, NED velocity and
+    linear acceleration (specific force in the level axes the attitude refers to, plus gravity).
+
+    In ECEF and ECI scenes the truth position and velocity are ECEF (ECI trajectories are rewritten as ECEF
+    before the kernel) and the attitude refers to local NED at the current position."""
+    from imu_emulator import wgs84
+    earth = frame in ("ECEF", "ECI")
+    llh = ecef_to_geodetic(position) if earth else local_to_geodetic(position, frame, origin)
+    if earth:
+        velocity_ned = np.einsum("nij,nj->ni", ned_from_ecef_matrix(llh[:, 0], llh[:, 1]), velocity)
+    else:
+        velocity_ned = to_ned(velocity, frame)
+    down = (wgs84.normal_gravity(np.radians(llh[:, 0]), llh[:, 2]) if gravity_model == "wgs84"
+            else np.full(len(llh), gravity))
+    accel_ned = to_ned(specific_force, "ENU" if frame == "ENU" else "NED").copy()
+    accel_ned[:, 2] += down
+    return {"position_llh": llh, "velocity_ned": velocity_ned, "linear_accel_ned": accel_ned}

@@ -36,7 +36,7 @@ import firmware_protocols
 from firmware_protocols.base import EncodeError, can_bits_worst_case
 from imu_emulator.errors import ImuEmulatorError, SceneError, TargetError
 from imu_emulator.outfile import AtomicOutput
-from imu_emulator.geodesy import local_to_geodetic, to_ned
+from imu_emulator.geodesy import device_navigation
 from imu_emulator.samples import counts_text
 from imu_emulator.realtime import LatenessStats, Pacer, drop_realtime, enable_realtime
 from imu_emulator.transport import TargetOptions, check_carries, link_capacity, open_target, parse_target
@@ -182,7 +182,7 @@ class Stream:
         check_carries(self.spec, info.kind)
         self.capacity = link_capacity(self.spec, info.kind, config.target_options)
         self.device = None
-        self.navigation = None     # (frame, gravity) when the device reports navigation quantities
+        self.navigation = None     # (frame, gravity, origin, model) when the device reports navigation
         try:
             if config.device and info.device is not None and self.spec.kind not in _ONE_WAY_TARGETS:
                 # The device encodes too: budgets read its bytes_per_sample / frames_per_sample.
@@ -226,12 +226,9 @@ class Stream:
         # A device may be asked for any field its format knows at any moment: give it all we have.
         nav = {}
         if self.navigation is not None and block.truth is not None:
-            frame, gravity = self.navigation
             specific_force = np.einsum("nij,nj->ni", quat_to_matrix(block.quat[i]), block.accel[i])
-            specific_force[:, 2] += -gravity if frame == "ENU" else gravity
-            nav = {"position_llh": local_to_geodetic(block.truth["position"], frame),
-                   "velocity_ned": to_ned(block.truth["velocity"], frame),
-                   "linear_accel_ned": to_ned(specific_force, frame)}
+            nav = device_navigation(block.truth["position"], block.truth["velocity"], specific_force,
+                                    *self.navigation)
         return Samples(time_ns, block.accel[i], block.gyro[i], quat=block.quat[i], euler=quat_to_euler(block.quat[i]),
                        temperature_c=temperature, **nav, **increments)
 
@@ -775,7 +772,7 @@ def run_streams(scene, sim, configs: list[StreamConfig], options: RunOptions) ->
     streams = build_streams(configs, tuple(sim.imu_names), float(scene.rate_hz))
     for stream in streams:
         if stream.device is not None and stream.info.device_navigation:
-            stream.navigation = (scene.frame, float(scene.gravity_mps2))
+            stream.navigation = (scene.frame, float(scene.gravity_mps2), scene.origin, scene.gravity_model)
     if not math.isfinite(options.speed) or options.speed < 0:
         raise StreamError(f"--speed: expected a number >= 0, got {options.speed}")
     return Streamer(sim, float(scene.rate_hz), float(scene.t0_s), streams, options).run()

@@ -190,3 +190,55 @@ def test_frames_refuse_what_is_not_built():
         earth_scene("ECEF")
     with pytest.raises(SceneError, match=r"effects.coriolis: frame = \"ECI\" needs it"):
         earth_scene("ECI", trajectory={"x": "7e6", "y": "0", "z": "0"}, effects={"earth_rate": True})
+
+
+# --- truth and output headers ---------------------------------------------------------------------------
+
+def test_truth_geodetic_ned_velocity_and_earth_terms():
+    """The Earth truth against pymap3d (geodetic, ECEF, NED velocity) and the spec's closed forms."""
+    pymap3d = pytest.importorskip("pymap3d")
+    scene = earth_scene("ENU", *ORIGIN, rate_hz=10, duration_s=30.0,
+                        trajectory={"x": "40*t", "y": "25*t + 0.3*t**2", "z": "100 + 2*t"},
+                        attitude={"roll": "0.2", "pitch": "-0.1", "yaw": "1.0 + 0.01*t"})
+    tr = Simulation(scene, attitude=False, truth=True).run().truth
+    pos, vel = tr["position"], tr["velocity"]
+    want = np.array([pymap3d.enu2geodetic(*p, *ORIGIN) for p in pos])
+    np.testing.assert_allclose(np.radians(tr["geodetic"][:, :2]), np.radians(want[:, :2]), rtol=0, atol=1e-11)
+    np.testing.assert_allclose(tr["geodetic"][:, 2], want[:, 2], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(tr["position_ecef"], [pymap3d.enu2ecef(*p, *ORIGIN) for p in pos], rtol=0, atol=1e-6)
+    v_ecef = np.array([pymap3d.enu2uvw(*v, ORIGIN[0], ORIGIN[1]) for v in vel])
+    np.testing.assert_allclose(tr["velocity_ecef"], v_ecef, rtol=0, atol=1e-9)
+    v_ned = np.array([pymap3d.ecef2nedv(*v, lat, lon) for v, (lat, lon, _) in zip(v_ecef, want)])
+    np.testing.assert_allclose(tr["velocity_ned"], v_ned, rtol=0, atol=1e-9)
+    lat = np.radians(want[:, 0])
+    np.testing.assert_allclose(tr["earth_rate_ned"], np.column_stack(
+        [float(OMEGA) * np.cos(lat), 0 * lat, -float(OMEGA) * np.sin(lat)]), rtol=0, atol=1e-18)
+    np.testing.assert_allclose(tr["gravity_ned"][:, 2], [float(gamma(la, h)) for la, _, h in want], rtol=1e-12)
+    # attitude w.r.t. local NED of a forward-right-down body: scipy's ZYX of the ENU/FLU attitude re-expressed
+    from scipy.spatial.transform import Rotation
+    enu = Rotation.from_euler("ZYX", tr["euler"][:, ::-1]).as_matrix()
+    perm, flip = np.array([[0, 1, 0], [1, 0, 0], [0, 0, -1.0]]), np.diag([1.0, -1.0, -1.0])
+    ned = Rotation.from_matrix(perm @ enu @ flip).as_euler("ZYX")[:, ::-1]
+    np.testing.assert_allclose(tr["euler_ned"], ned, rtol=0, atol=1e-12)
+
+
+def test_generate_writes_conventions_and_earth_columns(tmp_path):
+    import csv
+
+    from imu_emulator.cli import main
+    scene = tmp_path / "s.toml"
+    scene.write_text('[scene]\nrate_hz = 10\nduration_s = 1\nframe = "NED"\ngravity_model = "wgs84"\n'
+                     'origin = { lat_deg = 45.0, lon_deg = 7.0, height_m = 200.0 }\n'
+                     '[trajectory]\nx = "10*t"\n[[imu]]\nname = "a"\n'
+                     '[effects]\ngravity = true\nearth_rate = true\ncoriolis = true\n')
+    assert main(["generate", str(scene), "-o", str(tmp_path / "o.csv"), "--quiet", "--truth"]) == 0
+    lines = (tmp_path / "o.csv").read_text().splitlines()
+    comments = [line for line in lines if line.startswith("#")]
+    assert any("NED tangent to the Earth at origin (45.0 deg, 7.0 deg, 200.0 m)" in c for c in comments)
+    assert any("f = a - g" in c for c in comments)
+    rows = list(csv.DictReader(line for line in lines if not line.startswith("#")))
+    assert len(rows) == 10 and float(rows[0]["lat_deg"]) == pytest.approx(45.0, abs=1e-12)
+    assert float(rows[5]["vn"]) == pytest.approx(10.0, rel=1e-6)
+    assert main(["generate", str(scene), "-o", str(tmp_path / "o.npz"), "--quiet", "--truth"]) == 0
+    with np.load(tmp_path / "o.npz") as data:
+        assert data["geodetic"].shape == (10, 3) and any("f = a - g" in c for c in data["conventions"])
