@@ -72,20 +72,23 @@ def geodetic_to_ecef(lat_deg, lon_deg, h_m) -> np.ndarray:
 
 
 def ecef_to_geodetic(xyz) -> np.ndarray:
-    """(..., 3) ECEF m -> (..., 3) latitude deg, longitude deg, height m. Fixed-point iteration on the
-    latitude written with sin/cos (no 1/cos L: exact at the poles); the same scheme as the kernel's
-    (effects/_earth.py), which explains the iteration count."""
+    """(..., 3) ECEF m -> (..., 3) latitude deg, longitude deg, height m: Bowring's start, then updates of
+    tan L written with sin/cos (no 1/cos L: exact at the poles); the kernel's scheme (effects/_earth.py,
+    which explains the count), with one update more."""
     xyz = np.asarray(xyz, dtype=float)
     x, y, z = xyz[..., 0], xyz[..., 1], xyz[..., 2]
     p = np.hypot(x, y)
-    c = p * (1.0 - wgs84.E2)
-    for _ in range(6):
-        r = np.hypot(c, z)
-        sl, cl = z / r, c / r
+    u = np.hypot(p * wgs84.B, z * wgs84.A)
+    cu, su = p * wgs84.B / u, z * wgs84.A / u
+    s, c = z + wgs84.EP2 * wgs84.B * su ** 3, p - wgs84.E2 * wgs84.A * cu ** 3
+    for i in range(4):
+        r = np.hypot(c, s)
+        sl, cl = s / r, c / r
         w = np.sqrt(1.0 - wgs84.E2 * sl * sl)
         h = p * cl + z * sl - wgs84.A * w
-        c = p * (1.0 - wgs84.E2 * wgs84.A / (wgs84.A + h * w))
-    return np.stack([np.degrees(np.arctan2(z, c)), np.degrees(np.arctan2(y, x)), h], axis=-1)
+        if i < 3:
+            c, s = p * (1.0 - wgs84.E2 * wgs84.A / (wgs84.A + h * w)), z
+    return np.stack([np.degrees(np.arctan2(s, c)), np.degrees(np.arctan2(y, x)), h], axis=-1)
 
 
 def ned_from_ecef_matrix(lat_deg, lon_deg) -> np.ndarray:

@@ -11,6 +11,7 @@ A = 6378137.0                       # semi-major axis, m
 F = 1.0 / 298.257223563             # flattening
 E2 = F * (2.0 - F)                  # first eccentricity squared (6.69437999014e-3)
 B = A * (1.0 - F)                   # semi-minor axis, m
+EP2 = E2 / (1.0 - E2)               # second eccentricity squared
 OMEGA_IE = 7.292115e-5              # Earth rotation rate, rad/s
 GM = 3.986004418e14                 # m^3/s^2
 GAMMA_E = 9.7803253359              # normal gravity at the equator, m/s^2

@@ -90,6 +90,17 @@ def test_static_level_facing_north_enu(lat, h):
     np.testing.assert_allclose(f, np.broadcast_to(want_f, f.shape), rtol=0, atol=1e-12 * want_f[2])
 
 
+def test_static_far_above_the_ellipsoid():
+    """The kernel's geodetic latitude (Bowring's start and two updates) holds to the rounding floor up high:
+    at 9000 km the normal-gravity formula and the Earth rate still match their closed forms to 1e-12."""
+    lat, h = 33.3, 9.0e6
+    f, w = run(earth_scene("NED", lat, -20.0, h))
+    L = mpmath.radians(lat)
+    np.testing.assert_allclose(w[0], [float(OMEGA * mpmath.cos(L)), 0.0, float(-OMEGA * mpmath.sin(L))], rtol=0,
+                               atol=1e-12 * float(OMEGA))
+    np.testing.assert_allclose(f[0], [0.0, 0.0, -float(gamma(lat, h))], rtol=0, atol=1e-12 * abs(float(gamma(lat, h))))
+
+
 def test_equator_eastward_travel_eotvos_and_centripetal():
     """Along the equator at speed v, height 0, facing east (NED origin at 0°, 0°; the equator is the circle of
     radius a in the tangent frame's east-down plane). Local NED: f_D = v^2/a + 2 omega v - gamma_e (the up

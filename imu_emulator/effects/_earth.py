@@ -20,10 +20,11 @@ import numpy as np
 from imu_emulator import wgs84
 
 EARTH_EFFECTS = ("earth_rate", "coriolis")
-#: fixed-point iterations of the geodetic latitude: each shrinks the error by about 2 e^4 = 1e-4, and the
-#: start (tan L = z / (p (1 - e2))) is exact at h = 0 and within e2 h / R of it elsewhere (1e-5 at 10 km,
-#: 1e-2 in orbit), so 4 reach the rounding floor from the ground to beyond geostationary height
-GEODETIC_ITERATIONS = 4
+#: updates of the geodetic latitude after Bowring's start (tan L from the parametric latitude u, tan u =
+#: a z / (b p)): the start is within 1e-13 rad at 10 km, 1e-9 at 1000 km, 4e-7 at 40 000 km, and each update
+#: (tan L = z / (p (1 - e2 N / (N + h)))) squares the error times about e2, so two reach 1e-15 rad from the
+#: ground to beyond geostationary height (imu_emulator.frames runs the same scheme; tests/test_frames.py)
+GEODETIC_UPDATES = 2
 _DONE = "_earth_prelude_emitted"
 
 
@@ -76,19 +77,24 @@ def prelude(ctx) -> list[str]:
         "else:",     # on the axis longitude is undefined: take 0
         "    e_co = 1.0",
         "    e_so = 0.0",
-        # tan L = z / (p (1 - e2 N / (N + h))), iterated from h = 0; h = p cos L + z sin L - a w (no 1/cos L)
-        f"e_c = e_p * (1.0 - {e2})",
+        # Bowring's start from the parametric latitude, then tan L = z / (p (1 - e2 N / (N + h))) with
+        # h = p cos L + z sin L - a w (no 1/cos L anywhere: exact at the poles)
+        f"e_iu = 1.0 / math.sqrt((e_p * {wgs84.B!r}) ** 2 + (e_rz * {a}) ** 2)",
+        f"e_cu = e_p * {wgs84.B!r} * e_iu",
+        f"e_su = e_rz * {a} * e_iu",
+        f"e_s = e_rz + {repr(wgs84.EP2 * wgs84.B)} * e_su * e_su * e_su",
+        f"e_c = e_p - {repr(wgs84.E2 * wgs84.A)} * e_cu * e_cu * e_cu",
     ]
-    for i in range(GEODETIC_ITERATIONS + 1):
+    for i in range(GEODETIC_UPDATES + 1):
         lines += [
-            "e_ir = 1.0 / math.sqrt(e_c * e_c + e_rz * e_rz)",
-            "e_sl = e_rz * e_ir",
+            "e_ir = 1.0 / math.sqrt(e_c * e_c + e_s * e_s)",
+            "e_sl = e_s * e_ir",
             "e_cl = e_c * e_ir",
             f"e_w = math.sqrt(1.0 - {e2} * e_sl * e_sl)",
             f"e_h = e_p * e_cl + e_rz * e_sl - {a} * e_w",
         ]
-        if i < GEODETIC_ITERATIONS:
-            lines.append(f"e_c = e_p * (1.0 - {e2} * {a} / ({a} + e_h * e_w))")
+        if i < GEODETIC_UPDATES:
+            lines += [f"e_c = e_p * (1.0 - {e2} * {a} / ({a} + e_h * e_w))", "e_s = e_rz"]
     lines += [
         f"e_re = {a} / e_w + e_h",
         f"e_rn = {repr(wgs84.A * (1.0 - wgs84.E2))} / (e_w * e_w * e_w) + e_h",
