@@ -1,5 +1,5 @@
 """Coriolis and transport rate: f gains 2 omega_ie x v; the gyros sense omega_en, the turning of the local
-level frame as it follows the vehicle over the curved Earth (Groves 2nd ed. eq. 5.44, 5.37)."""
+level frame as it follows the vehicle over the curved Earth (Groves 2nd ed. §5.4)."""
 from imu_emulator import wgs84
 from imu_emulator.effects import _earth
 from imu_emulator.effects._record import Effect, Stage
@@ -20,5 +20,5 @@ def emit(ctx) -> list[str]:
 EFFECT = Effect(
     name="coriolis",
     description="Coriolis force 2 omega_ie x v on the accelerometers and the transport rate omega_en on the "
-                "gyros; needs [scene] origin in ENU/NED",
+                "gyros",
     stage=Stage.NAVIGATION, order=2, emit=emit, nav_rate=True)

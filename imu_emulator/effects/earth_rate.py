@@ -12,5 +12,5 @@ def emit(ctx) -> list[str]:
 EFFECT = Effect(
     name="earth_rate",
     description="gyros sense the Earth's rotation (7.292115e-5 rad/s, WGS-84) at the current latitude; "
-                "needs [scene] origin in ENU/NED",
+                "ENU/NED frames are tangent at [scene] origin",
     stage=Stage.NAVIGATION, order=1, emit=emit, nav_rate=True)
