@@ -7,6 +7,7 @@ from imu_emulator.errors import SceneError
 from imu_emulator.scene import GRAVITY_MODELS, _choice, _no_unknown, _number, _table
 
 ORIGIN_KEYS = ("lat_deg", "lon_deg", "height_m")
+GEODETIC_KEYS = ORIGIN_KEYS     # a geodetic trajectory's [trajectory] keys
 MAX_ORIGIN_HEIGHT_M = 1e7      # beyond geostationary orbit is not a place to put a tangent frame
 
 
@@ -22,7 +23,7 @@ def _origin(head: Mapping):
 
 
 def earth_keys(head: Mapping, frame: str, effects: frozenset[str], attitude_mode: str, shape: bool,
-               expressions: bool, warnings: list[str]):
+               trajectory, warnings: list[str]):
     """(origin or None, gravity model), validated against the frame and the effects named."""
     from imu_emulator.effects._earth import EARTH_EFFECTS
     origin = _origin(head)
@@ -35,11 +36,22 @@ def earth_keys(head: Mapping, frame: str, effects: frozenset[str], attitude_mode
             earth.append("gravity")
             if "gravity_mps2" in head:
                 warnings.append("scene.gravity_mps2 is ignored: gravity_model = \"wgs84\" computes gravity")
+    geodetic = getattr(trajectory, "keys", None) == GEODETIC_KEYS
+    if geodetic:
+        if frame == "ECI":
+            raise SceneError("trajectory.lat_deg: a geodetic trajectory is fixed to the Earth; use frame = \"NED\", "
+                             "\"ENU\" (the attitude's level axes) or \"ECEF\"")
+        if attitude_mode == "tangent":
+            raise SceneError("attitude.mode: 'tangent' is not built for geodetic trajectories yet; give roll, pitch, "
+                             "yaw relative to local level")
+        if origin is not None:
+            warnings.append("scene.origin is ignored: the trajectory is geodetic")
+        return None, model
     if frame in ("ECEF", "ECI"):
         if shape:
             raise SceneError(f"trajectory.shape: shapes are built in a local frame; with frame = \"{frame}\" give "
                              f"x, y, z expressions{' or a file' if frame == 'ECEF' else ''} in {frame} metres")
-        if frame == "ECI" and not expressions:
+        if frame == "ECI" and getattr(trajectory, "keys", None) is None:
             raise SceneError("trajectory: frame = \"ECI\" takes x, y, z expressions of t (sampled ECI "
                              "trajectories are not built yet)")
         if attitude_mode == "tangent":

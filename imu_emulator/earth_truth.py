@@ -12,7 +12,8 @@ Keys added to SampleBlock.truth (each (n, 3)), and their CSV columns:
     transport_rate_ned  wen_n wen_e wen_d            omega_en (the level frame turning over the Earth), rad/s
     coriolis_ned        cor_n cor_e cor_d            2 omega_ie x v, the term added to specific force, m/s^2
     gravity_ned         g_n g_e g_d                  gravity used (WGS-84 normal or the constant), m/s^2
-For ECI scenes "position" and "velocity" are turned back from the kernel's ECEF into ECI.
+For ECI scenes "position" and "velocity" are turned back from the kernel's ECEF into ECI; for geodetic
+trajectories they are ECEF.
 """
 from __future__ import annotations
 
@@ -57,9 +58,9 @@ def conventions(scene) -> list[str]:
 
 def fill(scene, t: np.ndarray, truth: dict) -> None:
     """Add the Earth keys to one block's truth, in place (the arrays exist: Simulation allocates KEYS)."""
-    from imu_emulator.effects._earth import tangent_to_ecef
+    from imu_emulator.effects._earth import position_frame, tangent_to_ecef
     position, velocity = truth["position"], truth["velocity"]
-    r0, c = tangent_to_ecef(scene.frame, scene.origin)
+    r0, c = tangent_to_ecef(position_frame(scene), scene.origin)
     r_e = r0 + position @ c.T
     v_e = velocity @ c.T
     llh = frames.ecef_to_geodetic(r_e)

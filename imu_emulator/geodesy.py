@@ -28,14 +28,14 @@ def local_to_geodetic(position: np.ndarray, frame: str, origin=None) -> np.ndarr
 
 
 def device_navigation(position, velocity, specific_force, frame: str, gravity: float, origin=None,
-                      gravity_model: str = "constant") -> dict:
+                      gravity_model: str = "constant", positions: str | None = None) -> dict:
     """What a device reports about where it is, from the run's truth: geodetic position, NED velocity and
     linear acceleration (specific force in the level axes the attitude refers to, plus gravity).
 
-    In ECEF and ECI scenes the truth position and velocity are ECEF (ECI trajectories are rewritten as ECEF
-    before the kernel) and the attitude refers to local NED at the current position."""
+    `positions` is the frame of the truth position and velocity (effects._earth.position_frame: ECEF for ECEF,
+    ECI and geodetic scenes); ECEF and ECI attitudes refer to local NED at the current position."""
     from imu_emulator import wgs84
-    earth = frame in ("ECEF", "ECI")
+    earth = (positions or frame) == "ECEF"
     llh = ecef_to_geodetic(position) if earth else local_to_geodetic(position, frame, origin)
     if earth:
         velocity_ned = np.einsum("nij,nj->ni", ned_from_ecef_matrix(llh[:, 0], llh[:, 1]), velocity)

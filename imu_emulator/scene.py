@@ -49,6 +49,7 @@ _INF_HINT = " (TOML reads numbers beyond 1.8e308 as inf)"
 class Expressions:
     """Three expressions as validated text (x, y, z or roll, pitch, yaw)."""
     texts: tuple[str, str, str]
+    keys: tuple[str, str, str] = ("x", "y", "z")   # ("lat_deg", "lon_deg", "height_m"): a geodetic trajectory
 
 
 @dataclass(frozen=True)
@@ -472,6 +473,11 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
         track = _load_track(traj_table, "trajectory", base_dir)
         trajectory = _sampled_from_track(track, "position", derivative,
                                          _noise(traj_table, "position_noise_m", "trajectory", derivative, warnings))
+    elif {"lat_deg", "lon_deg", "height_m"} & set(traj_table):
+        from imu_emulator.earth_scene import GEODETIC_KEYS
+        _no_unknown(traj_table, set(GEODETIC_KEYS), "trajectory")
+        trajectory = _expressions(traj_table, GEODETIC_KEYS, "trajectory", params)
+        trajectory = Expressions(trajectory.texts, GEODETIC_KEYS)
     else:
         _no_unknown(traj_table, {"x", "y", "z"}, "trajectory")
         trajectory = _expressions(traj_table, ("x", "y", "z"), "trajectory", params)
@@ -545,7 +551,7 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
     effects = _effects(raw)
     from imu_emulator.earth_scene import earth_keys
     origin, gravity_model = earth_keys(head, frame, effects, mode, "shape" in traj_table,
-                                       isinstance(trajectory, Expressions), warnings)
+                                       trajectory, warnings)
     imu_list = raw.get("imu", [])
     if isinstance(imu_list, Mapping):
         imu_list = [imu_list]

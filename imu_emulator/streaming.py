@@ -182,7 +182,7 @@ class Stream:
         check_carries(self.spec, info.kind)
         self.capacity = link_capacity(self.spec, info.kind, config.target_options)
         self.device = None
-        self.navigation = None     # (frame, gravity, origin, model) when the device reports navigation
+        self.navigation = None     # (frame, gravity, origin, model, positions' frame) for navigation
         try:
             if config.device and info.device is not None and self.spec.kind not in _ONE_WAY_TARGETS:
                 # The device encodes too: budgets read its bytes_per_sample / frames_per_sample.
@@ -772,7 +772,9 @@ def run_streams(scene, sim, configs: list[StreamConfig], options: RunOptions) ->
     streams = build_streams(configs, tuple(sim.imu_names), float(scene.rate_hz))
     for stream in streams:
         if stream.device is not None and stream.info.device_navigation:
-            stream.navigation = (scene.frame, float(scene.gravity_mps2), scene.origin, scene.gravity_model)
+            from imu_emulator.effects._earth import position_frame
+            stream.navigation = (scene.frame, float(scene.gravity_mps2), scene.origin, scene.gravity_model,
+                                 position_frame(scene))
     if not math.isfinite(options.speed) or options.speed < 0:
         raise StreamError(f"--speed: expected a number >= 0, got {options.speed}")
     return Streamer(sim, float(scene.rate_hz), float(scene.t0_s), streams, options).run()

@@ -253,3 +253,35 @@ def test_generate_writes_conventions_and_earth_columns(tmp_path):
     assert main(["generate", str(scene), "-o", str(tmp_path / "o.npz"), "--quiet", "--truth"]) == 0
     with np.load(tmp_path / "o.npz") as data:
         assert data["geodetic"].shape == (10, 3) and any("f = a - g" in c for c in data["conventions"])
+
+
+def test_geodetic_trajectory_along_the_equator_and_as_ecef():
+    """lat_deg, lon_deg, height_m expressions: eastward along the equator at v the closed form of the NED
+    test above holds; and a general geodetic motion gives what its ECEF expression (pymap3d's formula for the
+    same point, written out) gives, to 1e-9."""
+    v = 250.0
+    deg = f"{v!r}*t/{float(A)!r}*180/pi"
+    equator = earth_scene("NED", rate_hz=20, duration_s=60.0,
+                          trajectory={"lat_deg": "0", "lon_deg": deg, "height_m": "0"},
+                          attitude={"roll": "0", "pitch": "0", "yaw": "pi/2"})
+    assert equator.origin is None
+    f, w = run(equator)
+    np.testing.assert_allclose(f[:, 2], float(v ** 2 / A + 2 * OMEGA * v - GAMMA_E), rtol=1e-12)
+    np.testing.assert_allclose(w[:, 1], -float(OMEGA + v / A), rtol=1e-12)
+    assert np.max(np.abs(f[:, :2])) < 1e-12 * 9.8 and np.max(np.abs(w[:, [0, 2]])) < 1e-12 * 7.3e-5
+
+    lat, lon, h = "-33.9 + 0.001*t", "151.2 + 0.002*sin(0.05*t)", "45 + 10*t"
+    geo = earth_scene("NED", trajectory={"lat_deg": lat, "lon_deg": lon, "height_m": h}, attitude=ATTITUDE,
+                      rate_hz=20, duration_s=20.0)
+    e2, a = float(E2), float(A)
+    n = f"({a!r}/sqrt(1 - {e2!r}*sin(({lat})*pi/180)**2))"
+    ecef = {"x": f"({n} + {h})*cos(({lat})*pi/180)*cos(({lon})*pi/180)",
+            "y": f"({n} + {h})*cos(({lat})*pi/180)*sin(({lon})*pi/180)",
+            "z": f"({n}*(1 - {e2!r}) + {h})*sin(({lat})*pi/180)"}
+    pymap3d = pytest.importorskip("pymap3d")
+    np.testing.assert_allclose([eval(ecef[k], {"sqrt": math.sqrt, "sin": math.sin, "cos": math.cos, "pi": math.pi,
+                                               "t": 3.0}) for k in "xyz"],
+                               pymap3d.geodetic2ecef(-33.9 + 0.003, 151.2 + 0.002 * math.sin(0.15), 75.0), atol=1e-6)
+    f_geo, w_geo = run(geo)
+    f_ecef, w_ecef = run(earth_scene("ECEF", trajectory=ecef, attitude=ATTITUDE, rate_hz=20, duration_s=20.0))
+    assert np.max(np.abs(f_geo - f_ecef)) < 1e-9 and np.max(np.abs(w_geo - w_ecef)) < 1e-9

@@ -28,9 +28,16 @@ GEODETIC_UPDATES = 2
 _DONE = "_earth_prelude_emitted"
 
 
+def position_frame(scene) -> str:
+    """The frame of the kernel's px..pz: the scene's, except ECEF for ECI (rewritten) and geodetic
+    trajectories (converted to ECEF, imu_emulator.earth_motion)."""
+    geodetic = getattr(scene.trajectory, "keys", ("x", "y", "z")) != ("x", "y", "z")
+    return "ECEF" if geodetic or scene.frame in ("ECEF", "ECI") else scene.frame
+
+
 def model_on(scene) -> bool:
     """Whether the navigation stage follows the Earth (see the module's docstring)."""
-    return (scene.frame in ("ECEF", "ECI") or any(name in scene.effects for name in EARTH_EFFECTS)
+    return (position_frame(scene) == "ECEF" or any(name in scene.effects for name in EARTH_EFFECTS)
             or ("gravity" in scene.effects and scene.gravity_model == "wgs84"))
 
 
@@ -65,7 +72,7 @@ def prelude(ctx) -> list[str]:
         return []
     setattr(ctx.plan, _DONE, True)
     scene = ctx.scene
-    r0, c = tangent_to_ecef(scene.frame, scene.origin)
+    r0, c = tangent_to_ecef(position_frame(scene), scene.origin)
     a, e2 = repr(wgs84.A), repr(wgs84.E2)
     lines = _affine("e_r", r0, c, ("px", "py", "pz")) + _affine("e_v", None, c, ("vx", "vy", "vz"))
     lines += _affine("e_a", None, c, ("ax", "ay", "az"))
