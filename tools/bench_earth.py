@@ -19,10 +19,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from bench_effects import BLOCK, time_run  # noqa: E402
+from bench_effects import time_interleaved  # noqa: E402
 
 from imu_emulator import scene_from_dict  # noqa: E402
-from imu_emulator.simulation import Simulation  # noqa: E402
 
 VARIANTS = [("flat: constant gravity", {}, "constant"),
             ("gravity_model = wgs84", {}, "wgs84"),
@@ -47,22 +46,12 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--seconds", type=float, default=60.0, help="scene length per timed run (1 kHz)")
     args = parser.parse_args()
-    sims = []
-    for label, effects, model in VARIANTS:
-        scene = circle(effects, model, args.seconds)
-        sim = Simulation(scene, attitude=False)
-        sims.append((label, sim, sim.block(0, BLOCK), scene.n_samples))
-    cpu = {label: [] for label, *_ in sims}
-    wall = {label: [] for label, *_ in sims}
-    for _ in range(args.rounds):
-        for label, sim, out, n in sims:
-            c, w = time_run(sim, n, out)
-            cpu[label].append(c / n)
-            wall[label].append(w / n)
-    base = np.median(cpu[sims[0][0]])
+    cpu, wall = time_interleaved([(label, circle(effects, model, args.seconds)) for label, effects, model in VARIANTS],
+                                 args.rounds)
+    base = np.median(cpu[VARIANTS[0][0]])
     print(f"circle scene, NED at 47.4 N, 1 kHz, {args.seconds:g} s per run, {args.rounds} interleaved rounds "
           f"(ns/sample; thread CPU min / median / max, wall median)")
-    for label, *_ in sims:
+    for label in cpu:
         c = np.array(cpu[label])
         print(f"  {label:36} {c.min():7.1f} {np.median(c):7.1f} {c.max():7.1f}   wall {np.median(wall[label]):7.1f}"
               f"   cost {np.median(c) - base:+7.1f}   ratio {np.median(c) / base:5.2f}")
