@@ -25,7 +25,7 @@ def _origin(head: Mapping):
 def earth_keys(head: Mapping, frame: str, effects: frozenset[str], attitude_mode: str, shape: bool,
                trajectory, warnings: list[str]):
     """(origin or None, gravity model), validated against the frame and the effects named."""
-    from imu_emulator.effects._earth import EARTH_EFFECTS
+    from imu_emulator.earth_motion import EARTH_EFFECTS
     origin = _origin(head)
     model = _choice(head, "gravity_model", "scene", GRAVITY_MODELS, "constant")
     earth = [name for name in EARTH_EFFECTS if name in effects]
@@ -65,7 +65,10 @@ def earth_keys(head: Mapping, frame: str, effects: frozenset[str], attitude_mode
         if origin is not None:
             warnings.append(f"scene.origin is ignored with frame = \"{frame}\" (positions are {frame} already)")
             origin = None
-    elif earth and origin is None:
+    elif earth and attitude_mode == "tangent":
+        warnings.append("attitude.mode: 'tangent' follows the velocity in the frame tangent at the origin, not in "
+                        "the local level frame the Earth effects use (they differ by distance / 6371 km rad)")
+    if frame in ("ENU", "NED") and earth and origin is None:
         # a default, said out loud: the devices have always used it for their GNSS fields
         from imu_emulator.geodesy import DEFAULT_ORIGIN
         origin = DEFAULT_ORIGIN

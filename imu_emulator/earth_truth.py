@@ -32,7 +32,7 @@ KEYS = tuple(COLUMNS)
 
 
 def on(scene) -> bool:
-    from imu_emulator.effects._earth import model_on
+    from imu_emulator.earth_motion import model_on
     return model_on(scene)
 
 
@@ -43,6 +43,9 @@ def conventions(scene) -> list[str]:
     body = "forward-left-up" if level == "ENU" else "forward-right-down"
     where = {"ENU": "ENU tangent to the Earth at origin", "NED": "NED tangent to the Earth at origin",
              "ECEF": "WGS-84 ECEF", "ECI": "ECI (axes on ECEF's at t = 0 s, turning at omega_ie about z)"}
+    from imu_emulator.earth_motion import position_frame
+    if position_frame(scene) == "ECEF" and scene.frame != "ECI":
+        where[scene.frame] = "WGS-84 ECEF" + (" (from the geodetic trajectory)" if scene.frame != "ECEF" else "")
     lines = [f"frame: trajectory px py pz, vx vy vz in {where[scene.frame]}"
              + (f" ({scene.origin[0]!r} deg, {scene.origin[1]!r} deg, {scene.origin[2]!r} m)"
                 if scene.origin is not None and scene.frame in ("ENU", "NED") else ""),
@@ -58,7 +61,7 @@ def conventions(scene) -> list[str]:
 
 def fill(scene, t: np.ndarray, truth: dict) -> None:
     """Add the Earth keys to one block's truth, in place (the arrays exist: Simulation allocates KEYS)."""
-    from imu_emulator.effects._earth import position_frame, tangent_to_ecef
+    from imu_emulator.earth_motion import position_frame, tangent_to_ecef
     position, velocity = truth["position"], truth["velocity"]
     r0, c = tangent_to_ecef(position_frame(scene), scene.origin)
     r_e = r0 + position @ c.T

@@ -309,6 +309,9 @@ def motion_code(scene: Scene, angles: bool) -> MotionCode:
     else:
         assert isinstance(scene.attitude, SampledData)
         attitude_lines = sampled_attitude_lines(angles)
+    from imu_emulator.earth_motion import geometry_lines, model_on
+    if model_on(scene):   # after the attitude: tangent attitude reads the frame's own a
+        attitude_lines = attitude_lines + geometry_lines(scene)
     if not symbolic_parts:
         return MotionCode(lines=lines + attitude_lines, constants={}, needs_jerk=tangent,
                           rotation_given=rotation_given)

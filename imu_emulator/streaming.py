@@ -772,7 +772,7 @@ def run_streams(scene, sim, configs: list[StreamConfig], options: RunOptions) ->
     streams = build_streams(configs, tuple(sim.imu_names), float(scene.rate_hz))
     for stream in streams:
         if stream.device is not None and stream.info.device_navigation:
-            from imu_emulator.effects._earth import position_frame
+            from imu_emulator.earth_motion import position_frame
             stream.navigation = (scene.frame, float(scene.gravity_mps2), scene.origin, scene.gravity_model,
                                  position_frame(scene))
     if not math.isfinite(options.speed) or options.speed < 0:

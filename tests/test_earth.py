@@ -285,3 +285,14 @@ def test_geodetic_trajectory_along_the_equator_and_as_ecef():
     f_geo, w_geo = run(geo)
     f_ecef, w_ecef = run(earth_scene("ECEF", trajectory=ecef, attitude=ATTITUDE, rate_hz=20, duration_s=20.0))
     assert np.max(np.abs(f_geo - f_ecef)) < 1e-9 and np.max(np.abs(w_geo - w_ecef)) < 1e-9
+
+
+def test_ecef_without_effects_still_resolves_acceleration_in_local_level():
+    """The geometry comes with the motion, not with an effect: an ECEF scene with no effects named (no gravity)
+    accelerating 0.5 m/s² north from rest, level and facing north, reads f = (0.5, 0, 0) in body axes (to
+    the curvature of 0.25 m of travel, 4e-8)."""
+    x, y, z = _ecef_expressions("0.25*t**2", "0", "0")
+    f, w = run(earth_scene("ECEF", trajectory={"x": x, "y": y, "z": z}, effects={"lever_arm": False},
+                           rate_hz=10, duration_s=1.0))
+    np.testing.assert_allclose(f, np.broadcast_to([0.5, 0.0, 0.0], f.shape), rtol=0, atol=1e-7)
+    assert np.max(np.abs(w)) < 1e-12    # no Earth rate named; the transport rate belongs to coriolis

@@ -14,7 +14,7 @@ def emit(ctx) -> list[str]:
     # omega_en^n = (v_E / (R_E + h), -v_N / (R_N + h), -v_E tan L / (R_E + h)); tan L: the NED frame itself is
     # undefined at the poles
     transport = ["e_ten = e_ve / e_re"] + _earth.add(scene, "wn", "e_ten", "-e_vn / e_rn", "-e_ten * e_sl / e_cl")
-    return _earth.prelude(ctx) + coriolis + transport
+    return coriolis + transport
 
 
 EFFECT = Effect(

@@ -6,7 +6,7 @@ from imu_emulator.effects._record import Effect, Stage
 
 def emit(ctx) -> list[str]:
     w = repr(wgs84.OMEGA_IE)
-    return _earth.prelude(ctx) + _earth.add(ctx.scene, "wn", f"{w} * e_cl", "0.0", f"-{w} * e_sl")
+    return _earth.add(ctx.scene, "wn", f"{w} * e_cl", "0.0", f"-{w} * e_sl")
 
 
 EFFECT = Effect(

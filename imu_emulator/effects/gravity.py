@@ -10,7 +10,7 @@ def emit(ctx) -> list[str]:
         # g = (0, 0, -g0) in ENU, (0, 0, +g0) in NED; g0 is [scene] gravity_mps2
         sign = "+" if scene.frame == "ENU" else "-"
         return [f"fnz = fnz {sign} {float(scene.gravity_mps2)!r}"]
-    lines = _earth.prelude(ctx)
+    lines = []     # the Earth geometry (e_*) comes with the motion (imu_emulator.earth_motion)
     if scene.gravity_model == "wgs84":
         # normal gravity (Somigliana, TR8350.2 eq. 4-3) along the ellipsoid normal; its north component
         # (below 1e-5 m/s^2 at aircraft heights) is not modelled
