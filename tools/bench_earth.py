@@ -19,7 +19,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from bench_effects import time_interleaved  # noqa: E402
+from bench_effects import rows, time_interleaved  # noqa: E402
 
 from imu_emulator import scene_from_dict  # noqa: E402
 
@@ -51,10 +51,8 @@ def main() -> None:
     base = np.median(cpu[VARIANTS[0][0]])
     print(f"circle scene, NED at 47.4 N, 1 kHz, {args.seconds:g} s per run, {args.rounds} interleaved rounds "
           f"(ns/sample; thread CPU min / median / max, wall median)")
-    for label in cpu:
-        c = np.array(cpu[label])
-        print(f"  {label:36} {c.min():7.1f} {np.median(c):7.1f} {c.max():7.1f}   wall {np.median(wall[label]):7.1f}"
-              f"   cost {np.median(c) - base:+7.1f}   ratio {np.median(c) / base:5.2f}")
+    for label, row, median in rows(cpu, wall, 36):
+        print(f"{row}   cost {median - base:+7.1f}   ratio {median / base:5.2f}")
 
 
 if __name__ == "__main__":

@@ -74,6 +74,14 @@ def time_interleaved(scenes, rounds: int) -> tuple[dict, dict]:
     return cpu, wall
 
 
+def rows(cpu: dict, wall: dict, width: int):
+    """(label, "  label  min median max   wall median", CPU median) per variant, for the tables printed."""
+    for label in cpu:
+        c = np.array(cpu[label])
+        yield label, (f"  {label:{width}} {c.min():7.1f} {np.median(c):7.1f} {c.max():7.1f}   "
+                      f"wall {np.median(wall[label]):7.1f}"), float(np.median(c))
+
+
 def normal_cost(rounds: int) -> list[float]:
     from imu_emulator.counter_rng import normals
     key = np.uint64(12345)
@@ -102,10 +110,8 @@ def main() -> None:
     base = np.median(cpu[variants[0][0]])
     print(f"circle scene, 1 kHz, lever arm, {args.seconds:g} s per run, {args.rounds} interleaved rounds "
           f"(ns/sample; thread CPU min / median / max, wall median; Msamples/s from the CPU median)")
-    for label in cpu:
-        c = np.array(cpu[label])
-        print(f"  {label:40} {c.min():7.1f} {np.median(c):7.1f} {c.max():7.1f}   wall {np.median(wall[label]):7.1f}"
-              f"   {1e3 / np.median(c):6.2f} M/s   effect cost {np.median(c) - base:+7.1f}")
+    for label, row, median in rows(cpu, wall, 40):
+        print(f"{row}   {1e3 / median:6.2f} M/s   effect cost {median - base:+7.1f}")
     nc = normal_cost(args.rounds)
     print(f"one counter-based normal (normals() loop, thread CPU): min {min(nc):.2f} median {np.median(nc):.2f} ns")
 
