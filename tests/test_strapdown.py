@@ -5,8 +5,7 @@ the true trajectory.
 
 Rate samples are the values at the sample instants, so the integrator is RK4 over pairs of intervals (samples
 k, k+1, k+2 are the start, middle and end of one 0.02 s step): its truncation error is O(h^5) per step, far
-below the goal, so what is left is what the emulator got wrong. The same loop fed exact increments (the
-`increments` branch) is below; it runs once that branch is merged.
+below the goal, so what is left is what the emulator got wrong. The same loop fed exact increments is below.
 
 Gravity here is the spec's: Somigliana with TR8350.2's height term along the ellipsoid normal, from geodetic
 coordinates computed below by Bowring's formula iterated (not imu_emulator.frames).
@@ -139,12 +138,7 @@ def test_closed_loop_notices_a_missing_earth_term():
     assert horizontal > 1.0 and attitude > 1e-3
 
 
-# --- fed exact increments (the `increments` branch: Simulation(..., increments=NODES)) ---------------------
-
-def _increments_built() -> bool:
-    import inspect
-    return "increments" in inspect.signature(Simulation).parameters
-
+# --- fed exact increments (Simulation(..., increments=NODES)) -----------------------------------------------
 
 def gravitation_eci(r_i, t):
     """Gravitation (gravity plus the centripetal term it hides) in ECI, axes on ECEF's at t = 0."""
@@ -186,18 +180,15 @@ def closed_loop_increments(duration_s=DURATION, nodes=3):
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not _increments_built(), reason="exact increments (the increments branch) are not merged yet")
 def test_closed_loop_600s_from_increments():
-    """The issue's goal: 0.1 m horizontal, 1e-5 deg over 600 s at 100 Hz (measured on a merge of the two
-    branches: 3.0e-3 m horizontal, 0.15 m vertical, 1.4e-9 deg; the same integrator fed rate x dt instead
-    ends 806 m and 0.03 deg off)."""
+    """The issue's goal: 0.1 m horizontal, 1e-5 deg over 600 s at 100 Hz (measured: 3.0e-3 m horizontal,
+    0.15 m vertical, 1.4e-9 deg; the same integrator fed rate x dt instead ends 806 m and 0.03 deg off)."""
     horizontal, vertical, attitude, span = closed_loop_increments()
     print(f"closed loop over {span:g} s from increments: horizontal {horizontal:.3g} m, vertical {vertical:.3g} m, "
           f"attitude {attitude:.3g} deg")
     assert horizontal < 0.1 and attitude < 1e-5
 
 
-@pytest.mark.skipif(not _increments_built(), reason="exact increments (the increments branch) are not merged yet")
 def test_closed_loop_60s_from_increments():
     horizontal, _, attitude, _ = closed_loop_increments(60.0)
     assert horizontal < 0.01 and attitude < 1e-6
