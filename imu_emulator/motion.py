@@ -145,10 +145,17 @@ def translational_parts(exprs: Expressions, scene: Scene, order: int):
     """sympy expressions of s, v, a[, j] for x, y, z."""
     import sympy
     t = sympy.Symbol("t", real=True)
+    given = [expressions.to_sympy(expressions.check(text, f"trajectory.{key}", scene.params), scene.params, t)
+             for key, text in zip(exprs.keys, exprs.texts)]
+    if exprs.keys != ("x", "y", "z"):
+        from imu_emulator.earth_motion import geodetic_to_ecef
+        given = geodetic_to_ecef(given)
+    elif scene.frame == "ECI":
+        from imu_emulator.earth_motion import eci_to_ecef
+        given = eci_to_ecef(given, t)
     parts = []
-    for axis, text in zip(AXES, exprs.texts):
-        where = f"trajectory.{axis}"
-        e = expressions.to_sympy(expressions.check(text, where, scene.params), scene.params, t)
+    for axis, key, text, e in zip(AXES, exprs.keys, exprs.texts, given):
+        where = f"trajectory.{key}"
         for d, prefix in enumerate("pva" + ("j" if order >= 3 else "")):
             expressions.check_symbolic(e, where, text, DERIVATIVE_NAMES[d])
             parts.append((f"{prefix}{axis}", e))
@@ -302,6 +309,9 @@ def motion_code(scene: Scene, angles: bool) -> MotionCode:
     else:
         assert isinstance(scene.attitude, SampledData)
         attitude_lines = sampled_attitude_lines(angles)
+    from imu_emulator.earth_motion import geometry_lines, model_on
+    if model_on(scene):   # after the attitude: tangent attitude reads the frame's own a
+        attitude_lines = attitude_lines + geometry_lines(scene)
     if not symbolic_parts:
         return MotionCode(lines=lines + attitude_lines, constants={}, needs_jerk=tangent,
                           rotation_given=rotation_given)
@@ -320,7 +330,7 @@ def _keyed_expressions(scene: Scene):
     out = []
     if isinstance(scene.trajectory, Expressions):
         order = 3 if scene.attitude_mode == "tangent" else 2
-        out += [(f"trajectory.{axis}", text, order) for axis, text in zip(AXES, scene.trajectory.texts)]
+        out += [(f"trajectory.{key}", text, order) for key, text in zip(scene.trajectory.keys, scene.trajectory.texts)]
     if isinstance(scene.attitude, Expressions):
         out += [(f"attitude.{key}", text, 2) for key, text in zip(("roll", "pitch", "yaw"), scene.attitude.texts)]
     return out

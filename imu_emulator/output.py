@@ -33,8 +33,11 @@ class Writer(FinishOnExit):
     its path on close(); discard() (or close() after an exception) leaves nothing behind."""
 
     def __init__(self, path: str | Path, imu_names, truth: bool, bias_truth: bool = False, temperature: bool = False,
-                 increments: bool = False):
+                 increments: bool = False, conventions: list[str] | None = None):
         self.path = check_path(path)
+        #: Earth scenes with truth: the frame and sign conventions ('#' lines before the CSV header, NPZ
+        #: "conventions") and the Earth truth columns (imu_emulator.earth_truth)
+        self.conventions = list(conventions) if truth and conventions else []
         self.increments = increments
         self.imu_names = list(imu_names)
         self.truth = truth
@@ -44,16 +47,18 @@ class Writer(FinishOnExit):
         self.csv = self.path.suffix.lower() == ".csv"
         self._out = AtomicOutput(self.path, "w" if self.csv else "wb")
         if self.csv:
+            self._out.write("".join(f"# {line}\n" for line in self.conventions))
             self._out.write(",".join(CSV_COLUMNS + (INCREMENT_COLUMNS if increments else ())
                                      + (("temp_c",) if temperature else ()) + (TRUTH_COLUMNS if truth else ())
-                                     + (BIAS_COLUMNS if self.bias_truth else ())) + "\n")
+                                     + (BIAS_COLUMNS if self.bias_truth else ()) + _earth_columns(self.conventions))
+                            + "\n")
 
     def write(self, block: SampleBlock) -> None:
         if not self.csv:
             self.blocks.append(block)
             return
         self._out.write(csv_rows(block, self.imu_names, self.truth, self.bias_truth, self.temperature,
-                                 self.increments))
+                                 self.increments, earth=bool(self.conventions)))
 
     def close(self) -> None:
         """Finish the file and put it at its path."""
@@ -80,6 +85,8 @@ class Writer(FinishOnExit):
             arrays.update(dtheta=data.dtheta, dvel=data.dvel)
         if self.truth:
             arrays.update(data.truth)
+        if self.conventions:
+            arrays["conventions"] = np.array(self.conventions)
         try:
             np.savez(self._out.file, **arrays)
         except OSError as exc:
@@ -87,7 +94,7 @@ class Writer(FinishOnExit):
 
 
 def open_writer(path: str | Path, imu_names, truth: bool, bias_truth: bool = False, temperature: bool = False,
-                increments: bool = False, metadata: dict | None = None):
+                increments: bool = False, metadata: dict | None = None, conventions: list[str] | None = None):
     """The writer for the output file's suffix: .mcap is a ROS 2 bag (imu_emulator.output_mcap; it carries no
     temperature, and no increments: sensor_msgs/Imu has no field for them); .parquet is a table with `metadata`
     (scene hash, seed, versions) in its footer (imu_emulator.output_parquet)."""
@@ -101,11 +108,19 @@ def open_writer(path: str | Path, imu_names, truth: bool, bias_truth: bool = Fal
                                    "integrated outputs; write .csv or .npz")
         from imu_emulator.output_mcap import McapWriter
         return McapWriter(check_path(path), imu_names, truth)
-    return Writer(path, imu_names, truth, bias_truth=bias_truth, temperature=temperature, increments=increments)
+    return Writer(path, imu_names, truth, bias_truth=bias_truth, temperature=temperature, increments=increments,
+                  conventions=conventions)
+
+
+def _earth_columns(conventions) -> tuple[str, ...]:
+    if not conventions:
+        return ()
+    from imu_emulator.earth_truth import COLUMNS
+    return tuple(name for names in COLUMNS.values() for name in names)
 
 
 def csv_rows(block: SampleBlock, imu_names, truth: bool, bias_truth: bool = False,
-             temperature: bool = False, increments: bool = False) -> str:
+             temperature: bool = False, increments: bool = False, earth: bool = False) -> str:
     """The CSV rows of one block (no header): one row per IMU per sample, sample k of every IMU before sample k+1.
 
     Numbers are the shortest text that reads back as the same double (pyarrow's CSV writer, double-conversion's
@@ -114,7 +129,7 @@ def csv_rows(block: SampleBlock, imu_names, truth: bool, bias_truth: bool = Fals
     import pyarrow as pa
     import pyarrow.csv as pa_csv
 
-    columns = block_columns(block, imu_names, truth, bias_truth, temperature, increments)
+    columns = block_columns(block, imu_names, truth, bias_truth, temperature, increments, earth=earth)
     # pyarrow's "needed" quotes every string; plain names go unquoted, as they always did.
     plain = not any(ch in name for name in imu_names for ch in '"\r\n')
     sink = pa.BufferOutputStream()
@@ -124,7 +139,7 @@ def csv_rows(block: SampleBlock, imu_names, truth: bool, bias_truth: bool = Fals
 
 
 def block_columns(block: SampleBlock, imu_names, truth: bool, bias_truth: bool = False, temperature: bool = False,
-                  increments: bool = False, time_ns: bool = False) -> dict:
+                  increments: bool = False, time_ns: bool = False, earth: bool = False) -> dict:
     """The columns of one block, one row per IMU per sample (sample k of every IMU before sample k+1): "t" in
     seconds (or "t_ns", integer nanoseconds), "imu" (a pyarrow dictionary of the names), then float64 columns."""
     import pyarrow as pa
@@ -147,10 +162,13 @@ def block_columns(block: SampleBlock, imu_names, truth: bool, bias_truth: bool =
         numeric += [np.repeat(tr[key], n_imu, axis=0) for key in ("position", "velocity", "euler", "omega_body")]
     if bias_truth:
         numeric += [interleaved(block.truth["accel_bias"]), interleaved(block.truth["gyro_bias"])]
+    if earth:
+        from imu_emulator.earth_truth import KEYS
+        numeric += [np.repeat(block.truth[key], n_imu, axis=0) for key in KEYS]
     values = np.hstack(numeric)
     names = (CSV_COLUMNS[2:] + (INCREMENT_COLUMNS if increments else ()) + (("temp_c",) if temperature else ())
              + (TRUTH_COLUMNS if truth else ())
-             + (BIAS_COLUMNS if bias_truth else ()))
+             + (BIAS_COLUMNS if bias_truth else ()) + _earth_columns(earth))
     for i, name in enumerate(names):
         columns[name] = values[:, i]
     return columns

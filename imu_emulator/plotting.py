@@ -66,12 +66,17 @@ def _truth(path: Path, n_imu: int):
                 return data["position"], data["euler"]
         return None, None
     with open(path) as f:
-        header = [name.strip().lower() for name in f.readline().split(",")]
+        skip = 1     # Earth scenes' outputs start with '#' lines stating their conventions
+        line = f.readline()
+        while line.startswith("#"):
+            skip += 1
+            line = f.readline()
+        header = [name.strip().lower() for name in line.split(",")]
     wanted = ("px", "py", "pz", "roll", "pitch", "yaw")
     if not set(wanted) <= set(header):
         return None, None
     # rows run IMU-fastest (sample k of every IMU, then k+1): every n_imu-th row is one per sample
-    values = np.loadtxt(path, delimiter=",", skiprows=1, usecols=[header.index(c) for c in wanted], ndmin=2)[::n_imu]
+    values = np.loadtxt(path, delimiter=",", skiprows=skip, usecols=[header.index(c) for c in wanted], ndmin=2)[::n_imu]
     return values[:, :3], values[:, 3:]
 
 

@@ -21,7 +21,8 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-FRAMES = ("ENU", "NED")
+FRAMES = ("ENU", "NED", "ECEF", "ECI")
+GRAVITY_MODELS = ("constant", "wgs84")
 ATTITUDE_MODES = ("euler", "tangent", "file")
 DEFAULT_DERIVATIVE = "spline5c"   # see README "What accuracy costs in time"
 SEED_LIMIT = 2 ** 64      # [scene] seed: an integer 0 <= seed < 2**64
@@ -48,6 +49,7 @@ _INF_HINT = " (TOML reads numbers beyond 1.8e308 as inf)"
 class Expressions:
     """Three expressions as validated text (x, y, z or roll, pitch, yaw)."""
     texts: tuple[str, str, str]
+    keys: tuple[str, str, str] = ("x", "y", "z")   # ("lat_deg", "lon_deg", "height_m"): a geodetic trajectory
 
 
 @dataclass(frozen=True)
@@ -96,6 +98,8 @@ class Scene:
     path: str | None = None
     warnings: tuple[str, ...] = ()
     seed: int = 0                                # root of every random stream (imu_emulator.counter_rng)
+    origin: tuple[float, float, float] | None = None   # lat deg, lon deg, height m where ENU/NED is tangent
+    gravity_model: str = "constant"              # "constant" (gravity_mps2) or "wgs84" (normal gravity)
 
     @property
     def dt(self) -> float:
@@ -435,7 +439,8 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
     warnings: list[str] = []
 
     head = _table(raw, "scene")
-    _no_unknown(head, {"rate_hz", "duration_s", "frame", "gravity_mps2", "t0_s", "name", "seed"}, "scene")
+    _no_unknown(head, {"rate_hz", "duration_s", "frame", "gravity_mps2", "t0_s", "name", "seed", "origin",
+                       "gravity_model"}, "scene")
     seed = _seed(head)
     rate = _number(head, "rate_hz", "scene", required=True, positive=True)
     if not RATE_RANGE_HZ[0] <= rate <= RATE_RANGE_HZ[1]:
@@ -468,6 +473,11 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
         track = _load_track(traj_table, "trajectory", base_dir)
         trajectory = _sampled_from_track(track, "position", derivative,
                                          _noise(traj_table, "position_noise_m", "trajectory", derivative, warnings))
+    elif {"lat_deg", "lon_deg", "height_m"} & set(traj_table):
+        from imu_emulator.earth_scene import GEODETIC_KEYS
+        _no_unknown(traj_table, set(GEODETIC_KEYS), "trajectory")
+        trajectory = _expressions(traj_table, GEODETIC_KEYS, "trajectory", params)
+        trajectory = Expressions(trajectory.texts, GEODETIC_KEYS)
     else:
         _no_unknown(traj_table, {"x", "y", "z"}, "trajectory")
         trajectory = _expressions(traj_table, ("x", "y", "z"), "trajectory", params)
@@ -539,6 +549,9 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
     _check_time_resolution(t0, duration, rate)
 
     effects = _effects(raw)
+    from imu_emulator.earth_scene import earth_keys
+    origin, gravity_model = earth_keys(head, frame, effects, mode, "shape" in traj_table,
+                                       trajectory, warnings)
     imu_list = raw.get("imu", [])
     if isinstance(imu_list, Mapping):
         imu_list = [imu_list]
@@ -559,7 +572,8 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
     return Scene(rate_hz=rate, duration_s=duration, frame=frame, gravity_mps2=gravity, t0_s=t0,
                  params=params, trajectory=trajectory, attitude_mode=mode, attitude=attitude,
                  initial_heading_rad=heading, imus=tuple(imus), effects=effects,
-                 streams=tuple(dict(s) for s in streams), path=path, warnings=tuple(warnings), seed=seed)
+                 streams=tuple(dict(s) for s in streams), path=path, warnings=tuple(warnings), seed=seed,
+                 origin=origin, gravity_model=gravity_model)
 
 
 def load_scene(path: str | Path) -> Scene:

@@ -41,6 +41,8 @@ class Simulation:
         self._stateful = bool(self._plan.slots)
         #: each IMU's temperature profile reaches the samples when the temperature effect is on
         self.temperature = "temperature" in scene.effects
+        from imu_emulator import earth_truth
+        self._earth_truth = truth and earth_truth.on(scene)   # geodetic, NED, ECEF truth (earth_truth.KEYS)
         self._position = self._series(scene.trajectory, 3 if scene.attitude_mode == "tangent" else 2, "trajectory")
         self._euler = self._series(scene.attitude, 2, "attitude")
         self.kernel = compile_kernel(scene, attitude=attitude, truth=truth, increments=self.increments)
@@ -129,6 +131,9 @@ class Simulation:
             out.t_s[:] = t
         self._call(k0, n, s0, out)
         self._check_finite(out.accel, out.gyro, k0)
+        if self._earth_truth:
+            from imu_emulator import earth_truth
+            earth_truth.fill(self.scene, t, out.truth)
         if self.temperature:
             from imu_emulator.effects.temperature import profile
             for m, imu in enumerate(self.scene.imus):
@@ -146,6 +151,9 @@ class Simulation:
 
     def _new_truth(self, n: int) -> dict:
         truth = {k: np.empty((n, 3)) for k in TRUTH_KEYS}
+        if self._earth_truth:
+            from imu_emulator.earth_truth import KEYS
+            truth.update({k: np.empty((n, 3)) for k in KEYS})
         if self.bias_truth:
             truth.update({k: np.empty((len(self.scene.imus), n, 3)) for k in BIAS_TRUTH_KEYS})
         return truth

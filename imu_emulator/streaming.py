@@ -37,7 +37,7 @@ from firmware_protocols import attitude
 from firmware_protocols.base import EncodeError, can_bits_worst_case
 from imu_emulator.errors import ImuEmulatorError, SceneError, TargetError
 from imu_emulator.outfile import AtomicOutput
-from imu_emulator.geodesy import DEFAULT_ORIGIN, local_to_geodetic, to_ned
+from imu_emulator.geodesy import device_navigation
 from imu_emulator.samples import counts_text
 from imu_emulator.realtime import LatenessStats, Pacer, drop_realtime, enable_realtime
 from imu_emulator.transport import TargetOptions, check_carries, link_capacity, open_target, parse_target
@@ -183,7 +183,7 @@ class Stream:
         check_carries(self.spec, info.kind)
         self.capacity = link_capacity(self.spec, info.kind, config.target_options)
         self.device = None
-        self.navigation = None     # (frame, gravity, origin) when the device reports navigation quantities
+        self.navigation = None     # (frame, gravity, origin, model, positions' frame) for navigation
         self.frame = "NED"          # the scene's navigation frame: attitude goes out NED-referenced (run_streams)
         try:
             if config.device and info.device is not None and self.spec.kind not in _ONE_WAY_TARGETS:
@@ -221,7 +221,8 @@ class Stream:
             increments = {"delta_theta": block.dtheta[i], "delta_velocity": block.dvel[i],
                           "delta_time_s": np.full(len(time_ns), self.period_s)}
         # Wire formats reference attitude to NED (Samples.quat is sensor -> NED): an ENU scene's is converted.
-        quat = attitude.to_ned(block.quat[i], self.frame)
+        # (ECEF and ECI scenes give attitude relative to local NED already)
+        quat = attitude.to_ned(block.quat[i], "ENU" if self.frame == "ENU" else "NED")
         if self.device is None:
             return Samples(time_ns, block.accel[i], block.gyro[i], quat=quat, temperature_c=temperature,
                            **increments)
@@ -230,12 +231,9 @@ class Stream:
         # A device may be asked for any field its format knows at any moment: give it all we have.
         nav = {}
         if self.navigation is not None and block.truth is not None:
-            frame, gravity, origin = self.navigation
             specific_force = np.einsum("nij,nj->ni", quat_to_matrix(block.quat[i]), block.accel[i])
-            specific_force[:, 2] += -gravity if frame == "ENU" else gravity
-            nav = {"position_llh": local_to_geodetic(block.truth["position"], frame, origin),
-                   "velocity_ned": to_ned(block.truth["velocity"], frame),
-                   "linear_accel_ned": to_ned(specific_force, frame)}
+            nav = device_navigation(block.truth["position"], block.truth["velocity"], specific_force,
+                                    *self.navigation)
         return Samples(time_ns, block.accel[i], block.gyro[i], quat=quat, euler=quat_to_euler(quat),
                        temperature_c=temperature, **nav, **increments)
 
@@ -780,8 +778,9 @@ def run_streams(scene, sim, configs: list[StreamConfig], options: RunOptions) ->
     for stream in streams:
         stream.frame = scene.frame
         if stream.device is not None and stream.info.device_navigation:
-            # the scene has no geodetic origin yet: geodesy's documented default stands in for it
-            stream.navigation = (scene.frame, float(scene.gravity_mps2), DEFAULT_ORIGIN)
+            from imu_emulator.earth_motion import position_frame
+            stream.navigation = (scene.frame, float(scene.gravity_mps2), scene.origin, scene.gravity_model,
+                                 position_frame(scene))
     if not math.isfinite(options.speed) or options.speed < 0:
         raise StreamError(f"--speed: expected a number >= 0, got {options.speed}")
     return Streamer(sim, float(scene.rate_hz), float(scene.t0_s), streams, options).run()

@@ -89,7 +89,7 @@ CASES = [
     ('duration_s = 1.0', 'duration_s = 1.0\nrate = 5', ["scene.rate", "unknown key"]),
     ('f = 1.0', 'f = "2*t"', ["params.f", "constants"]),
     ('f = 1.0', 'sin = 1.0', ["params.sin", "not a usable name"]),
-    ('gravity = true', 'gravity = true\ncoriolis = true', ["effects.coriolis", "unknown effect"]),
+    ('gravity = true', 'gravity = true\ncentrifuge = true', ["effects.centrifuge", "unknown effect"]),
     ('gravity = true', 'gravity = "yes"', ["effects.gravity", "true or false"]),
     ('name = "imu0"', 'name = "imu0"\nlever_arm_m = [1, 2]', ["imu[0].lever_arm_m", "three numbers"]),
     ('name = "imu0"', 'name = "imu0"\n[[imu]]\nname = "imu0"', ["imu[1].name", "used twice"]),

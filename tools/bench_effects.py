@@ -57,6 +57,31 @@ def time_run(sim: Simulation, n: int, out) -> tuple[int, int]:
     return time.thread_time_ns() - cpu0, time.perf_counter_ns() - wall0
 
 
+def time_interleaved(scenes, rounds: int) -> tuple[dict, dict]:
+    """[(label, scene)] -> ({label: [thread CPU ns/sample per round]}, {label: [wall ns/sample]}), the variants
+    run in turn within each round."""
+    sims = []
+    for label, scene in scenes:
+        sim = Simulation(scene, attitude=False)
+        sims.append((label, sim, sim.block(0, BLOCK), scene.n_samples))
+    cpu = {label: [] for label, *_ in sims}
+    wall = {label: [] for label, *_ in sims}
+    for _ in range(rounds):
+        for label, sim, out, n in sims:
+            c, w = time_run(sim, n, out)
+            cpu[label].append(c / n)
+            wall[label].append(w / n)
+    return cpu, wall
+
+
+def rows(cpu: dict, wall: dict, width: int):
+    """(label, "  label  min median max   wall median", CPU median) per variant, for the tables printed."""
+    for label in cpu:
+        c = np.array(cpu[label])
+        yield label, (f"  {label:{width}} {c.min():7.1f} {np.median(c):7.1f} {c.max():7.1f}   "
+                      f"wall {np.median(wall[label]):7.1f}"), float(np.median(c))
+
+
 def normal_cost(rounds: int) -> list[float]:
     from imu_emulator.counter_rng import normals
     key = np.uint64(12345)
@@ -81,26 +106,12 @@ def main() -> None:
                 ("+ bias", ["bias"]), ("stochastic (noise, BI, RW, bias)", ["noise", "bias_instability", "random_walk", "bias"]),
                 *((f"+ {name}", [name]) for name in DETERMINISTIC),
                 ("full error model (issue 9 §6)", FULL), ("every error effect", [*FULL, "bias", *DETERMINISTIC[2:5]])]
-    sims = []
-    for label, effects in variants:
-        scene = circle(effects, args.seconds)
-        sim = Simulation(scene, attitude=False)
-        out = sim.block(0, BLOCK)
-        sims.append((label, sim, out, scene.n_samples))
-    cpu = {label: [] for label, *_ in sims}
-    wall = {label: [] for label, *_ in sims}
-    for _ in range(args.rounds):
-        for label, sim, out, n in sims:
-            c, w = time_run(sim, n, out)
-            cpu[label].append(c / n)
-            wall[label].append(w / n)
-    base = np.median(cpu[sims[0][0]])
+    cpu, wall = time_interleaved([(label, circle(effects, args.seconds)) for label, effects in variants], args.rounds)
+    base = np.median(cpu[variants[0][0]])
     print(f"circle scene, 1 kHz, lever arm, {args.seconds:g} s per run, {args.rounds} interleaved rounds "
           f"(ns/sample; thread CPU min / median / max, wall median; Msamples/s from the CPU median)")
-    for label, *_ in sims:
-        c = np.array(cpu[label])
-        print(f"  {label:40} {c.min():7.1f} {np.median(c):7.1f} {c.max():7.1f}   wall {np.median(wall[label]):7.1f}"
-              f"   {1e3 / np.median(c):6.2f} M/s   effect cost {np.median(c) - base:+7.1f}")
+    for label, row, median in rows(cpu, wall, 40):
+        print(f"{row}   {1e3 / median:6.2f} M/s   effect cost {median - base:+7.1f}")
     nc = normal_cost(args.rounds)
     print(f"one counter-based normal (normals() loop, thread CPU): min {min(nc):.2f} median {np.median(nc):.2f} ns")
 

@@ -1,0 +1,144 @@
+"""The Earth under the motion: ECI and geodetic trajectories as ECEF expressions, and the geometry lines the
+kernel runs after the motion whenever the Earth model is on.
+
+With the Earth model on (frame ECEF or ECI, a geodetic trajectory, or any of effects.earth_rate,
+effects.coriolis, effects.gravity with gravity_model = "wgs84"), the trajectory is Cartesian in the scene's
+frame: ENU/NED is the tangent frame fixed to the Earth at [scene] origin, ECEF is ECEF; ECI and geodetic
+trajectories are rewritten as ECEF in sympy (exact derivatives; sin/cos of omega_ie t take the motion's exact
+phase reduction, so t far from zero stays exact). The attitude is relative to the local level frame at the
+current position (NED, or ENU when the scene's frame is ENU), so the navigation stage works in that frame:
+geometry_lines convert the position to geodetic (latitude, longitude, height), resolve velocity and
+acceleration in local NED (e_vn.., e_an..), and hand the navigation stage the Earth-fixed acceleration in the
+level axes as ax ay az. The Earth effects (imu_emulator/effects/earth_rate.py, coriolis.py, gravity.py) read:
+    e_sl e_cl (sin, cos latitude), e_so e_co (longitude), e_h (height, m), e_w = sqrt(1 - e2 sin^2 L),
+    e_rn e_re (R_N + h, R_E + h), e_vn e_ve e_vd (Earth-referenced velocity, local NED).
+The formulas are written once, in NED (Groves 2nd ed. §2.4, §5.4); `level` maps NED components to the scene's
+level axes (ENU: x = E, y = N, z = -D).
+
+ECI here has its axes on ECEF's at scene time t = 0 and turns by the Earth rotation angle theta = omega_ie t
+about z (no precession, nutation or polar motion: the issue's ECI).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from imu_emulator import wgs84
+
+EARTH_EFFECTS = ("earth_rate", "coriolis")
+#: updates of the geodetic latitude after Bowring's start (tan L from the parametric latitude u, tan u =
+#: a z / (b p)): the start is within 1e-13 rad at 10 km, 1e-9 at 1000 km, 4e-7 at 40 000 km, and each update
+#: (tan L = z / (p (1 - e2 N / (N + h)))) squares the error times about e2, so two reach 1e-15 rad from the
+#: ground to beyond geostationary height (imu_emulator.frames runs the same scheme; tests/test_frames.py)
+GEODETIC_UPDATES = 2
+
+
+def position_frame(scene) -> str:
+    """The frame of the kernel's px..pz: the scene's, except ECEF for ECI (rewritten) and geodetic
+    trajectories (converted to ECEF, below)."""
+    geodetic = getattr(scene.trajectory, "keys", ("x", "y", "z")) != ("x", "y", "z")
+    return "ECEF" if geodetic or scene.frame in ("ECEF", "ECI") else scene.frame
+
+
+def model_on(scene) -> bool:
+    """Whether the navigation stage follows the Earth (see the module's docstring)."""
+    return (position_frame(scene) == "ECEF" or any(name in scene.effects for name in EARTH_EFFECTS)
+            or ("gravity" in scene.effects and scene.gravity_model == "wgs84"))
+
+
+def level(scene, n: str, e: str, d: str) -> tuple[str, str, str]:
+    """NED components as the scene's level axes (ENU for an ENU scene, NED otherwise)."""
+    return (e, n, f"-({d})") if scene.frame == "ENU" else (n, e, d)
+
+
+def tangent_to_ecef(frame: str, origin) -> tuple[np.ndarray, np.ndarray]:
+    """(r0, C): ECEF position of the frame's origin and the matrix whose columns are its axes in ECEF."""
+    if frame in ("ECEF", "ECI"):     # ECI trajectories reach the kernel as ECEF (imu_emulator.motion)
+        return np.zeros(3), np.eye(3)
+    from imu_emulator import frames   # numba (rotations) only when a kernel is generated
+    local = frames.enu_from_ecef_matrix if frame == "ENU" else frames.ned_from_ecef_matrix
+    return frames.geodetic_to_ecef(*origin), local(origin[0], origin[1]).T
+
+
+def _affine(out: str, r0, c, names) -> list[str]:
+    """out{x,y,z} = r0 + C @ names, printed without the exact zeros (0 * x is not folded: x may be inf)."""
+    lines = []
+    for i, axis in enumerate("xyz"):
+        terms = [repr(float(r0[i]))] if r0 is not None and r0[i] != 0.0 else []
+        terms += [f"{float(c[i, j])!r} * {names[j]}" if c[i, j] != 1.0 else names[j]
+                  for j in range(3) if c[i, j] != 0.0]
+        lines.append(f"{out}{axis} = {' + '.join(terms) or '0.0'}")
+    return lines
+
+
+def geometry_lines(scene) -> list[str]:
+    """The Earth geometry, after the motion's lines: geodetic position, local-NED velocity and acceleration
+    (e_*), and ax ay az replaced by the Earth-fixed acceleration in the level axes (the navigation stage's
+    f starts from them)."""
+    r0, c = tangent_to_ecef(position_frame(scene), scene.origin)
+    a, e2 = repr(wgs84.A), repr(wgs84.E2)
+    lines = _affine("e_r", r0, c, ("px", "py", "pz")) + _affine("e_v", None, c, ("vx", "vy", "vz"))
+    lines += _affine("e_a", None, c, ("ax", "ay", "az"))
+    lines += [
+        "e_p = math.sqrt(e_rx * e_rx + e_ry * e_ry)",
+        "if e_p > 0.0:",
+        "    e_co = e_rx / e_p",
+        "    e_so = e_ry / e_p",
+        "else:",     # on the axis longitude is undefined: take 0
+        "    e_co = 1.0",
+        "    e_so = 0.0",
+        # Bowring's start from the parametric latitude, then tan L = z / (p (1 - e2 N / (N + h))) with
+        # h = p cos L + z sin L - a w (no 1/cos L anywhere: exact at the poles)
+        f"e_iu = 1.0 / math.sqrt((e_p * {wgs84.B!r}) ** 2 + (e_rz * {a}) ** 2)",
+        f"e_cu = e_p * {wgs84.B!r} * e_iu",
+        f"e_su = e_rz * {a} * e_iu",
+        f"e_s = e_rz + {repr(wgs84.EP2 * wgs84.B)} * e_su * e_su * e_su",
+        f"e_c = e_p - {repr(wgs84.E2 * wgs84.A)} * e_cu * e_cu * e_cu",
+    ]
+    for i in range(GEODETIC_UPDATES + 1):
+        lines += [
+            "e_ir = 1.0 / math.sqrt(e_c * e_c + e_s * e_s)",
+            "e_sl = e_s * e_ir",
+            "e_cl = e_c * e_ir",
+            f"e_w = math.sqrt(1.0 - {e2} * e_sl * e_sl)",
+            f"e_h = e_p * e_cl + e_rz * e_sl - {a} * e_w",
+        ]
+        if i < GEODETIC_UPDATES:
+            lines += [f"e_c = e_p * (1.0 - {e2} * {a} / ({a} + e_h * e_w))", "e_s = e_rz"]
+    lines += [
+        f"e_re = {a} / e_w + e_h",
+        f"e_rn = {repr(wgs84.A * (1.0 - wgs84.E2))} / (e_w * e_w * e_w) + e_h",
+    ]
+    # local NED at the current position: rows of C_e^n
+    rows = {"n": ("-e_sl * e_co", "-e_sl * e_so", "e_cl"), "e": ("-e_so", "e_co", None),
+            "d": ("-e_cl * e_co", "-e_cl * e_so", "-e_sl")}
+    for vec in ("v", "a"):
+        for axis, row in rows.items():
+            terms = [f"({r}) * e_{vec}{c}" for r, c in zip(row, "xyz") if r is not None]
+            lines.append(f"e_{vec}{axis} = {' + '.join(terms)}")
+    fx, fy, fz = level(scene, "e_an", "e_ae", "e_ad")
+    return lines + [f"ax = {fx}", f"ay = {fy}", f"az = {fz}"]
+
+
+def eci_to_ecef(xyz, t):
+    """[x, y, z] sympy expressions of t in ECI -> the same point in ECEF: r_e = R_z(-theta) r_i."""
+    import sympy
+    # omega_ie as the exact decimal WGS-84 states, so the phase constants are formed from it exactly
+    theta = sympy.Rational("7.292115e-5") * t
+    c, s = sympy.cos(theta), sympy.sin(theta)
+    x, y, z = xyz
+    return [c * x + s * y, -s * x + c * y, z]
+
+
+def geodetic_to_ecef(llh):
+    """[lat_deg, lon_deg, height_m] sympy expressions of t -> WGS-84 ECEF x, y, z (closed form; sympy
+    differentiates it exactly, and sin/cos of a latitude or longitude linear in t take the exact phase
+    reduction)."""
+    import sympy
+
+    from imu_emulator import wgs84
+    lat, lon = (sympy.pi / 180 * e for e in llh[:2])
+    h = llh[2]
+    a, e2 = sympy.Float(wgs84.A, 30), sympy.Float(wgs84.E2, 30)
+    n = a / sympy.sqrt(1 - e2 * sympy.sin(lat) ** 2)
+    return [(n + h) * sympy.cos(lat) * sympy.cos(lon), (n + h) * sympy.cos(lat) * sympy.sin(lon),
+            (n * (1 - e2) + h) * sympy.sin(lat)]

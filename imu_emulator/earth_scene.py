@@ -1,0 +1,78 @@
+"""The scene's Earth keys: [scene] origin, gravity_model, and what the ECEF frame and the Earth effects need."""
+from __future__ import annotations
+
+from typing import Mapping
+
+from imu_emulator.errors import SceneError
+from imu_emulator.scene import GRAVITY_MODELS, _choice, _no_unknown, _number, _table
+
+ORIGIN_KEYS = ("lat_deg", "lon_deg", "height_m")
+GEODETIC_KEYS = ORIGIN_KEYS     # a geodetic trajectory's [trajectory] keys
+MAX_ORIGIN_HEIGHT_M = 1e7      # beyond geostationary orbit is not a place to put a tangent frame
+
+
+def _origin(head: Mapping):
+    if "origin" not in head:
+        return None
+    table = _table(head, "origin", "scene.")
+    _no_unknown(table, set(ORIGIN_KEYS), "scene.origin")
+    lat = _number(table, "lat_deg", "scene.origin", required=True, bound=90.0, unit=" deg")
+    lon = _number(table, "lon_deg", "scene.origin", required=True, bound=360.0, unit=" deg")
+    height = _number(table, "height_m", "scene.origin", default=0.0, bound=MAX_ORIGIN_HEIGHT_M, unit=" m")
+    return (lat, lon, height)
+
+
+def earth_keys(head: Mapping, frame: str, effects: frozenset[str], attitude_mode: str, shape: bool,
+               trajectory, warnings: list[str]):
+    """(origin or None, gravity model), validated against the frame and the effects named."""
+    from imu_emulator.earth_motion import EARTH_EFFECTS
+    origin = _origin(head)
+    model = _choice(head, "gravity_model", "scene", GRAVITY_MODELS, "constant")
+    earth = [name for name in EARTH_EFFECTS if name in effects]
+    if model == "wgs84":
+        if "gravity" not in effects:
+            warnings.append("scene.gravity_model is ignored because effects.gravity is not true")
+        else:
+            earth.append("gravity")
+            if "gravity_mps2" in head:
+                warnings.append("scene.gravity_mps2 is ignored: gravity_model = \"wgs84\" computes gravity")
+    geodetic = getattr(trajectory, "keys", None) == GEODETIC_KEYS
+    if geodetic:
+        if frame == "ECI":
+            raise SceneError("trajectory.lat_deg: a geodetic trajectory is fixed to the Earth; use frame = \"NED\", "
+                             "\"ENU\" (the attitude's level axes) or \"ECEF\"")
+        if attitude_mode == "tangent":
+            raise SceneError("attitude.mode: 'tangent' is not built for geodetic trajectories yet; give roll, pitch, "
+                             "yaw relative to local level")
+        if origin is not None:
+            warnings.append("scene.origin is ignored: the trajectory is geodetic")
+        return None, model
+    if frame in ("ECEF", "ECI"):
+        if shape:
+            raise SceneError(f"trajectory.shape: shapes are built in a local frame; with frame = \"{frame}\" give "
+                             f"x, y, z expressions{' or a file' if frame == 'ECEF' else ''} in {frame} metres")
+        if frame == "ECI" and getattr(trajectory, "keys", None) is None:
+            raise SceneError("trajectory: frame = \"ECI\" takes x, y, z expressions of t (sampled ECI "
+                             "trajectories are not built yet)")
+        if attitude_mode == "tangent":
+            raise SceneError(f"attitude.mode: 'tangent' is not built for frame = \"{frame}\" yet (it assumes the "
+                             "frame's z axis is vertical); give roll, pitch, yaw relative to local NED")
+        if frame == "ECI":
+            missing = [name for name in EARTH_EFFECTS if name not in effects]
+            if missing:
+                raise SceneError(f"effects.{missing[0]}: frame = \"ECI\" needs it (an inertial trajectory seen "
+                                 "from the rotating Earth: name effects.earth_rate and effects.coriolis)")
+        if origin is not None:
+            warnings.append(f"scene.origin is ignored with frame = \"{frame}\" (positions are {frame} already)")
+            origin = None
+    elif earth and attitude_mode == "tangent":
+        warnings.append("attitude.mode: 'tangent' follows the velocity in the frame tangent at the origin, not in "
+                        "the local level frame the Earth effects use (they differ by distance / 6371 km rad)")
+    if frame in ("ENU", "NED") and earth and origin is None:
+        # a default, said out loud: the devices have always used it for their GNSS fields
+        from imu_emulator.geodesy import DEFAULT_ORIGIN
+        origin = DEFAULT_ORIGIN
+        warnings.append(f"scene.origin is not given: effects.{earth[0]} puts the {frame} frame's origin at "
+                        f"{origin[0]} deg N, {origin[1]} deg E, {origin[2]} m (set origin = {{ lat_deg = ..., "
+                        "lon_deg = ..., height_m = ... }})")
+    return origin, model

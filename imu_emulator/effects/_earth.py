@@ -1,0 +1,10 @@
+"""What the Earth effects share: the geometry comes from the motion (imu_emulator.earth_motion, run whenever
+the Earth model is on), the effects add NED vectors to the navigation stage's level-axes variables here."""
+from __future__ import annotations
+
+from imu_emulator.earth_motion import EARTH_EFFECTS, level, model_on, position_frame  # noqa: F401 (API)
+
+
+def add(scene, target: str, n: str, e: str, d: str) -> list[str]:
+    """Lines adding a NED vector to the level-axes variables target{x,y,z} (fn or wn)."""
+    return [f"{target}{axis} += {value}" for axis, value in zip("xyz", level(scene, n, e, d)) if value != "0.0"]
