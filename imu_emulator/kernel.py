@@ -288,6 +288,8 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
         if sensor:   # the true sensor-frame values and the realized bias, for the error effects to use
             sensor = ["tfx, tfy, tfz, twx, twy, twz = ox, oy, oz, gx, gy, gz",
                       "bax = bay = baz = bgx = bgy = bgz = 0.0"] + sensor
+        elif truth and plan.bias_truth:   # an IMU without error terms beside one with: its bias is 0
+            sensor = ["bax = bay = baz = bgx = bgy = bgz = 0.0"]
         increment = []
         if increments:
             from imu_emulator import increments as inc
