@@ -65,39 +65,36 @@ def from_output(path: str) -> PlotData:
                     gyro_bias=None if gyro_bias is None else gyro_bias[:, :n])
 
 
-def _truth(path: Path, n_imu: int):
-    """Position and roll, pitch, yaw of S from a `generate --truth` output, else (None, None)."""
+def _read_columns(path: Path, npz_keys: tuple[str, ...], csv_columns: tuple[str, ...]):
+    """The NPZ arrays `npz_keys`, or the CSV columns `csv_columns` as one (rows, columns) array, of a `generate`
+    output; None when it lacks any of them."""
     if path.suffix.lower() == ".npz":
         with np.load(path) as data:
-            if "position" in data and "euler" in data:
-                return data["position"], data["euler"]
-        return None, None
+            return [data[k] for k in npz_keys] if all(k in data for k in npz_keys) else None
     with open(path) as f:
         header = [name.strip().lower() for name in f.readline().split(",")]
-    wanted = ("px", "py", "pz", "roll", "pitch", "yaw")
-    if not set(wanted) <= set(header):
-        return None, None
+    if not set(csv_columns) <= set(header):
+        return None
+    return np.loadtxt(path, delimiter=",", skiprows=1, usecols=[header.index(c) for c in csv_columns], ndmin=2)
+
+
+def _truth(path: Path, n_imu: int):
+    """Position and roll, pitch, yaw of S from a `generate --truth` output, else (None, None)."""
+    found = _read_columns(path, ("position", "euler"), ("px", "py", "pz", "roll", "pitch", "yaw"))
+    if found is None or isinstance(found, list):
+        return tuple(found) if found else (None, None)
     # rows run IMU-fastest (sample k of every IMU, then k+1): every n_imu-th row is one per sample
-    values = np.loadtxt(path, delimiter=",", skiprows=1, usecols=[header.index(c) for c in wanted], ndmin=2)[::n_imu]
-    return values[:, :3], values[:, 3:]
+    return found[::n_imu, :3], found[::n_imu, 3:]
 
 
 def _bias_truth(path: Path, n_imu: int):
     """Each IMU's realized accelerometer and gyro bias (n_imu, n, 3) from a `generate --truth` output of a scene
     with error effects (NPZ accel_bias / gyro_bias, CSV bax..bgz), else (None, None)."""
     from imu_emulator.output import BIAS_COLUMNS
-    if path.suffix.lower() == ".npz":
-        with np.load(path) as data:
-            if "accel_bias" in data and "gyro_bias" in data:
-                return data["accel_bias"], data["gyro_bias"]
-        return None, None
-    with open(path) as f:
-        header = [name.strip().lower() for name in f.readline().split(",")]
-    if not set(BIAS_COLUMNS) <= set(header):
-        return None, None
-    values = np.loadtxt(path, delimiter=",", skiprows=1, usecols=[header.index(c) for c in BIAS_COLUMNS], ndmin=2)
-    # rows run IMU-fastest: row k * n_imu + m is sample k of IMU m
-    per_imu = values.reshape(-1, n_imu, 6).transpose(1, 0, 2)
+    found = _read_columns(path, ("accel_bias", "gyro_bias"), BIAS_COLUMNS)
+    if found is None or isinstance(found, list):
+        return tuple(found) if found else (None, None)
+    per_imu = found.reshape(-1, n_imu, 6).transpose(1, 0, 2)   # row k * n_imu + m: sample k of IMU m
     return per_imu[:, :, :3], per_imu[:, :, 3:]
 
 

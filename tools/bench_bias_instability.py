@@ -16,13 +16,12 @@ import sys
 import tempfile
 from pathlib import Path
 
-import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tools"))
 
-from bench_effects import FULL, circle, time_run  # noqa: E402
+from bench_effects import FULL, circle, interleave, report  # noqa: E402
 
 from imu_emulator import kernel  # noqa: E402
 from imu_emulator.effects import bias_instability  # noqa: E402
@@ -58,21 +57,9 @@ def main() -> None:
             variants += [(f"+ bias_instability, {n}/tau", ["bias_instability"], n),
                          (f"full error model, {n}/tau", FULL, n)]
         sims = [(label, *build(effects, n, args.seconds, Path(tmp))) for label, effects, n in variants]
-        cpu = {label: [] for label, *_ in sims}
-        wall = {label: [] for label, *_ in sims}
-        for _ in range(args.rounds):
-            for label, sim, out, n in sims:
-                c, w = time_run(sim, n, out)
-                cpu[label].append(c / n)
-                wall[label].append(w / n)
-    base = np.median(cpu[sims[0][0]])
-    print(f"circle scene, 1 kHz, lever arm, {args.seconds:g} s per run, {args.rounds} interleaved rounds "
-          f"(ns/sample; thread CPU min / median / max, wall median)")
-    for label, *_ in sims:
-        c = np.array(cpu[label])
-        print(f"  {label:36} {c.min():7.1f} {np.median(c):7.1f} {c.max():7.1f}   wall {np.median(wall[label]):7.1f}"
-              f"   {1e3 / np.median(c):6.2f} M/s   over kinematics {np.median(c) - base:+7.1f}")
-
+        cpu, wall = interleave(sims, args.rounds)
+    report(sims, cpu, wall, f"circle scene, 1 kHz, lever arm, {args.seconds:g} s per run, {args.rounds} interleaved "
+           "rounds (ns/sample; thread CPU min / median / max, wall median)", "over kinematics")
 
 if __name__ == "__main__":
     main()

@@ -70,6 +70,28 @@ def normal_cost(rounds: int) -> list[float]:
     return costs
 
 
+def interleave(sims, rounds: int):
+    """Thread CPU and wall ns/sample of each (label, sim, out, n), the variants taking turns every round."""
+    cpu = {label: [] for label, *_ in sims}
+    wall = {label: [] for label, *_ in sims}
+    for _ in range(rounds):
+        for label, sim, out, n in sims:
+            c, w = time_run(sim, n, out)
+            cpu[label].append(c / n)
+            wall[label].append(w / n)
+    return cpu, wall
+
+
+def report(sims, cpu, wall, header: str, against: str) -> None:
+    """One line per variant: CPU min / median / max, wall median, M samples/s, and the difference from the first."""
+    base = np.median(cpu[sims[0][0]])
+    print(header)
+    for label, *_ in sims:
+        c = np.array(cpu[label])
+        print(f"  {label:40} {c.min():7.1f} {np.median(c):7.1f} {c.max():7.1f}   wall {np.median(wall[label]):7.1f}"
+              f"   {1e3 / np.median(c):6.2f} M/s   {against} {np.median(c) - base:+7.1f}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--rounds", type=int, default=7)
@@ -87,20 +109,10 @@ def main() -> None:
         sim = Simulation(scene, attitude=False)
         out = sim.block(0, BLOCK)
         sims.append((label, sim, out, scene.n_samples))
-    cpu = {label: [] for label, *_ in sims}
-    wall = {label: [] for label, *_ in sims}
-    for _ in range(args.rounds):
-        for label, sim, out, n in sims:
-            c, w = time_run(sim, n, out)
-            cpu[label].append(c / n)
-            wall[label].append(w / n)
-    base = np.median(cpu[sims[0][0]])
-    print(f"circle scene, 1 kHz, lever arm, {args.seconds:g} s per run, {args.rounds} interleaved rounds "
-          f"(ns/sample; thread CPU min / median / max, wall median; Msamples/s from the CPU median)")
-    for label, *_ in sims:
-        c = np.array(cpu[label])
-        print(f"  {label:40} {c.min():7.1f} {np.median(c):7.1f} {c.max():7.1f}   wall {np.median(wall[label]):7.1f}"
-              f"   {1e3 / np.median(c):6.2f} M/s   effect cost {np.median(c) - base:+7.1f}")
+    cpu, wall = interleave(sims, args.rounds)
+    report(sims, cpu, wall, f"circle scene, 1 kHz, lever arm, {args.seconds:g} s per run, {args.rounds} interleaved "
+           "rounds (ns/sample; thread CPU min / median / max, wall median; Msamples/s from the CPU median)",
+           "effect cost")
     nc = normal_cost(args.rounds)
     print(f"one counter-based normal (normals() loop, thread CPU): min {min(nc):.2f} median {np.median(nc):.2f} ns")
 
