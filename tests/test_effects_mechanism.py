@@ -133,6 +133,12 @@ def test_kernel_command_prints_the_source():
         assert f"`{name}`" in table
 
 
+def test_readme_parameter_table_is_the_records_table():
+    """README's "Sensor errors" table is documentation_table() as printed by `imu-emulator kernel --effects`."""
+    from imu_emulator.effects import documentation_table
+    assert documentation_table() in (ROOT / "README.md").read_text()
+
+
 # --- cache ------------------------------------------------------------------------------------------
 
 @pytest.fixture
