@@ -33,17 +33,23 @@ ACCEL = {"noise_density": "120 ug/sqrt(Hz)", "bias_instability": "30 ug", "rando
          "scale_factor": "0.1 %", "misalignment": "1 mrad", "nonlinearity": "10 ug/g^2",
          "bias_tc": "0.1 mg/K", "scale_tc": "100 ppm/K", "range": "16 g", "resolution": "0.488 mg"}
 IMU = {"temperature_c": "20 + 0.001*t", "warmup_rise_c": 15.0, "warmup_tau_s": 300.0}
+#: vibration variants: three sinusoidal lines (two linear, one angular), or a random PSD on three axes
+SINES = {"sines": [{"axis": "x", "amplitude": "0.5 g", "frequency": "120 Hz"},
+                   {"axis": "z", "amplitude": "0.3 g", "frequency": "47 Hz", "phase": "30 deg"},
+                   {"axis": "y", "amplitude": "2 deg/s", "frequency": "90 Hz"}]}
+PSD = {"psd": [["20 Hz", "0.001 g^2/Hz"], ["80 Hz", "0.01 g^2/Hz"], ["450 Hz", "0.01 g^2/Hz"]]}
 DETERMINISTIC = ["scale_factor", "misalignment", "g_sensitivity", "nonlinearity", "temperature", "range", "resolution"]
 #: the issue's full error model: noise + bias instability + random walk + scale/misalignment + range + resolution
 FULL = ["noise", "bias_instability", "random_walk", "scale_factor", "misalignment", "range", "resolution"]
 
 
-def circle(effects, seconds: float):
+def circle(effects, seconds: float, vibration=None):
     return scene_from_dict({
         "scene": {"rate_hz": 1000, "duration_s": seconds, "seed": 1},
         "trajectory": {"shape": "circle", "radius_m": 5.0, "frequency_hz": 1.0},
         "attitude": {"mode": "tangent"},
-        "imu": [{"name": "imu0", "lever_arm_m": [0.1, -0.05, 0.02], "gyro": GYRO, "accel": ACCEL, **IMU}],
+        "imu": [{"name": "imu0", "lever_arm_m": [0.1, -0.05, 0.02], "gyro": GYRO, "accel": ACCEL, **IMU,
+                 **({"vibration": vibration} if vibration else {})}],
         "effects": {"gravity": True, "lever_arm": True, **{name: True for name in effects}},
     })
 
@@ -102,10 +108,11 @@ def main() -> None:
                 ("+ bias_instability", ["bias_instability"]), ("+ random_walk", ["random_walk"]),
                 ("+ bias", ["bias"]), ("stochastic (noise, BI, RW, bias)", ["noise", "bias_instability", "random_walk", "bias"]),
                 *((f"+ {name}", [name]) for name in DETERMINISTIC),
-                ("full error model (issue 9 §6)", FULL), ("every error effect", [*FULL, "bias", *DETERMINISTIC[2:5]])]
+                ("full error model (issue 9 §6)", FULL), ("every error effect", [*FULL, "bias", *DETERMINISTIC[2:5]]),
+                ("+ vibration, 3 sines", ["vibration"], SINES), ("+ vibration, PSD 3 x 256 lines", ["vibration"], PSD)]
     sims = []
-    for label, effects in variants:
-        scene = circle(effects, args.seconds)
+    for label, effects, *vibration in variants:
+        scene = circle(effects, args.seconds, *vibration)
         sim = Simulation(scene, attitude=False)
         out = sim.block(0, BLOCK)
         sims.append((label, sim, out, scene.n_samples))
