@@ -20,7 +20,7 @@ import numpy as np
 
 from imu_emulator.derivatives import validate_samples
 from imu_emulator.errors import DataError
-from imu_emulator.output import TRUTH_COLUMNS
+from imu_emulator.output import BIAS_COLUMNS, TRUTH_COLUMNS
 from imu_emulator.trackfile import _parse_table, read_csv_rows, read_npz_arrays
 
 SAMPLE_COLUMNS = ("t", "ax", "ay", "az", "gx", "gy", "gz")
@@ -79,7 +79,7 @@ def _read_csv(path: Path) -> dict[str | None, ImuLog]:
         raise DataError(f"{where}: row {header_line}: missing column{'s' if len(missing) > 1 else ''} "
                         f"{', '.join(missing)} (the header has {', '.join(names)}; need "
                         f"{', '.join(SAMPLE_COLUMNS)})")
-    known = set(SAMPLE_COLUMNS) | {"imu"} | set(TRUTH_COLUMNS)
+    known = set(SAMPLE_COLUMNS) | {"imu", "temp_c"} | set(TRUTH_COLUMNS) | set(BIAS_COLUMNS)
     for name in names:
         if name not in known:
             raise DataError(f"{where}: row {header_line}: unexpected column '{name}' (expected "

@@ -171,6 +171,7 @@ class EffectPlan:
         self.slots: list[tuple[str, int, object]] = []    # (variable, imu, initial(draw))
         self.streams: list[tuple[int, str]] = []          # (imu, name)
         self.counters: list[tuple[int, int, str]] = []    # (state slot, imu, label)
+        self.constants: dict[str, tuple[float, ...]] = {}  # module-level arrays (numba freezes them)
         navigation = [e for e in self.active if e.stage == Stage.NAVIGATION]
         self.clock = self._emit([e for e in navigation if e.sample_clock], None, None)
         self.navigation = self._emit([e for e in navigation if not e.sample_clock], None, None)
@@ -199,6 +200,16 @@ class EffectPlan:
     def add_state(self, var: str, m: int, initial) -> str:
         self.slots.append((var, m, initial))
         return var
+
+    def add_state_block(self, m: int, initials) -> int:
+        """Slots the kernel reads as state[base + i] (no local variable): returns base."""
+        base = len(self.slots)
+        self.slots += [(None, m, initial) for initial in initials]
+        return base
+
+    def add_constant(self, name: str, values) -> str:
+        self.constants[name] = tuple(float(v) for v in values)
+        return name
 
     def add_counter(self, var: str, m: int, label: str) -> str:
         self.counters.append((len(self.slots), m, label))
@@ -277,10 +288,12 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
         if sensor:   # the true sensor-frame values and the realized bias, for the error effects to use
             sensor = ["tfx, tfy, tfz, twx, twy, twz = ox, oy, oz, gx, gy, gz",
                       "bax = bay = baz = bgx = bgy = bgz = 0.0"] + sensor
+        elif truth and plan.bias_truth:   # an IMU without error terms beside one with: its bias is 0
+            sensor = ["bax = bay = baz = bgx = bgy = bgz = 0.0"]
         increment = []
         if increments:
             from imu_emulator import increments as inc
-            increment = inc.imu_lines(m, sensor, [var for var, owner, _ in plan.slots if owner == m])
+            increment = inc.imu_lines(m, sensor, [var for var, owner, _ in plan.slots if owner == m and var is not None])
         per_imu += fill(PER_IMU_TEMPLATE, **frame_slots, increment=increment, sensor=sensor,
                         output=stages["output"], quat=quat, bias_truth=bias_truth).splitlines()
 
@@ -303,10 +316,11 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
             motion=node_motion + ([] if motion.rotation_given else _rotation_and_rates()), navigation=navigation,
             imu_frames=frames, t0=float(scene.t0_s), dt=1.0 / scene.rate_hz)
     return fill(
-        KERNEL_TEMPLATE, imports=imports, eps_v2=repr(EPS_SPEED ** 2), chunk=CHUNK, constants=constants,
+        KERNEL_TEMPLATE, imports=imports, eps_v2=repr(EPS_SPEED ** 2), chunk=CHUNK,
+        constants=constants + [f"{name} = np.array({list(values)!r})" for name, values in plan.constants.items()],
         args=", ".join(args), increments=integrate,
-        load_state=[f"{var} = state[{i}]" for i, (var, _, _) in enumerate(plan.slots)],
-        store_state=[f"state[{i}] = {var}" for i, (var, _, _) in enumerate(plan.slots)],
+        load_state=[f"{var} = state[{i}]" for i, (var, _, _) in enumerate(plan.slots) if var is not None],
+        store_state=[f"state[{i}] = {var}" for i, (var, _, _) in enumerate(plan.slots) if var is not None],
         n_phase=max(n_phase, 1), phase_stage=phase_stage, t0=repr(float(scene.t0_s)), dt=repr(1.0 / scene.rate_hz),
         clock=plan.clock, clock_shift=f" + clk * {1.0 / scene.rate_hz!r}" if plan.clock else "",
         motion=body, navigation=navigation, attitude=attitude_lines, per_imu=per_imu, truth=truth_lines)

@@ -2,7 +2,8 @@
 
 Left: the trajectory of the reference point S in 3-D with the body drawn as a triangle (nose along body x) at
 intervals along it, S and each IMU (S + R·lever arm) marked. Right: per IMU, specific force and angular rate against
-time. Needs matplotlib (the `plot` extra); always renders with the Agg backend, so no display is needed.
+time, with each IMU's realized bias (the error effects' terms, from `--truth`) overlaid dashed on a right-hand axis
+when the run has one. Needs matplotlib (the `plot` extra); always renders with the Agg backend, so no display is needed.
 """
 from __future__ import annotations
 
@@ -28,6 +29,8 @@ class PlotData:
     lever_arms: list | None = None          # per IMU, body frame (known only when plotting a scene)
     frame: str = "ENU"
     title: str = ""
+    accel_bias: np.ndarray | None = None    # (n_imu, n, 3) realized bias of each triad (--truth, error effects on)
+    gyro_bias: np.ndarray | None = None
 
 
 def from_scene(path: str) -> PlotData:
@@ -42,7 +45,8 @@ def from_simulation(sim) -> PlotData:
     out = sim.run()
     arms = [imu.lever_arm_m if "lever_arm" in scene.effects else (0.0, 0.0, 0.0) for imu in scene.imus]
     return PlotData(out.t_s, list(scene.imu_names), out.accel, out.gyro, out.truth["position"], out.truth["euler"],
-                    arms, scene.frame, f"{scene.path} ({scene.frame})")
+                    arms, scene.frame, f"{scene.path} ({scene.frame})", out.truth.get("accel_bias"),
+                    out.truth.get("gyro_bias"))
 
 
 def from_output(path: str) -> PlotData:
@@ -54,17 +58,19 @@ def from_output(path: str) -> PlotData:
     n = min(len(r.t) for r in records)
     names = [name or Path(path).stem for name in logs]
     position, euler = _truth(Path(path), len(records))
+    accel_bias, gyro_bias = _bias_truth(Path(path), len(records))
     return PlotData(records[0].t[:n], names, np.stack([r.accel[:n] for r in records]),
-                    np.stack([r.gyro[:n] for r in records]), position, euler, title=str(path))
+                    np.stack([r.gyro[:n] for r in records]), position, euler, title=str(path),
+                    accel_bias=None if accel_bias is None else accel_bias[:, :n],
+                    gyro_bias=None if gyro_bias is None else gyro_bias[:, :n])
 
 
-def _truth(path: Path, n_imu: int):
-    """Position and roll, pitch, yaw of S from a `generate --truth` output, else (None, None)."""
+def _read_columns(path: Path, npz_keys: tuple[str, ...], csv_columns: tuple[str, ...]):
+    """The NPZ arrays `npz_keys`, or the CSV columns `csv_columns` as one (rows, columns) array, of a `generate`
+    output; None when it lacks any of them."""
     if path.suffix.lower() == ".npz":
         with np.load(path) as data:
-            if "position" in data and "euler" in data:
-                return data["position"], data["euler"]
-        return None, None
+            return [data[k] for k in npz_keys] if all(k in data for k in npz_keys) else None
     with open(path) as f:
         skip = 1     # Earth scenes' outputs start with '#' lines stating their conventions
         line = f.readline()
@@ -72,12 +78,29 @@ def _truth(path: Path, n_imu: int):
             skip += 1
             line = f.readline()
         header = [name.strip().lower() for name in line.split(",")]
-    wanted = ("px", "py", "pz", "roll", "pitch", "yaw")
-    if not set(wanted) <= set(header):
-        return None, None
+    if not set(csv_columns) <= set(header):
+        return None
+    return np.loadtxt(path, delimiter=",", skiprows=skip, usecols=[header.index(c) for c in csv_columns], ndmin=2)
+
+
+def _truth(path: Path, n_imu: int):
+    """Position and roll, pitch, yaw of S from a `generate --truth` output, else (None, None)."""
+    found = _read_columns(path, ("position", "euler"), ("px", "py", "pz", "roll", "pitch", "yaw"))
+    if found is None or isinstance(found, list):
+        return tuple(found) if found else (None, None)
     # rows run IMU-fastest (sample k of every IMU, then k+1): every n_imu-th row is one per sample
-    values = np.loadtxt(path, delimiter=",", skiprows=skip, usecols=[header.index(c) for c in wanted], ndmin=2)[::n_imu]
-    return values[:, :3], values[:, 3:]
+    return found[::n_imu, :3], found[::n_imu, 3:]
+
+
+def _bias_truth(path: Path, n_imu: int):
+    """Each IMU's realized accelerometer and gyro bias (n_imu, n, 3) from a `generate --truth` output of a scene
+    with error effects (NPZ accel_bias / gyro_bias, CSV bax..bgz), else (None, None)."""
+    from imu_emulator.output import BIAS_COLUMNS
+    found = _read_columns(path, ("accel_bias", "gyro_bias"), BIAS_COLUMNS)
+    if found is None or isinstance(found, list):
+        return tuple(found) if found else (None, None)
+    per_imu = found.reshape(-1, n_imu, 6).transpose(1, 0, 2)   # row k * n_imu + m: sample k of IMU m
+    return per_imu[:, :, :3], per_imu[:, :, 3:]
 
 
 def _decimate(n: int) -> slice:
@@ -136,14 +159,20 @@ def draw(data: PlotData, output: str | Path):
     t = data.t[step]
     col = 1 if axes3d is not None else slice(None)
     for m, name in enumerate(data.imu_names):
-        for row, (values, label, unit) in enumerate(((data.accel, "specific force", "m/s²"),
-                                                     (data.gyro, "angular rate", "rad/s"))):
+        for row, (values, bias, label, unit) in enumerate(((data.accel, data.accel_bias, "specific force", "m/s²"),
+                                                           (data.gyro, data.gyro_bias, "angular rate", "rad/s"))):
             ax = fig.add_subplot(grid[2 * m + row, col])
             for axis, color in zip(range(3), ("tab:red", "tab:green", "tab:blue")):
                 ax.plot(t, values[m, step, axis], color=color, lw=1, label="xyz"[axis])
             ax.set_ylabel(f"{unit}")
             ax.set_title(f"IMU {name}: {label} (sensor frame)", fontsize=9)
             ax.legend(loc="upper right", fontsize=7, ncol=3)
+            if bias is not None:   # far smaller than the signal: its own scale, on the right
+                twin = ax.twinx()
+                for axis, color in zip(range(3), ("tab:red", "tab:green", "tab:blue")):
+                    twin.plot(t, bias[m, step, axis], color=color, lw=1, ls="--", label=f"bias {'xyz'[axis]}")
+                twin.set_ylabel(f"realized bias ({unit})", fontsize=8)
+                twin.legend(loc="lower right", fontsize=7, ncol=3)
             if m == n_imu - 1 and row == 1:
                 ax.set_xlabel("t (s)")
     fig.tight_layout()

@@ -149,4 +149,75 @@ def parse(value, unit: str, shape: str, where: str):
         else:
             row = [to_unit(value, unit, where)] * 3
         return tuple(tuple(row[i] if (i == j) == diagonal else 0.0 for j in range(3)) for i in range(3))
+    if shape == "sines":
+        return _sines(value, unit, where)
+    if shape == "psd":
+        return _psd(value, unit, where)
     raise ValueError(shape)
+
+
+def _sines(value, unit: str, where: str):
+    """Sinusoidal lines: a list of tables {axis = "x"|"y"|"z", amplitude, frequency, phase (optional)}; the
+    amplitude's unit alternatives ("m/s^2|rad/s") say its kind: a string converts to the first alternative of
+    its dimension, a plain number is in the first unless `kind` names another ("angular").
+    -> tuple of (axis index, kind index, amplitude, frequency in Hz, phase in rad)."""
+    kinds = unit.split("|")
+    if not isinstance(value, (list, tuple)):
+        raise SceneError(f"{where}: expected a list of tables {{axis, amplitude, frequency}}, got {value!r}")
+    lines = []
+    for i, line in enumerate(value):
+        at = f"{where}[{i}]"
+        if not isinstance(line, dict):
+            raise SceneError(f"{at}: expected a table {{axis, amplitude, frequency}}, got {line!r}")
+        unknown = set(line) - {"axis", "amplitude", "frequency", "phase", "kind"}
+        if unknown or not {"axis", "amplitude", "frequency"} <= set(line):
+            raise SceneError(f"{at}: expected keys axis, amplitude, frequency (phase, kind optional), got "
+                             f"{sorted(line)}")
+        if line["axis"] not in ("x", "y", "z"):
+            raise SceneError(f"{at}.axis: expected \"x\", \"y\" or \"z\", got {line['axis']!r}")
+        names = ("linear", "angular")[: len(kinds)]
+        kind = line.get("kind")
+        if kind is not None and kind not in names:
+            raise SceneError(f"{at}.kind: expected one of {', '.join(names)}, got {kind!r}")
+        amplitude = line["amplitude"]
+        if kind is not None:
+            index = names.index(kind)
+            number = to_unit(amplitude, kinds[index], f"{at}.amplitude")
+        elif isinstance(amplitude, str):
+            number = to_unit(amplitude, unit, f"{at}.amplitude")
+            index = next(j for j, k in enumerate(kinds) if _fits(amplitude, k))
+        else:
+            index, number = 0, to_unit(amplitude, kinds[0], f"{at}.amplitude")
+        frequency = to_unit(line["frequency"], "Hz", f"{at}.frequency")
+        if not frequency > 0:
+            raise SceneError(f"{at}.frequency: must be positive, got {line['frequency']!r}")
+        phase = to_unit(line.get("phase", 0.0), "rad", f"{at}.phase")
+        lines.append(("xyz".index(line["axis"]), index, number, frequency, phase))
+    return tuple(lines)
+
+
+def _fits(value: str, unit: str) -> bool:
+    try:
+        to_unit(value, unit, "")
+        return True
+    except SceneError:
+        return False
+
+
+def _psd(value, unit: str, where: str):
+    """A power spectral density table: a list of [frequency, level] breakpoints, frequencies increasing and
+    positive, levels positive (interpolated log-log between them, as vibration specifications are drawn).
+    -> tuple of (frequency in Hz, level in `unit`)."""
+    if not isinstance(value, (list, tuple)) or (value and len(value) < 2):
+        raise SceneError(f"{where}: expected a list of at least two [frequency, level] pairs, got {value!r}")
+    table = []
+    for i, pair in enumerate(value):
+        if not isinstance(pair, (list, tuple)) or len(pair) != 2:
+            raise SceneError(f"{where}[{i}]: expected a [frequency, level] pair, got {pair!r}")
+        f = to_unit(pair[0], "Hz", f"{where}[{i}][0]")
+        level = to_unit(pair[1], unit, f"{where}[{i}][1]")
+        if not (f > 0 and level > 0) or (table and not f > table[-1][0]):
+            raise SceneError(f"{where}[{i}]: frequencies must increase and be positive, levels positive, "
+                             f"got {pair!r}")
+        table.append((f, level))
+    return tuple(table)

@@ -36,6 +36,10 @@ def _sample_value(param, scale: float):
         return param.example * scale
     if param.shape == "scalar":
         return 0.3 * scale
+    if param.shape == "sines":
+        return [{"axis": "y", "amplitude": 0.5 * scale, "frequency": 30.0}]
+    if param.shape == "psd":
+        return [[10.0, 0.01 * scale], [40.0, 0.01 * scale]]
     if param.shape == "expression":
         return f"{20 * scale!r} + 0.1*t"
     if param.shape in ("vector3", "triple"):
@@ -76,7 +80,7 @@ def test_records_declare_stage_order_and_contract():
         assert effect.name.isidentifier() and effect.description and "\n" not in effect.description
         assert isinstance(effect.stage, Stage) and isinstance(effect.order, int)
         for param in effect.params:
-            assert param.table in ("imu", "imu.gyro", "imu.accel")
+            assert param.table in ("imu", "imu.gyro", "imu.accel", "imu.vibration")
     assert set(STAGE_CONTRACT) == set(Stage)
     order = [(e.stage, e.order) for e in EFFECTS.values()]
     assert order == sorted(order)
@@ -127,6 +131,12 @@ def test_kernel_command_prints_the_source():
                            capture_output=True, text=True, check=True).stdout
     for name in EFFECTS:
         assert f"`{name}`" in table
+
+
+def test_readme_parameter_table_is_the_records_table():
+    """README's "Sensor errors" table is documentation_table() as printed by `imu-emulator kernel --effects`."""
+    from imu_emulator.effects import documentation_table
+    assert documentation_table() in (ROOT / "README.md").read_text()
 
 
 # --- cache ------------------------------------------------------------------------------------------

@@ -66,3 +66,34 @@ def test_plot_bad_input_is_one_error_line(tmp_path, capsys):
     assert main(["plot", str(tmp_path / "junk.txt"), "-o", str(tmp_path / "j.png")]) == 2
     lines = capsys.readouterr().err.splitlines()
     assert len(lines) == 3 and all(line.startswith("error: ") for line in lines)
+
+
+def test_plot_of_a_truth_output_overlays_each_imus_realized_bias(tmp_path):
+    """generate --truth of a scene with error effects writes the realized biases; the plot of that output (NPZ
+    and CSV) holds them, per IMU and axis, as the dashed lines of a right-hand axis beside each signal."""
+    scene = tmp_path / "biased.toml"
+    scene.write_text(
+        (ROOT / "examples" / "two_imus.toml").read_text().replace("[effects]", "[effects]\nbias = true\n"
+                                                                  "random_walk = true")
+        + '\n[imu.gyro]\nbias = ["0.1 deg/s", 0, "-0.2 deg/s"]\nrandom_walk = "20 deg/h/sqrt(h)"\n'
+        + '[imu.accel]\nbias = [0.05, -0.02, 0.0]\n')
+    for name in ("run.npz", "run.csv"):
+        assert main(["generate", str(scene), "-o", str(tmp_path / name), "--quiet", "--truth"]) == 0
+        data = plotting.from_output(str(tmp_path / name))
+        with np.load(tmp_path / "run.npz") as npz:
+            np.testing.assert_allclose(data.gyro_bias, npz["gyro_bias"], rtol=1e-15, atol=0)
+            np.testing.assert_allclose(data.accel_bias, npz["accel_bias"], rtol=1e-15, atol=0)
+        # imu0 has no error terms (its bias is 0, not imu1's); imu1's gyro x starts at its constant bias
+        assert not data.gyro_bias[0].any() and not data.accel_bias[0].any()
+        assert abs(data.gyro_bias[1, 0, 0] - np.radians(0.1)) < 1e-12 and data.accel_bias[1, 0, 0] == 0.05
+        fig = plotting.draw(data, tmp_path / (name + ".png"))
+        _assert_png(tmp_path / (name + ".png"))
+        step = plotting._decimate(len(data.t))
+        for m in range(len(data.imu_names)):
+            for bias in (data.accel_bias, data.gyro_bias):
+                for axis in range(3):
+                    expected = bias[m, step, axis]
+                    assert any(line.get_label() == f"bias {'xyz'[axis]}" and line.get_linestyle() == "--"
+                               and np.array_equal(line.get_ydata(), expected)
+                               for ax in fig.axes for line in ax.get_lines()), (name, m, axis)
+        assert len(fig.axes) == 1 + 4 * len(data.imu_names)   # each signal axes has its bias twin

@@ -103,6 +103,22 @@ def test_quadratic_nonlinearity_rectifies_a_sine_vibration_into_k2_a0_squared_ov
     assert abs(out2.accel[0, :, 0].mean() - 200e-6 / G0 * a0 ** 2 / 2) < 1e-12
 
 
+def test_nonlinearity_in_percent_of_full_scale_is_k2_x_over_fs():
+    # a quadratic term reaching x of full scale FS at FS: K2 FS^2 = x FS, so K2 = x / FS (DC shift K2 a0^2 / 2)
+    a0 = 30.0
+    out, _ = run(vibration_scene(("nonlinearity",), {"nonlinearity_fs": ["0.5 %", 0, 0],
+                                                      "nonlinearity_full_scale": "16 g"}, a0, 50.0, 1000, 10))
+    assert abs(out.accel[0, :, 0].mean() - 0.005 / (16 * G0) * a0 ** 2 / 2) < 1e-12
+    # the full scale from the range effect (8 g here), and the per-unit form adding to it
+    out, _ = run(vibration_scene(("nonlinearity", "range"), {"nonlinearity_fs": ["0.5 %", 0, 0], "range": "8 g",
+                                                               "nonlinearity": [1e-4, 0, 0]}, a0, 50.0, 1000, 10))
+    assert abs(out.accel[0, :, 0].mean() - (0.005 / (8 * G0) + 1e-4) * a0 ** 2 / 2) < 1e-12
+    with pytest.raises(SceneError, match=r"imu\[0\]\.accel\.nonlinearity_fs: needs a full scale on axis x"):
+        vibration_scene(("nonlinearity",), {"nonlinearity_fs": "0.5 %"}, a0, 50.0, 1000, 10)
+    with pytest.raises(SceneError, match=r"imu\[0\]\.accel\.nonlinearity_fs: needs a full scale"):
+        run(vibration_scene(("nonlinearity",), {"nonlinearity_fs": "0.5 %", "range": "8 g"}, a0, 50.0, 1000, 10))
+
+
 def ramp_scene(effects, gyro, accel, rate_hz=100, duration_s=2.0, t0=-1.0):
     # without gravity, accel z = t (z = t^3/6, untouched by the yaw) and gyro z = -t (yaw = -t^2/2): both cross
     # +-range within the run; the other axes read 0

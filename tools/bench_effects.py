@@ -33,17 +33,23 @@ ACCEL = {"noise_density": "120 ug/sqrt(Hz)", "bias_instability": "30 ug", "rando
          "scale_factor": "0.1 %", "misalignment": "1 mrad", "nonlinearity": "10 ug/g^2",
          "bias_tc": "0.1 mg/K", "scale_tc": "100 ppm/K", "range": "16 g", "resolution": "0.488 mg"}
 IMU = {"temperature_c": "20 + 0.001*t", "warmup_rise_c": 15.0, "warmup_tau_s": 300.0}
+#: vibration variants: three sinusoidal lines (two linear, one angular), or a random PSD on three axes
+SINES = {"sines": [{"axis": "x", "amplitude": "0.5 g", "frequency": "120 Hz"},
+                   {"axis": "z", "amplitude": "0.3 g", "frequency": "47 Hz", "phase": "30 deg"},
+                   {"axis": "y", "amplitude": "2 deg/s", "frequency": "90 Hz"}]}
+PSD = {"psd": [["20 Hz", "0.001 g^2/Hz"], ["80 Hz", "0.01 g^2/Hz"], ["450 Hz", "0.01 g^2/Hz"]]}
 DETERMINISTIC = ["scale_factor", "misalignment", "g_sensitivity", "nonlinearity", "temperature", "range", "resolution"]
 #: the issue's full error model: noise + bias instability + random walk + scale/misalignment + range + resolution
 FULL = ["noise", "bias_instability", "random_walk", "scale_factor", "misalignment", "range", "resolution"]
 
 
-def circle(effects, seconds: float):
+def circle(effects, seconds: float, vibration=None):
     return scene_from_dict({
         "scene": {"rate_hz": 1000, "duration_s": seconds, "seed": 1},
         "trajectory": {"shape": "circle", "radius_m": 5.0, "frequency_hz": 1.0},
         "attitude": {"mode": "tangent"},
-        "imu": [{"name": "imu0", "lever_arm_m": [0.1, -0.05, 0.02], "gyro": GYRO, "accel": ACCEL, **IMU}],
+        "imu": [{"name": "imu0", "lever_arm_m": [0.1, -0.05, 0.02], "gyro": GYRO, "accel": ACCEL, **IMU,
+                 **({"vibration": vibration} if vibration else {})}],
         "effects": {"gravity": True, "lever_arm": True, **{name: True for name in effects}},
     })
 
@@ -95,6 +101,28 @@ def normal_cost(rounds: int) -> list[float]:
     return costs
 
 
+def interleave(sims, rounds: int):
+    """Thread CPU and wall ns/sample of each (label, sim, out, n), the variants taking turns every round."""
+    cpu = {label: [] for label, *_ in sims}
+    wall = {label: [] for label, *_ in sims}
+    for _ in range(rounds):
+        for label, sim, out, n in sims:
+            c, w = time_run(sim, n, out)
+            cpu[label].append(c / n)
+            wall[label].append(w / n)
+    return cpu, wall
+
+
+def report(sims, cpu, wall, header: str, against: str) -> None:
+    """One line per variant: CPU min / median / max, wall median, M samples/s, and the difference from the first."""
+    base = np.median(cpu[sims[0][0]])
+    print(header)
+    for label, *_ in sims:
+        c = np.array(cpu[label])
+        print(f"  {label:40} {c.min():7.1f} {np.median(c):7.1f} {c.max():7.1f}   wall {np.median(wall[label]):7.1f}"
+              f"   {1e3 / np.median(c):6.2f} M/s   {against} {np.median(c) - base:+7.1f}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--rounds", type=int, default=7)
@@ -105,13 +133,18 @@ def main() -> None:
                 ("+ bias_instability", ["bias_instability"]), ("+ random_walk", ["random_walk"]),
                 ("+ bias", ["bias"]), ("stochastic (noise, BI, RW, bias)", ["noise", "bias_instability", "random_walk", "bias"]),
                 *((f"+ {name}", [name]) for name in DETERMINISTIC),
-                ("full error model (issue 9 §6)", FULL), ("every error effect", [*FULL, "bias", *DETERMINISTIC[2:5]])]
-    cpu, wall = time_interleaved([(label, circle(effects, args.seconds)) for label, effects in variants], args.rounds)
-    base = np.median(cpu[variants[0][0]])
-    print(f"circle scene, 1 kHz, lever arm, {args.seconds:g} s per run, {args.rounds} interleaved rounds "
-          f"(ns/sample; thread CPU min / median / max, wall median; Msamples/s from the CPU median)")
-    for label, row, median in rows(cpu, wall, 40):
-        print(f"{row}   {1e3 / median:6.2f} M/s   effect cost {median - base:+7.1f}")
+                ("full error model (issue 9 §6)", FULL), ("every error effect", [*FULL, "bias", *DETERMINISTIC[2:5]]),
+                ("+ vibration, 3 sines", ["vibration"], SINES), ("+ vibration, PSD 3 x 256 lines", ["vibration"], PSD)]
+    sims = []
+    for label, effects, *vibration in variants:
+        scene = circle(effects, args.seconds, *vibration)
+        sim = Simulation(scene, attitude=False)
+        out = sim.block(0, BLOCK)
+        sims.append((label, sim, out, scene.n_samples))
+    cpu, wall = interleave(sims, args.rounds)
+    report(sims, cpu, wall, f"circle scene, 1 kHz, lever arm, {args.seconds:g} s per run, {args.rounds} interleaved "
+           "rounds (ns/sample; thread CPU min / median / max, wall median; Msamples/s from the CPU median)",
+           "effect cost")
     nc = normal_cost(args.rounds)
     print(f"one counter-based normal (normals() loop, thread CPU): min {min(nc):.2f} median {np.median(nc):.2f} ns")
 

@@ -31,3 +31,10 @@ def require_nonnegative(values: dict, key: str, where: str, what: str) -> None:
         for axis, value in enumerate(values[f"imu.{triad}.{key}"]):
             if value < 0:
                 raise SceneError(f"{where}.{triad}.{key}: {what}, got {value!r} on axis {AXES[axis]}")
+
+
+def nonnegative(key: str, what: str):
+    """The validate function of an effect whose triads' `key` must be >= 0 on every axis (range, resolution)."""
+    def validate(values: dict, where: str) -> None:
+        require_nonnegative(values, key, where, what)
+    return validate

@@ -136,6 +136,20 @@ class EmitContext:
         var = self.var("".join(c if c.isalnum() else "_" for c in name))
         return self.plan.add_state(var, self.m, lambda draw: initial(lambda s, c: draw(f"{prefix}.{s}", c)))
 
+    def state_block(self, name: str, initials) -> int:
+        """Slots carried in the state array that the kernel reads as state[base + i] inside a loop (no local
+        variable each): returns base. initials[i](draw) gives slot i's value at the run's start."""
+        if name not in self.effect.state:
+            raise KeyError(f"{self.effect.name} did not declare state {name!r}")
+        prefix = f"{self.effect.name}.{name}"
+        return self.plan.add_state_block(self.m, [
+            lambda draw, initial=initial: initial(lambda s, c: draw(f"{prefix}.{s}", c)) for initial in initials])
+
+    def constant(self, name: str, values) -> str:
+        """A module-level float array of this effect and IMU (numba folds it into the machine code): returns
+        its name in the generated source."""
+        return self.plan.add_constant(f"{self.effect.name.upper()}_{self.m}_{name}", values)
+
     def normal(self, stream: str, counter: str = "s") -> str:
         """Source for the standard normal number `counter` of this IMU's stream `stream` (default: this run
         sample's)."""

@@ -5,16 +5,23 @@ within -5.4 % / +0.9 % of 0.664 B from 3 tau_min to tau_max / 3). Also the plain
 correlation time) of Kalibr / RotorS.
 
 Exact discretization x' = a x + sigma sqrt(1 - a^2) w, a = exp(-h / tau), x_0 drawn from N(0, sigma^2) (a
-stationary start, neither 0 nor +sigma). Slow poles step on a grid of m samples (h = m dt at most the fastest slow
-tau / STEPS_PER_TAU) and are interpolated linearly between knots: what that changes is at cluster times below
-h, where the faster poles dominate the sum; the Allan-recovery tests measure the result."""
+stationary start, neither 0 nor +sigma). Slow processes step on grids of h = m_p dt (at most tau / STEPS_PER_TAU,
+tau / FLICKER_STEPS_PER_TAU for the flicker poles) and are interpolated linearly between knots: what that changes
+is at cluster times below h, where the faster poles and the white noise dominate; the Allan-recovery tests
+measure the result."""
 import math
 
 from imu_emulator.effects._record import AXES, TRIADS, Effect, Param, Stage, triad_params
 from imu_emulator.errors import SceneError
 
 SIGMA_PER_B = 0.856
+#: a plain Gauss-Markov process steps at least STEPS_PER_TAU times per tau (its per-knot statistics are
+#: exact, the straight lines between knots its only approximation); a pole of the flicker sum at least
+#: FLICKER_STEPS_PER_TAU times: only the sum's Allan curve is promised, and interpolating a pole over tau / 20
+#: changes it by far less than its confidence intervals at tau >= 0.1 s (tests/test_allan.py; the per-pole
+#: variance dips by (1 - exp(-1/20)) / 2 = 2.4 % midway between knots, 0.4 % of a six-pole sum)
 STEPS_PER_TAU = 100
+FLICKER_STEPS_PER_TAU = 20
 
 
 def poles(tau_min: float, tau_max: float) -> list[float]:
@@ -25,8 +32,8 @@ def poles(tau_min: float, tau_max: float) -> list[float]:
     return out
 
 
-def _steps(tau: float, dt: float) -> int:
-    return max(1, int(tau / (STEPS_PER_TAU * dt)))
+def _steps(tau: float, dt: float, per_tau: int = STEPS_PER_TAU) -> int:
+    return max(1, int(tau / (per_tau * dt)))
 
 
 def _coefficients(sigma: float, tau: float, h: float) -> tuple[float, float]:
@@ -34,60 +41,111 @@ def _coefficients(sigma: float, tau: float, h: float) -> tuple[float, float]:
     return math.exp(-h / tau), sigma * math.sqrt(-math.expm1(-2.0 * h / tau))
 
 
-def _processes(values: dict, triad: str, axis: int) -> list[tuple[str, float, float]]:
+def _processes(values: dict, triad: str, axis: int, dt: float) -> list[tuple[str, float, float, int]]:
+    """(stream name, stationary sigma, tau, samples per step at most) of one axis."""
     b = values[f"imu.{triad}.bias_instability"][axis]
     band = poles(values[f"imu.{triad}.bias_instability_tau_min_s"], values[f"imu.{triad}.bias_instability_tau_max_s"])
-    found = [(f"{triad}.{AXES[axis]}.p{i}", SIGMA_PER_B * b, tau) for i, tau in enumerate(band)] if b else []
+    found = [(f"{triad}.{AXES[axis]}.p{i}", SIGMA_PER_B * b, tau, _steps(tau, dt, FLICKER_STEPS_PER_TAU))
+             for i, tau in enumerate(band)] if b else []
     if values[f"imu.{triad}.gauss_markov_sigma"][axis]:
-        found.append((f"{triad}.{AXES[axis]}.gm", values[f"imu.{triad}.gauss_markov_sigma"][axis],
-                      values[f"imu.{triad}.gauss_markov_tau_s"][axis]))
+        tau = values[f"imu.{triad}.gauss_markov_tau_s"][axis]
+        found.append((f"{triad}.{AXES[axis]}.gm", values[f"imu.{triad}.gauss_markov_sigma"][axis], tau,
+                      _steps(tau, dt)))
     return found
 
 
+def _grids(every: dict, m: int) -> dict[str, int]:
+    """Each slow process's grid m_p: a multiple of m, and of the grid of the next faster process of its axis,
+    at most its own step count (the flicker poles of an axis nest, so the knot code tests one remainder per
+    level and only when the level above stepped)."""
+    grids = {}
+    for procs in every.values():
+        below = m
+        for name, _, _, steps in sorted((p for p in procs if p[3] > 1), key=lambda p: p[3]):
+            grids[name] = below * (steps // below)      # steps >= below: sorted, and below <= its steps
+            below = grids[name]
+    return grids
+
+
 def emit(ctx) -> list[str]:
-    """Fast processes (tau < 2 * STEPS_PER_TAU * dt) step every sample. The slow ones of this IMU all step on one
-    common grid of m samples (the fastest slow pole's tau / STEPS_PER_TAU, so at least every 100th of any
-    slow tau), exactly for h = m dt, and each axis interpolates linearly between the sums of its slow
-    processes at two knots: one interpolation per axis and sample, whatever the number of poles."""
-    every = {(triad, axis): _processes(ctx.imu.values, triad, axis) for triad in TRIADS for axis in range(3)}
-    slow_steps = [_steps(tau, ctx.dt) for procs in every.values() for _, _, tau in procs if _steps(tau, ctx.dt) > 1]
+    """Fast processes (one step per sample) step every sample. The slow ones of this IMU share one grid of m
+    samples (the smallest slow step count), and each axis interpolates linearly between the sums of its slow
+    processes at two grid knots: one interpolation per axis and sample, whatever the number of poles. A slow
+    process steps exactly on its own coarser grid of m_p samples (a multiple of m, so its value at the m-knots,
+    the straight line between its own knots, interpolated again between m-knots is that same straight line): a
+    pole of tau = 1e4 s draws a normal every m_p samples, not every m. The knot code runs once every m samples:
+    one remainder test per grid level, deeper levels only when the level above stepped."""
+    every = {(triad, axis): _processes(ctx.imu.values, triad, axis, ctx.dt) for triad in TRIADS for axis in range(3)}
+    slow_steps = [steps for procs in every.values() for *_, steps in procs if steps > 1]
     m = min(slow_steps) if slow_steps else 1
-    step, adds, after = [], [], []
+    grids = _grids(every, m)
+    adds, after, shift, sums = [], [], [], []
+    advance: dict[int, list[str]] = {}       # m_p -> lines stepping the processes on that grid
     r = ctx.var("r")
     for (triad, axis), procs in every.items():
-        terms = []
-        slow = []
-        for name, sigma, tau in procs:
-            if _steps(tau, ctx.dt) == 1:   # x_s is read, then x_{s+1} = a x_s + q w
+        terms, nexts, slow = [], [], []
+        for name, sigma, tau, steps in procs:
+            if steps == 1:   # x_s is read, then x_{s+1} = a x_s + q w
                 a, q = _coefficients(sigma, tau, ctx.dt)
                 x = ctx.state(f"gm[{name}]", lambda draw, sigma=sigma, name=name: sigma * draw(name, 0))
                 terms.append(x)
                 after.append(f"{x} = {a!r} * {x} + {q!r} * {ctx.normal(name, '(s + 1)')}")
             else:
-                slow.append((name, sigma, *_coefficients(sigma, tau, m * ctx.dt)))
-        if slow:
-            # knots i = s // m and i + 1: sums sa, sb of the slow processes; each process keeps its value at i + 1
-            def start(draw, slow=slow):
-                return sum(sigma * draw(name, 0) for name, sigma, _, _ in slow)
+                slow.append((name, sigma, grids[name], *_coefficients(sigma, tau, grids[name] * ctx.dt)))
+        if not slow:
+            if terms:
+                adds += ctx.add_bias(triad, axis, " + ".join(terms))
+            continue
 
-            def start_next(draw, slow=slow):
-                return sum(a * sigma * draw(name, 0) + q * draw(name, 1) for name, sigma, a, q in slow)
-            label = f"{triad}.{AXES[axis]}"
-            sa = ctx.state(f"gm[{label}.sa]", start)
-            sb = ctx.state(f"gm[{label}.sb]", start_next)
-            step.append(f"    {sa} = {sb}")
-            nexts = []
-            for name, sigma, a, q in slow:
-                xb = ctx.state(f"gm[{name}.b]", lambda draw, name=name, sigma=sigma, a=a, q=q:
-                               a * sigma * draw(name, 0) + q * draw(name, 1))
-                step.append(f"    {xb} = {a!r} * {xb} + {q!r} * {ctx.normal(name, f'(s // {m} + 1)')}")
+        # the sums sa, sb of the slow processes at m-knots i = s // m and i + 1; each process keeps its values xa,
+        # xb at its own knots j = s // m_p and j + 1 (xa only when m_p > m: at m-knots it is interpolated)
+        def at_next_knot(xa, xb, m_p):
+            return xb if m_p == m else xa + (xb - xa) * (m / m_p)
+
+        def start(draw, slow=slow):
+            return sum(sigma * draw(name, 0) for name, sigma, *_ in slow)
+
+        def start_next(draw, slow=slow):
+            return sum(at_next_knot(sigma * draw(name, 0), a * sigma * draw(name, 0) + q * draw(name, 1), m_p)
+                       for name, sigma, m_p, a, q in slow)
+        label = f"{triad}.{AXES[axis]}"
+        sa = ctx.state(f"gm[{label}.sa]", start)
+        sb = ctx.state(f"gm[{label}.sb]", start_next)
+        shift.append(f"{sa} = {sb}")
+        for name, sigma, m_p, a, q in slow:
+            xb = ctx.state(f"gm[{name}.b]", lambda draw, name=name, sigma=sigma, a=a, q=q:
+                           a * sigma * draw(name, 0) + q * draw(name, 1))
+            step = f"{xb} = {a!r} * {xb} + {q!r} * {ctx.normal(name, f'(s // {m_p} + 1)')}"
+            if m_p == m:
+                advance.setdefault(m_p, []).append(step)
                 nexts.append(xb)
-            step.append(f"    {sb} = {' + '.join(nexts)}")
-            terms.append(f"({sa} + ({sb} - {sa}) * ({r} * {1.0 / m!r}))")
-        if terms:
-            adds += ctx.add_bias(triad, axis, " + ".join(terms))
-    before = [f"{r} = s % {m}", f"if {r} == 0 and s > 0:", *step] if step else []
-    return before + adds + after
+                continue
+            xa = ctx.state(f"gm[{name}.a]", lambda draw, name=name, sigma=sigma: sigma * draw(name, 0))
+            advance.setdefault(m_p, []).extend([f"{xa} = {xb}", step])
+            nexts.append(f"({xa} + ({xb} - {xa}) * {ctx.var(f'w{m_p}')})")
+        sums.append(f"{sb} = {' + '.join(nexts)}")
+        terms.append(f"({sa} + ({sb} - {sa}) * ({r} * {1.0 / m!r}))")
+        adds += ctx.add_bias(triad, axis, " + ".join(terms))
+    if not shift:
+        return adds + after
+    knot = shift + _nested(sorted(advance), advance, m)
+    # where each coarser grid's straight line is at the next m-knot
+    knot += [f"{ctx.var(f'w{m_p}')} = (s % {m_p} + {m}) * {1.0 / m_p!r}" for m_p in sorted(advance) if m_p != m]
+    knot += sums
+    return [f"{r} = s % {m}", f"if {r} == 0 and s > 0:", *("    " + line for line in knot)] + adds + after
+
+
+def _nested(levels: list[int], advance: dict, m: int) -> list[str]:
+    """The stepping lines of each grid, inside the block of the coarsest finer grid it is a multiple of (so its
+    remainder is tested only when that one stepped); the m grid steps at every knot, untested."""
+    parent = {g: max((h for h in levels if h < g and g % h == 0), default=None) for g in levels}
+
+    def block(g: int) -> list[str]:
+        body = list(advance[g])
+        for child in (c for c in levels if parent[c] == g):
+            body += block(child)
+        return body if g == m else [f"if s % {g} == 0:", *("    " + line for line in body)]
+    return [line for g in levels if parent[g] is None for line in block(g)]
 
 
 def validate(values: dict, where: str) -> None:

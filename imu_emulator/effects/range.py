@@ -1,7 +1,7 @@
 """Range: the sensor's full scale. Outputs beyond ±range saturate there and are counted per IMU and axis
 (Simulation.counts(), shown by generate and stream; apart from the wire fields' own saturation counts).
 0 (the default) leaves that axis unlimited."""
-from imu_emulator.effects._linear import per_axis, require_nonnegative
+from imu_emulator.effects._linear import nonnegative, per_axis
 from imu_emulator.effects._record import Effect, Stage, triad_params
 
 
@@ -14,13 +14,10 @@ def emit(ctx) -> list[str]:
     return lines
 
 
-def validate(values: dict, where: str) -> None:
-    require_nonnegative(values, "range", where, "a full scale is positive (or 0 for unlimited)")
-
-
 EFFECT = Effect(
     name="range",
     description="full scale: outputs beyond +-range saturate there, counted per IMU and axis",
-    stage=Stage.OUTPUT, order=0, emit=emit, validate=validate,
+    stage=Stage.OUTPUT, order=0, emit=emit,
+    validate=nonnegative("range", "a full scale is positive (or 0 for unlimited)"),
     params=triad_params("range", "rad/s", "m/s^2", "full scale (0: unlimited)", gyro_datasheet="`2000 deg/s`",
                         accel_datasheet="`16 g`"))

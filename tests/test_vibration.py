@@ -1,0 +1,168 @@
+"""The vibration effect as motion of the IMU: sinusoidal lines against closed forms, the general case (a turning,
+rolling body, linear and two-axis angular lines: coning) against a sympy derivation of the IMU's own motion, the
+random part's PSD level against Welch's chi-square interval, and the vibration rectification of a quadratic
+nonlinearity (K2 a0^2 / 2)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import sympy as sp
+from scipy import signal, stats
+
+from imu_emulator import scene_from_dict
+from imu_emulator.errors import SceneError
+from imu_emulator.simulation import Simulation
+
+G0 = 9.80665
+
+
+def scene(vibration, effects=("gravity", "vibration"), rate_hz=1000, duration_s=0.5, attitude=None, seed=1,
+          **imu):
+    return scene_from_dict({
+        "scene": {"rate_hz": rate_hz, "duration_s": duration_s, "seed": seed},
+        "trajectory": {"x": "0", "y": "0", "z": "0"},
+        **({"attitude": attitude} if attitude else {}),
+        "imu": [{"name": "imu0", "vibration": vibration, **imu}],
+        "effects": {name: True for name in effects}})
+
+
+def run(s, attitude=False):
+    return Simulation(s, attitude=attitude).run()
+
+
+def test_linear_and_angular_sines_against_closed_forms():
+    # x: 2 g at 37 Hz, phase 30 deg (linear); y: 3 deg/s at 11 Hz (angular). A body at rest, ENU: the IMU's axes
+    # are turned by b = -A_w / w cos(w t) about y, so f = Ry(b)^T (a_x, 0, g), omega = (0, A_w sin(w t), 0).
+    out = run(scene({"sines": [{"axis": "x", "amplitude": "2 g", "frequency": "37 Hz", "phase": "30 deg"},
+                               {"axis": "y", "amplitude": "3 deg/s", "frequency": "11 Hz"}]}))
+    t = out.t_s
+    a_x = 2 * G0 * np.sin(2 * np.pi * 37 * t + np.pi / 6)
+    rate = math.radians(3)
+    b = -rate / (2 * np.pi * 11) * np.cos(2 * np.pi * 11 * t)
+    expected_f = np.stack([np.cos(b) * a_x - np.sin(b) * G0, 0 * t, np.sin(b) * a_x + np.cos(b) * G0], axis=1)
+    np.testing.assert_allclose(out.accel[0], expected_f, rtol=0, atol=1e-12 * 2 * G0)
+    np.testing.assert_allclose(out.gyro[0], np.stack([0 * t, rate * np.sin(2 * np.pi * 11 * t), 0 * t], axis=1),
+                               rtol=0, atol=1e-12 * rate)
+
+
+def _rot(axis, angle):
+    c, s = sp.cos(angle), sp.sin(angle)
+    return {"x": sp.Matrix([[1, 0, 0], [0, c, -s], [0, s, c]]),
+            "y": sp.Matrix([[c, 0, s], [0, 1, 0], [-s, 0, c]]),
+            "z": sp.Matrix([[c, -s, 0], [s, c, 0], [0, 0, 1]])}[axis]
+
+
+def test_vibration_on_a_moving_body_is_the_imus_own_motion_sympy():
+    """The IMU at body point d(t) (linear lines, body axes) with axes R_b R_v (angular lines on x and z, 90 deg
+    apart: coning), the body rolling and turning: sympy differentiates the IMU's position and attitude directly
+    (f = R^T (p'' + g e_z), omega = vee(R^T R')), independent of the kernel's lever-arm and rotation terms."""
+    t = sp.symbols("t", real=True)
+    lines = [("x", "linear", 3.0, 13.0, 0.4), ("y", "linear", 1.5, 7.0, 0.0), ("z", "linear", 2.0, 5.0, 1.0),
+             ("x", "angular", 0.2, 9.0, 0.0), ("z", "angular", 0.2, 9.0, math.pi / 2), ("y", "angular", 0.1, 4.0, 0.3)]
+    vib = {"sines": [{"axis": a, "kind": k, "amplitude": amp, "frequency": f, "phase": ph}
+                     for a, k, amp, f, ph in lines]}
+    out = run(scene(vib, rate_hz=200, duration_s=0.5,
+                    attitude={"roll": "0.3*sin(0.5*t)", "pitch": "0.1*t", "yaw": "0.4*t"}))
+    d = {a: sp.Integer(0) for a in "xyz"}
+    ang = {a: sp.Integer(0) for a in "xyz"}
+    for axis, kind, amp, f, ph in lines:
+        w = 2 * sp.pi * f
+        if kind == "linear":      # d'' = A sin(w t + ph)
+            d[axis] += -amp / w ** 2 * sp.sin(w * t + ph)
+        else:                     # angle' = A sin(w t + ph)
+            ang[axis] += -amp / w * sp.cos(w * t + ph)
+    r_b = _rot("z", 0.4 * t) * _rot("y", 0.1 * t) * _rot("x", 0.3 * sp.sin(0.5 * t))
+    r_v = _rot("x", ang["x"]) * _rot("y", ang["y"]) * _rot("z", ang["z"])
+    r = r_b * r_v
+    p = r_b * sp.Matrix([d["x"], d["y"], d["z"]])
+    f = r.T * (p.diff(t, 2) + sp.Matrix([0, 0, G0]))
+    omega = r.T * r.diff(t)
+    w_vec = sp.Matrix([omega[2, 1], omega[0, 2], omega[1, 0]])
+    f_num, w_num = sp.lambdify(t, f, "numpy"), sp.lambdify(t, w_vec, "numpy")
+    for j in (0, 17, 50, 99):
+        tj = float(out.t_s[j])
+        np.testing.assert_allclose(out.accel[0, j], np.ravel(f_num(tj)).astype(float), rtol=0, atol=1e-10)
+        np.testing.assert_allclose(out.gyro[0, j], np.ravel(w_num(tj)).astype(float), rtol=0, atol=1e-12)
+
+
+def test_quadratic_nonlinearity_dc_shift_under_a_sine_vibration_effect():
+    a0, k2 = 20.0, 3e-3
+    out = run(scene({"sines": [{"axis": "x", "amplitude": a0, "frequency": "50 Hz"}]},
+                    effects=("gravity", "vibration", "nonlinearity"), duration_s=1.0,
+                    accel={"nonlinearity": [k2, 0.0, 0.0]}))
+    # 1000 samples = 50 whole periods, 20 samples each: the sampled mean of sin^2 is exactly 1/2, of sin 0
+    assert abs(out.accel[0, :, 0].mean() - k2 * a0 ** 2 / 2) < 1e-12
+
+
+PSD_G2HZ, F_LO, F_HI, RATE, SECONDS, NPERSEG = 0.01, 50.0, 400.0, 2000, 64.0, 1024
+
+
+@pytest.fixture(scope="module")
+def random_vibration():
+    return scene({"psd": [[f"{F_LO} Hz", f"{PSD_G2HZ} g^2/Hz"], [f"{F_HI} Hz", f"{PSD_G2HZ} g^2/Hz"]],
+                  "psd_lines": 1000, "psd_axes": [1.0, 0.0, 0.0]},
+                 rate_hz=RATE, duration_s=SECONDS, seed=7)
+
+
+def test_random_vibration_psd_level_by_welch_within_chi_square_interval(random_vibration):
+    out = run(random_vibration)
+    level = PSD_G2HZ * G0 ** 2
+    freqs, pxx = signal.welch(out.accel[0, :, 0], fs=RATE, window="hann", nperseg=NPERSEG, noverlap=0,
+                              detrend="constant")
+    inside = (freqs > F_LO + 10) & (freqs < F_HI - 10)     # away from the band edges' window leakage
+    segments = int(SECONDS * RATE) // NPERSEG
+    # For a Gaussian process each bin is level * chi2(2K) / 2K over K non-overlapping segments. A sum of
+    # sinusoids with random phases has no such spread from the lines' powers (they are exact), but the cross
+    # terms of lines within one window bandwidth average out over the segments only where their beat is not near
+    # a multiple of 1/T_seg, so a single bin can leave that interval; means over bins average the cross terms
+    # (their signs are random). Hann makes neighbouring bins correlated: count K degrees of freedom per bin, half
+    # of 2K. Checked: the band's mean (two-sided 1e-3) and the mean of each of 5 sub-bands (two-sided 1e-3 / 5,
+    # Bonferroni), which also checks the spectrum is flat across the band.
+    n_bins = int(inside.sum())
+    nu = segments * n_bins
+    lo, hi = stats.chi2.ppf([0.5e-3, 1 - 0.5e-3], nu) / nu
+    assert lo * level < pxx[inside].mean() < hi * level, pxx[inside].mean() / level
+    for part in np.array_split(pxx[inside], 5):
+        nu = segments * part.size
+        lo, hi = stats.chi2.ppf([0.1e-3, 1 - 0.1e-3], nu) / nu
+        assert lo * level < part.mean() < hi * level, part.mean() / level
+    # outside the band: nothing but the edges' leakage (far below the level)
+    assert np.all(pxx[(freqs > F_HI + 20) | ((freqs < F_LO - 20) & (freqs > 0))] < 1e-3 * level)
+    # the y and z axes carry no vibration (weight 0): z is gravity exactly
+    np.testing.assert_array_equal(out.accel[0, :, 1], 0.0)
+    np.testing.assert_allclose(out.accel[0, :, 2], G0, rtol=1e-15)
+
+
+def test_random_vibration_same_bytes_for_any_block_size_and_new_phases_for_another_seed(random_vibration):
+    whole = Simulation(random_vibration, attitude=False).block(0, 3000).accel
+    sim = Simulation(random_vibration, attitude=False)
+    parts = np.concatenate([sim.block(k, n).accel for k, n in ((0, 1), (1, 7), (8, 992), (1000, 2000))], axis=1)
+    assert whole.tobytes() == parts.tobytes()
+    other = scene_from_dict({**_raw(random_vibration, seed=8)})
+    again = Simulation(other, attitude=False).block(0, 3000).accel
+    assert np.abs(np.corrcoef(whole[0, :, 0], again[0, :, 0])[0, 1]) < 5 / math.sqrt(3000)
+
+
+def _raw(s, seed):
+    """The random_vibration scene's dict with another seed."""
+    return {"scene": {"rate_hz": RATE, "duration_s": SECONDS, "seed": seed},
+            "trajectory": {"x": "0", "y": "0", "z": "0"},
+            "imu": [{"name": "imu0", "vibration": {
+                "psd": [[f"{F_LO} Hz", f"{PSD_G2HZ} g^2/Hz"], [f"{F_HI} Hz", f"{PSD_G2HZ} g^2/Hz"]],
+                "psd_lines": 1000, "psd_axes": [1.0, 0.0, 0.0]}}],
+            "effects": {"gravity": True, "vibration": True}}
+
+
+@pytest.mark.parametrize("vibration, message", [
+    ({"sines": [{"axis": "w", "amplitude": 1, "frequency": 5}]}, r"imu\[0\]\.vibration\.sines\[0\]\.axis"),
+    ({"sines": [{"axis": "x", "amplitude": "1 m", "frequency": 5}]}, r"sines\[0\]\.amplitude: .*wrong dimension"),
+    ({"sines": [{"axis": "x", "amplitude": 1, "frequency": 0}]}, r"sines\[0\]\.frequency: must be positive"),
+    ({"psd": [[20, 0.1], [10, 0.1]]}, r"vibration\.psd\[1\]: frequencies must increase"),
+    ({"psd": [[20, "0.1 g"], [40, 0.1]]}, r"vibration\.psd\[0\]\[1\]: .*wrong dimension"),
+    ({"psd": [[20, 0.1], [40, 0.1]], "psd_lines": 2.5}, r"vibration\.psd_lines: expected a whole number"),
+])
+def test_bad_vibration_parameters_name_the_key(vibration, message):
+    with pytest.raises(SceneError, match=message):
+        scene(vibration)
