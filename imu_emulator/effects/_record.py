@@ -83,6 +83,7 @@ class Effect:
     params: tuple[Param, ...] = ()
     state: tuple[str, ...] = ()  # what the per-IMU state slots hold (carried across blocks)
     random: bool = False         # draws random numbers (needs [scene] seed for a chosen realization)
+    drawn_once: bool = False     # its state and draws are made at the run's start and only read after
     nav_rate: bool = False       # navigation-stage effect that adds a rate of the navigation frame
     #: navigation-stage effect whose lines define `clk`, the actual sampling instant's offset from sample k in
     #: samples (t = t0 + (k + clk) dt); they run before the motion, which is evaluated at that instant

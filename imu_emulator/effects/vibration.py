@@ -146,7 +146,7 @@ def validate(values: dict, where: str) -> None:
 EFFECT = Effect(
     name="vibration",
     description="vibration as motion of the IMU: sinusoidal lines (linear or angular) and a random PSD",
-    stage=Stage.BODY, order=50, emit=emit, validate=validate, random=True, state=("phase",),
+    stage=Stage.BODY, order=50, emit=emit, validate=validate, random=True, state=("phase",), drawn_once=True,
     params=(Param("sines", "imu.vibration", "m/s^2|rad/s", "sinusoidal lines: [{axis, amplitude, frequency, "
                   "phase}], amplitude as the sensor sees it (acceleration, or kind = \"angular\": rate)",
                   shape="sines", default=(), datasheet="`[{axis = \"x\", amplitude = \"2 g\", frequency = "
