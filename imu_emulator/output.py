@@ -78,6 +78,8 @@ class Writer(FinishOnExit):
             arrays["temperature_c"] = data.temperature_c
         if self.increments:
             arrays.update(dtheta=data.dtheta, dvel=data.dvel)
+        if data.time_offset_s is not None:      # [[imu]] time_offset_s: each IMU's own stamps, (imu, n)
+            arrays["t_imu"] = data.imu_t_s()
         if self.truth:
             arrays.update(data.truth)
         try:
@@ -114,7 +116,7 @@ def csv_rows(block: SampleBlock, imu_names, truth: bool, bias_truth: bool = Fals
     def interleaved(per_imu):      # (n_imu, n, k) -> (n * n_imu, k), IMU index fastest
         return np.ascontiguousarray(per_imu.transpose(1, 0, 2)).reshape(n * n_imu, -1)
 
-    columns = {"t": np.repeat(block.t_s, n_imu),
+    columns = {"t": block.imu_t_s().T.ravel(),
                "imu": pa.DictionaryArray.from_arrays(np.tile(np.arange(n_imu, dtype=np.int32), n),
                                                      pa.array(list(imu_names)))}
     numeric = [interleaved(block.accel), interleaved(block.gyro)]

@@ -6,14 +6,16 @@ Two IMUs on one body: B mounted at Euler (10°, −25°, 137°) relative to A, B
 from A, B's clock 3.7 ms ahead of A's (not a multiple of the 5 ms sample period), 200 Hz, 60 s.
 Cases (issue 12):
   a  exact data, three-axis rotation of 40–60 °/s at non-commensurate 0.37/0.83/1.07 Hz (phases drawn per seed)
-  b  a + BMI088-class noise, turn-on bias and bias instability          (needs the sensor-error model)
-  c  b + 0.1 % scale factor and 0.05° misalignment per sensor            (needs the sensor-error model)
-  d  c + 50 ppm clock drift of B                                         (needs the sensor-error model)
+  b  a + BMI088-class noise, turn-on bias and bias instability
+  c  b + 0.1 % scale factor and 0.05° misalignment per sensor (each off-diagonal element ±0.05°)
+  d  c + 50 ppm clock drift of B (the clock effect), drift estimated
   e  a car-like drive (a figure of eight, mostly yaw, small roll and pitch), exact data: what is observable
   w  a + white noise only, drawn here with numpy (not the sensor model) at BMI088-class densities:
      gyro 0.014 °/s/√Hz, accel 160 µg/√Hz, i.e. 3.5e-3 rad/s and 0.022 m/s² per sample at 200 Hz
-Cases b–d take their sensor model as a scene fragment (SENSOR_FRAGMENTS): until the scene accepts those keys
-they are reported as skipped with the scene's own error message.
+Cases b–d add the sensor model's effect records to both IMUs (sensor_fragment: the bosch-bmi088 preset's noise,
+turn-on bias, bias instability; c and d also scale factor and misalignment with signs drawn per seed); in d, B
+comes from a second run of the scene with the clock effect at +50 ppm (a scene's IMUs share one sample clock).
+B's time offset is its [[imu]] time_offset_s.
 Prints, per case and per estimated quantity, the max and RMS error over the seeds, the observability verdicts,
 and the run time of align() (wall, process CPU of all threads, CPU of the calling thread; the machine may be
 shared: see the header line).
@@ -44,15 +46,46 @@ RATE_HZ = 200.0
 DURATION_S = 60.0
 
 # The sensor model of cases b–d as scene fragments, merged into the scene (dicts merge, [[imu]] entries merge
-# per IMU). The keys follow the sensor-model issue; they are accepted once that model is on main.
-SENSOR_FRAGMENTS = {
-    "b": {"imu": [{"preset": "bmi088"}, {"preset": "bmi088"}], "effects": {"sensor_errors": True}},
-    "c": {"imu": [{"preset": "bmi088", "scale_factor_ppm": 1000, "misalignment_deg": 0.05}] * 2,
-          "effects": {"sensor_errors": True}},
-    "d": {"imu": [{"preset": "bmi088", "scale_factor_ppm": 1000, "misalignment_deg": 0.05},
-                  {"preset": "bmi088", "scale_factor_ppm": 1000, "misalignment_deg": 0.05, "clock_ppm": 50}],
-          "effects": {"sensor_errors": True, "clock": True}},
-}
+# per IMU, their [imu.gyro] / [imu.accel] tables too). BMI088 noise densities come from the preset
+# (`model = "bosch-bmi088"`, presets/bosch-bmi088.toml); the preset has no bias figures, so the turn-on bias and
+# bias instability are given here at the datasheet's orders of magnitude (zero-rate offset ±1 °/s, bias stability
+# 2 °/h; zero-g offset ±20 mg): turn-on σ 0.5 °/s and 10 mg, instability 2 °/h and 40 µg. Turn-on biases are drawn
+# per IMU from the seed, so A and B differ.
+BMI088 = {"model": "bosch-bmi088",
+          "gyro": {"turn_on_bias_sd": "0.5 deg/s", "bias_instability": "2 deg/h"},
+          "accel": {"turn_on_bias_sd": "10 mg", "bias_instability": "40 ug"}}
+SENSOR_EFFECTS = {"noise": True, "bias": True, "bias_instability": True}
+SCALE_FACTOR = 1e-3                 # case c: 0.1 % per axis, sign drawn per seed, axis and sensor
+MISALIGNMENT_DEG = 0.05             # case c: each off-diagonal element ±0.05°, sign drawn likewise
+CLOCK_PPM_B = 50.0                  # case d: B's sample clock (the clock effect), A's clock true
+
+
+def sensor_fragment(case: str, seed: int) -> dict:
+    """The [[imu]] / [effects] additions of case b, c or d for this seed."""
+    if case == "b":
+        return {"imu": [BMI088, BMI088], "effects": SENSOR_EFFECTS}
+    rng = np.random.default_rng(2000 + seed)
+    imus = []
+    for _ in range(2):
+        imu = copy.deepcopy(BMI088)
+        for triad in ("gyro", "accel"):
+            imu[triad]["scale_factor"] = (SCALE_FACTOR * rng.choice([-1.0, 1.0], 3)).tolist()
+            signs = rng.choice([-1.0, 1.0], (3, 3))
+            imu[triad]["misalignment"] = [[0.0 if i == j else math.radians(MISALIGNMENT_DEG) * signs[i, j]
+                                           for j in range(3)] for i in range(3)]
+        imus.append(imu)
+    return {"imu": imus, "effects": {**SENSOR_EFFECTS, "scale_factor": True, "misalignment": True}}
+
+
+def injected_misalignment_deg(fragment: dict) -> float:
+    """The rotation B's and A's misalignments put between their sensing axes (what no estimator can tell from a
+    mounting rotation): the antisymmetric part of M_B − M_A, as an angle; B's M acts in B's frame, and at this
+    size the frames do not matter to first order."""
+    if "imu" not in fragment or "misalignment" not in fragment["imu"][0].get("gyro", {}):
+        return 0.0
+    m = [np.array(imu["gyro"]["misalignment"]) for imu in fragment["imu"]]
+    a = 0.5 * ((m[1] - m[0]) - (m[1] - m[0]).T)
+    return float(np.degrees(np.linalg.norm([a[2, 1], a[0, 2], a[1, 0]])))
 
 
 def true_rotation() -> np.ndarray:
@@ -96,7 +129,7 @@ def merge(scene: dict, fragment: dict) -> dict:
     out = copy.deepcopy(scene)
     for key, value in fragment.items():
         if key == "imu":
-            out["imu"] = [{**imu, **extra} for imu, extra in zip(out["imu"], value)]
+            out["imu"] = [merge(imu, extra) for imu, extra in zip(out["imu"], value)]
         elif isinstance(value, dict):
             out[key] = {**out.get(key, {}), **value}
         else:
@@ -105,35 +138,54 @@ def merge(scene: dict, fragment: dict) -> dict:
 
 
 def two_logs(scene_dict: dict, offset_s: float = TIME_OFFSET_S, rate_b_hz: float | None = None,
-             t0_b_s: float = 0.0, drift_ppm: float = 0.0, t_ref_s: float = 0.0):
-    """ImuLogs of IMUs a and b (A's clock is the scene's time). B's stamp of the instant τ is
-    τ + offset_s + drift_ppm·1e-6·(τ − t_ref_s), i.e. t_B − t_A as alignment.py defines it. With rate_b_hz or
-    t0_b_s, B comes from a second run of the same scene at that rate, starting at that time: same motion,
-    other sample instants. (Until [[imu]] has its own time_offset_s, this relabelling is how a test gets one.)"""
+             t0_b_s: float = 0.0, drift_ppm: float = 0.0, t_ref_s: float = 0.0, b_fragment: dict | None = None):
+    """ImuLogs of IMUs a and b (A's clock is the scene's time), with B's `time_offset_s` = offset_s in the scene:
+    B's stamp of the instant τ is τ + offset_s, i.e. t_B − t_A as alignment.py defines it. With rate_b_hz, t0_b_s
+    or b_fragment, B comes from a second run of the same scene at that rate, starting at that time, with that
+    fragment merged (case d: a sample clock for B alone, as the IMUs of one scene share one clock): same motion,
+    other sample instants. drift_ppm relabels B's stamps by drift_ppm·1e-6·(τ − t_ref_s): an exact drift for the
+    exact-data tests (the clock effect's own drift, which also moves the sample instants, is case d)."""
     from imu_emulator.simulation import Simulation
+    scene_dict = copy.deepcopy(scene_dict)
+    scene_dict["imu"][1]["time_offset_s"] = offset_s
     out = Simulation(scene_from_dict(scene_dict), attitude=False).run()
-    a = ImuLog("A", out.t_s, out.accel[0], out.gyro[0])
-    if rate_b_hz is None and t0_b_s == 0.0:
-        b_t, b_acc, b_gyr = out.t_s, out.accel[1], out.gyro[1]
+    stamps = out.imu_t_s()
+    a = ImuLog("A", stamps[0], out.accel[0], out.gyro[0])
+    if rate_b_hz is None and t0_b_s == 0.0 and b_fragment is None:
+        b_t, b_acc, b_gyr = stamps[1], out.accel[1], out.gyro[1]
     else:
-        other = copy.deepcopy(scene_dict)
+        other = merge(scene_dict, b_fragment or {})
         other["scene"]["rate_hz"] = rate_b_hz or other["scene"]["rate_hz"]
         other["scene"]["t0_s"] = t0_b_s
         ob = Simulation(scene_from_dict(other), attitude=False).run()
-        b_t, b_acc, b_gyr = ob.t_s, ob.accel[1], ob.gyro[1]
-    stamps = b_t + offset_s + drift_ppm * 1e-6 * (b_t - t_ref_s)
-    return a, ImuLog("B", stamps, b_acc, b_gyr)
+        b_t, b_acc, b_gyr = ob.imu_t_s()[1], ob.accel[1], ob.gyro[1]
+    if drift_ppm:
+        b_t = b_t + drift_ppm * 1e-6 * (b_t - offset_s - t_ref_s)
+    return a, ImuLog("B", b_t, b_acc, b_gyr)
 
 
 def rotation_error_deg(C: np.ndarray, truth: np.ndarray) -> float:
     return float(np.degrees(Rotation.from_matrix(C @ truth.T).magnitude()))
 
 
-def scene_for(case: str, seed: int) -> dict:
+def scene_for(case: str, seed: int) -> tuple[dict, float]:
+    """The case's scene and the misalignment it injects (°, injected_misalignment_deg)."""
     if case == "e":
-        return car_scene(seed)
+        return car_scene(seed), 0.0
     scene = three_axis_scene(seed)
-    return merge(scene, SENSOR_FRAGMENTS[case]) if case in SENSOR_FRAGMENTS else scene
+    if case not in ("b", "c", "d"):
+        return scene, 0.0
+    fragment = sensor_fragment(case, seed)
+    return merge(scene, fragment), injected_misalignment_deg(fragment)
+
+
+def true_time_offset(case: str, t_ref_s: float) -> tuple[float, float]:
+    """(t_B − t_A at A's time t_ref_s, its drift in ppm). Case d: B samples at τ_k = k·Δt·(1 + p) and stamps
+    k·Δt + offset, so t_B − t_A = offset − p/(1 + p)·τ."""
+    if case != "d":
+        return TIME_OFFSET_S, 0.0
+    p = CLOCK_PPM_B * 1e-6
+    return TIME_OFFSET_S - p / (1 + p) * t_ref_s, -p / (1 + p) * 1e6
 
 
 # Per-sample σ = density·√f_s (specs/sensor-errors.md, "Exact discretization").
@@ -151,8 +203,10 @@ def run_case(case: str, seeds: int):
     truth = true_rotation()
     rows = {False: [], True: []}
     for seed in range(seeds):
+        scene, injected = scene_for("a" if case == "w" else case, seed)
+        b_clock = {"imu": [{"clock_ppm": CLOCK_PPM_B}] * 2, "effects": {"clock": True}} if case == "d" else None
         try:
-            a, b = two_logs(scene_for("a" if case == "w" else case, seed))
+            a, b = two_logs(scene, b_fragment=b_clock)
         except ImuEmulatorError as exc:
             return None, str(exc)
         if case == "w":
@@ -165,9 +219,11 @@ def run_case(case: str, seeds: int):
             thread = time.thread_time() - thread
             cpu = time.process_time() - cpu       # all threads: BLAS works outside the calling thread
             wall = time.perf_counter() - wall
+            offset, drift = true_time_offset(case, result.time_reference_s)
             rows[lever_arm].append({
-                "rotation_deg": rotation_error_deg(result.C, truth),
-                "time_offset_ms": abs(result.time_offset_s - TIME_OFFSET_S) * 1e3,
+                "rotation_deg": rotation_error_deg(result.C, truth), "injected_deg": injected,
+                "time_offset_ms": abs(result.time_offset_s - offset) * 1e3,
+                "drift_ppm": abs(result.drift_ppm - drift) if result.drift_ppm is not None else float("nan"),
                 "lever_arm_mm": (float(np.linalg.norm(result.lever_arm_m - np.array(LEVER_B_M))) * 1e3
                                  if lever_arm else float("nan")),
                 "sigma_rotation_deg": result.sigma["rotation_deg"],
@@ -195,16 +251,17 @@ def main(argv=None) -> int:
     os.environ.setdefault("IMU_EMULATOR_CACHE", "/tmp/imu-emulator-bench-align")
     print(f"# {args.seeds} seeds, {DURATION_S:g} s at {RATE_HZ:g} Hz; load average {os.getloadavg()[0]:.2f} "
           f"on {os.cpu_count()} CPUs (shared machine: times vary)")
-    print("| case | model | rotation err max / RMS (°) | Δt err max / RMS (ms) | lever arm err max / RMS (mm) "
+    print("| case | model | rotation err max / RMS (°) | injected misalignment max (°) | Δt err max / RMS (ms) "
+          "| drift err max / RMS (ppm) | lever arm err max / RMS (mm) "
           "| reported 1σ rotation (°, median) | unobservable (verdicts seen) "
           "| align() wall / process CPU / thread CPU, median (s) |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     results = {}
     for case in args.cases.split(","):
         rows, skipped = run_case(case, args.seeds)
         results[case] = rows
         if rows is None:
-            print(f"| {case} | — | skipped: {skipped} ||||||")
+            print(f"| {case} | — | skipped: {skipped} ||||||||")
             continue
         for lever_arm, model in ((False, "gyro only"), (True, "gyro + accel, lever arm")):
             col = {k: np.array([r[k] for r in rows[lever_arm]]) for k in rows[lever_arm][0] if k != "unobservable"}
@@ -215,7 +272,9 @@ def main(argv=None) -> int:
                     return "—"
                 return f"{fmt.format(np.max(x))} / {fmt.format(np.sqrt(np.mean(x ** 2)))}"
             verdicts = sorted({r["unobservable"] for r in rows[lever_arm]})
-            print(f"| {case} | {model} | {stat('rotation_deg', '{:.1e}')} | {stat('time_offset_ms', '{:.1e}')} | "
+            injected = f"{np.max(col['injected_deg']):.3f}" if np.any(col["injected_deg"]) else "—"
+            print(f"| {case} | {model} | {stat('rotation_deg', '{:.1e}')} | {injected} | "
+                  f"{stat('time_offset_ms', '{:.1e}')} | {stat('drift_ppm', '{:.1e}')} | "
                   f"{stat('lever_arm_mm', '{:.1e}')} | {np.median(col['sigma_rotation_deg']):.1e} | "
                   f"{'; '.join(verdicts)} | {np.median(col['wall_s']):.2f} / {np.median(col['cpu_s']):.2f} / "
                   f"{np.median(col['thread_s']):.2f} |",
