@@ -89,15 +89,16 @@ class Writer(FinishOnExit):
 
 
 def open_writer(path: str | Path, imu_names, truth: bool, bias_truth: bool = False, temperature: bool = False,
-                increments: bool = False):
+                increments: bool = False, covariances: dict | None = None):
     """The writer for the output file's suffix: .mcap is a ROS 2 bag (imu_emulator.output_mcap; it carries no
-    temperature, and no increments: sensor_msgs/Imu has no field for them)."""
+    temperature, and no increments: sensor_msgs/Imu has no field for them; it takes the noise covariances per
+    IMU, effects.noise.variances)."""
     if Path(path).suffix.lower() == ".mcap":
         if increments:
             raise ImuEmulatorError(f"{path}: --increments: a ROS 2 bag's sensor_msgs/Imu has no field for "
                                    "integrated outputs; write .csv or .npz")
         from imu_emulator.output_mcap import McapWriter
-        return McapWriter(check_path(path), imu_names, truth)
+        return McapWriter(check_path(path), imu_names, truth, covariances)
     return Writer(path, imu_names, truth, bias_truth=bias_truth, temperature=temperature, increments=increments)
 
 

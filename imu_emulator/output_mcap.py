@@ -4,8 +4,8 @@ frame_id = the IMU's name), and with truth a `nav_msgs/msg/Odometry` topic `/tru
 frame as REP 147 / nav_msgs ask). Written with mcap-ros2-support (CDR), readable by `ros2 bag` and Foxglove
 without a ROS installation; block by block, so memory does not grow with the run.
 
-Covariances: given per IMU (gyro and accelerometer variance, (rad/s)^2 and (m/s^2)^2) when a sensor noise
-model supplies them, on the diagonal; otherwise all zeros, which sensor_msgs/Imu defines as "covariance
+Covariances: given per IMU (gyro and accelerometer variance per axis, (rad/s)^2 and (m/s^2)^2) when a sensor
+noise model supplies them (the noise effect's per-sample variance, effects.noise.variances), on the diagonal; otherwise all zeros, which sensor_msgs/Imu defines as "covariance
 unknown" (-1 in element 0 would instead say "this field carries no data", and consumers would drop it).
 Orientation: the sensor frame's attitude (the emulator's truth, sensor -> navigation) when the simulation
 provides it, else orientation_covariance[0] = -1 ("no orientation estimate"), as the message asks.
@@ -88,7 +88,7 @@ class McapWriter(FinishOnExit):
         variance = self.covariances.get(name)
         if variance is None:
             return [0.0] * 9
-        return list(np.diag([variance[which]] * 3).ravel())
+        return [float(x) for x in np.diag(np.broadcast_to(variance[which], 3)).ravel()]
 
     def write(self, block: SampleBlock) -> None:
         scene_ns = block.time_ns()

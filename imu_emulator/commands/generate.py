@@ -36,8 +36,10 @@ def cmd_generate(args) -> int:
     # at its path only when every block is written (a failed run leaves nothing behind).
     from imu_emulator.kernel import EffectPlan
     bias_truth = EffectPlan(scene).bias_truth    # the realized-bias columns, known before compiling
+    from imu_emulator.effects.noise import variances
     with open_writer(args.output, scene.imu_names, args.truth, bias_truth=bias_truth,
-                     temperature="temperature" in scene.effects, increments=bool(args.increments)) as writer:
+                     temperature="temperature" in scene.effects, increments=bool(args.increments),
+                     covariances=variances(scene)) as writer:
         check_output(scene, args.output, args.truth, args.allow_large)
         # a ROS Imu message has an orientation field: fill it from the sensor frame's attitude
         attitude = args.output.lower().endswith(".mcap")

@@ -83,7 +83,8 @@ def cmd_replay(args) -> int:
     for warning in scene.warnings:
         print(f"warning: {warning}", file=sys.stderr)
     out = Simulation(scene).run()
-    writer = open_writer(output, scene.imu_names, truth=False)
+    from imu_emulator.effects.noise import variances
+    writer = open_writer(output, scene.imu_names, truth=False, covariances=variances(scene))
     writer.write(out)
     writer.close()
     if not args.quiet:
