@@ -257,6 +257,24 @@ def _noise(table: Mapping, key: str, where: str, derivative: str, warnings: list
 LOG_KEYS = {"position_source", "attitude_source", "max_gap_s"}
 
 
+def _noise_from_velocity(log, derivative: str, warnings: list[str]) -> float:
+    """position_noise_m = "velocity": the smoothing chosen from the log's own velocity (logs/velocity.py)."""
+    from imu_emulator.logs.velocity import noise_from_velocity
+    where = "trajectory.position_noise_m"
+    if derivative != "smooth":
+        raise SceneError(f"{where}: \"velocity\" chooses the smoothing of derivative 'smooth' (this one is "
+                         f"{derivative!r})")
+    if log.velocity is None:
+        raise SceneError(f"{where}: \"velocity\": {log.source.name} logs no velocity beside "
+                         f"{log.position.name}; state the noise in metres")
+    try:
+        sigma, _ = noise_from_velocity(log.position, log.velocity, f"{where}: {log.source.name}")
+    except DataError as exc:
+        raise SceneError(str(exc)) from None
+    warnings.append(f"{where}: {sigma:g} m, chosen from the logged velocity {log.velocity.name}")
+    return sigma
+
+
 def _is_log(table: Mapping) -> bool:
     from imu_emulator.logs import log_kind
     return isinstance(table.get("file"), str) and log_kind(table["file"]) is not None
@@ -462,9 +480,12 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
         _no_unknown(traj_table, {"file", "derivative", "position_noise_m"} | LOG_KEYS, "trajectory")
         derivative = _check_derivative(traj_table.get("derivative", DEFAULT_DERIVATIVE), "trajectory.derivative")
         log = _load_log(traj_table, "trajectory", base_dir)
+        if traj_table.get("position_noise_m") == "velocity":
+            noise = _noise_from_velocity(log, derivative, warnings)
+        else:
+            noise = _noise(traj_table, "position_noise_m", "trajectory", derivative, warnings)
         trajectory = SampledData(t=log.position.t, values=log.position.values, derivative=derivative,
-                                 source=f"{log.source}:{log.position.name}",
-                                 noise=_noise(traj_table, "position_noise_m", "trajectory", derivative, warnings))
+                                 source=f"{log.source}:{log.position.name}", noise=noise)
         warnings.extend(log.notes)
     elif "file" in traj_table or "t" in traj_table:
         _no_unknown(traj_table, {"file", "derivative", "t", "position", "euler", "quat", "position_noise_m"},
