@@ -206,7 +206,7 @@ def with_white_noise(log: ImuLog, rng) -> ImuLog:
                   log.gyro + rng.normal(0, WHITE_NOISE["gyro"], log.gyro.shape))
 
 
-def run_case(case: str, seeds: int):
+def run_case(case: str, seeds: int, lowpass: float | None = AlignOptions.lowpass):
     """Per model ("gyro only", "gyro + accel, lever arm"), one row of errors per seed; or None and the reason
     when the scene cannot be built (cases b–d before the sensor-error model)."""
     truth = true_rotation()
@@ -222,7 +222,7 @@ def run_case(case: str, seeds: int):
             rng = np.random.default_rng(1000 + seed)
             a, b = with_white_noise(a, rng), with_white_noise(b, rng)
         for lever_arm in (False, True):
-            options = AlignOptions(lever_arm=lever_arm, drift=(case == "d"))
+            options = AlignOptions(lever_arm=lever_arm, drift=(case == "d"), lowpass=lowpass)
             wall, cpu, thread = time.perf_counter(), time.process_time(), time.thread_time()
             result = align(a, b, options)
             thread = time.thread_time() - thread
@@ -281,6 +281,8 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--cases", default="a,b,c,d,e,w")
+    parser.add_argument("--no-lowpass", action="store_true",
+                        help="fit without the low-pass of both records (AlignOptions.lowpass = None), to see its effect")
     parser.add_argument("--plot", help="also draw the errors of every seed to this image (needs matplotlib)")
     args = parser.parse_args(argv)
     os.environ.setdefault("IMU_EMULATOR_CACHE", "/tmp/imu-emulator-bench-align")
@@ -293,7 +295,7 @@ def main(argv=None) -> int:
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     results = {}
     for case in args.cases.split(","):
-        rows, skipped = run_case(case, args.seeds)
+        rows, skipped = run_case(case, args.seeds, None if args.no_lowpass else AlignOptions.lowpass)
         results[case] = rows
         if rows is None:
             print(f"| {case} | — | skipped: {skipped} |||||||||")
