@@ -41,6 +41,9 @@ from imu_emulator.imulog import ImuLog
 MIN_SAMPLES = 32            # per record and in the overlap: a quintic spline and a dozen parameters need room
 MIN_OVERLAP_FRACTION = 0.5  # a candidate offset must leave half of the shorter record overlapping
 MIN_RATE_CHANGE = 0.01      # rad/s RMS of |ω| about its mean: less is too little motion to find a time offset
+LOWPASS_ORDER = 4
+REGULAR_STAMPS = 0.01       # low-pass only records whose sample steps stay within 1 % of their median
+LOWPASS_EDGE = 10.0         # after the low-pass, drop this many 1/f_c seconds at each end (start-up transients)
 MIN_CORRELATION = 0.8       # of |ω_A| and |ω_B| at the coarse offset; one body's motion gives ~1 unless noise
                             # dominates the rate changes, where the offset could not be trusted anyway
 # Noise floors for the observability verdict only: perfect (simulated) data would otherwise make a weakly
@@ -59,6 +62,13 @@ class AlignOptions:
     # noise into α (noise in a regressor shrinks the lever arm: 2.8 mm at 0.05 s, 0.4 mm at 0.1 s with
     # BMI088-class noise, tools/bench_align.py case w); motion much faster than 1/window would be smoothed.
     alpha_span_s: float = 0.1
+    # Zero-phase low-pass (Butterworth, order 4, forward and backward) of both records before the fit, at this
+    # fraction of the lower-rate record's Nyquist frequency; None: off. Interpolating white noise gives it a
+    # variance that depends on where between two samples the interpolation falls (least midway), so the
+    # least-squares fit is pulled toward half-sample offsets, and with a drift sweeping that position through
+    # the run the drift is biased: 1.1–1.3 ppm (2.6–3σ) with BMI088-class noise in tools/bench_align.py case d,
+    # 0.06–0.3 ppm with the low-pass. Noise limited to half the Nyquist band interpolates evenly.
+    lowpass: float | None = 0.5
     # Verdict thresholds (see _verdicts): a direction is unobservable when its 1σ (with the noise floors)
     # exceeds the maximum, or when it is excited less than min_excitation times the best direction of its kind.
     min_excitation: float = 0.1
@@ -215,6 +225,7 @@ class _Problem:
         self.names = names
         self.index = {k: slice(names.index(k), len(names) - names[::-1].index(k)) for k in dict.fromkeys(names)}
         self.scale = np.array([1.0, 1.0])    # residual weights 1/σ of gyro and accel groups
+        self.noise_bandwidth = 1.0           # fraction of white noise variance the low-pass passes (base grid)
 
     def __len__(self):
         return len(self.t)
@@ -340,8 +351,12 @@ def align(a: ImuLog, b: ImuLog, options: AlignOptions = AlignOptions()) -> Align
         drift0 = (offsets[1] - offsets[0]) / (centres[1] - centres[0]) * 1e6
         delta0 = float(np.mean(offsets) + drift0 * 1e-6 * (t_ref - np.mean(centres)))
     base_is_a = a.rate_hz <= b.rate_hz
+    bandwidth = 1.0
+    if options.lowpass is not None:
+        a, b, bandwidth = _lowpassed(a, b, options.lowpass, notes)
     problem = _Problem(a, b, base_is_a, delta0, drift0, t_ref, options.lever_arm, options.drift,
                        options.alpha_span_s)
+    problem.noise_bandwidth = bandwidth
     if len(problem) < MIN_SAMPLES:
         raise DataError(f"{where}: too short: {len(problem)} samples overlap (need at least {MIN_SAMPLES})")
     # Closed-form start: Kabsch on the centred gyro pairs (centring removes the bias difference).
@@ -379,6 +394,42 @@ def align(a: ImuLog, b: ImuLog, options: AlignOptions = AlignOptions()) -> Align
             notes.append("Levenberg–Marquardt stopped at its iteration limit before converging: treat the "
                          "estimates with suspicion")
     return _result(problem, p, C0, options, coarse, hi - lo, evaluations, notes)
+
+
+def _lowpassed(a: ImuLog, b: ImuLog, fraction: float, notes: list[str]) -> tuple[ImuLog, ImuLog, float]:
+    """Both records low-passed at one cutoff in Hz (fraction of the lower rate's Nyquist frequency) with zero
+    phase, their ends trimmed by LOWPASS_EDGE / f_c; and the fraction of white noise's variance the filter passes
+    on the lower-rate (base) grid, by which the residual variance understates the noise the estimates carry
+    (the signal lies in the pass band, where the filter is 1). Records too short to trim stay as they are."""
+    from scipy.signal import butter, sosfiltfilt
+    if not 0 < fraction < 1:
+        raise DataError(f"low-pass: the fraction of the Nyquist frequency must lie in (0, 1), got {fraction!r}")
+    low = min(a.rate_hz, b.rate_hz)
+    cutoff = fraction * 0.5 * low
+    edge = LOWPASS_EDGE / cutoff
+    if min(a.t[-1] - a.t[0], b.t[-1] - b.t[0]) < 10 * edge:
+        notes.append(f"records shorter than {10 * edge:.3g} s: not low-passed before the fit")
+        return a, b, 1.0
+    for log in (a, b):
+        # a digital filter assumes even spacing; jittered stamps already scatter the interpolation positions
+        steps = np.diff(log.t)
+        if np.max(np.abs(steps - np.median(steps))) > REGULAR_STAMPS * np.median(steps):
+            notes.append(f"{log.label}: stamps not evenly spaced (within {REGULAR_STAMPS:.0%}): not low-passed "
+                         "before the fit")
+            return a, b, 1.0
+    out = []
+    for log in (a, b):
+        sos = butter(LOWPASS_ORDER, cutoff, fs=log.rate_hz, output="sos")
+        keep = (log.t >= log.t[0] + edge) & (log.t <= log.t[-1] - edge)
+        out.append(ImuLog(log.label, log.t[keep], sosfiltfilt(sos, log.accel, axis=0)[keep],
+                          sosfiltfilt(sos, log.gyro, axis=0)[keep]))
+    sos = butter(LOWPASS_ORDER, cutoff, fs=low, output="sos")
+    n = 2 * int(20 * low / cutoff) + 1
+    impulse = np.zeros(n)
+    impulse[n // 2] = 1.0
+    response = sosfiltfilt(sos, impulse)
+    notes.append(f"both records low-passed at {cutoff:.4g} Hz (zero phase) before the fit")
+    return out[0], out[1], float(response @ response)
 
 
 def levenberg_marquardt(problem: _Problem, p: np.ndarray, C0: np.ndarray, floor: float,
@@ -466,9 +517,11 @@ def _result(problem: _Problem, p, C, options: AlignOptions, coarse, overlap_s, e
     rms = {"gyro_rad_s": _rms(rg)}
     if rf is not None:
         rms["accel_mps2"] = _rms(rf)
-    # Residual variance per group with the degrees of freedom shared out by rows.
-    sig_g = _rms(rg) * math.sqrt(m / dof)
-    sig_f = _rms(rf) * math.sqrt(m / dof) if rf is not None else 1.0
+    # Residual variance per group with the degrees of freedom shared out by rows; after a low-pass, the white
+    # noise that leaves this residual variance (the information sums JᵀJ over rows as if they were independent).
+    inflate = math.sqrt(m / dof / problem.noise_bandwidth)
+    sig_g = _rms(rg) * inflate
+    sig_f = _rms(rf) * inflate if rf is not None else 1.0
     cov = {}
     # (never below a millionth of the floors: exactly zero residuals would make the scale infinite)
     problem.scale = np.array([1.0 / max(sig_g, 1e-6 * GYRO_FLOOR), 1.0 / max(sig_f, 1e-6 * ACCEL_FLOOR)])

@@ -5,8 +5,8 @@ order, names matched after stripping spaces and ignoring case. The emulator's CS
 row per IMU per sample) and, with --truth, its truth columns; both are understood. Any other column is an
 error: a column we silently ignored (a "gx_dps", a second clock) is one the user believed we used.
 
-NPZ: what `imu-emulator generate -o run.npz` writes (t, imu_names, accel and gyro shaped (imu, n, 3)), or a
-plain record with t (n,), accel (n, 3), gyro (n, 3).
+NPZ: what `imu-emulator generate -o run.npz` writes (t, imu_names, accel and gyro shaped (imu, n, 3), and t_imu
+(imu, n) when an IMU has its own time_offset_s), or a plain record with t (n,), accel (n, 3), gyro (n, 3).
 
 Every record gets the same checks as a track file: finite values, strictly increasing time stamps, errors
 that name the file, the row (CSV line as an editor shows it, or 0-based NPZ index) and the column.
@@ -137,4 +137,10 @@ def _read_npz(path: Path) -> dict[str | None, ImuLog]:
         return f"index {i}"
     if names is None:
         return {None: _checked(where, t, accel, gyro, row_label)}
-    return {name: _checked(f"{where}[{name}]", t, accel[m], gyro[m], row_label) for m, name in enumerate(names)}
+    # t_imu (imu, n): each IMU's own stamps, written when an [[imu]] has a time_offset_s
+    stamps = arrays.get("t_imu")
+    if stamps is not None and (stamps.dtype.kind not in "iuf" or stamps.shape != (len(names), n)):
+        raise DataError(f"{where}: array t_imu has shape {stamps.shape} and dtype {stamps.dtype}, expected numbers "
+                        f"shaped {(len(names), n)}")
+    return {name: _checked(f"{where}[{name}]", t if stamps is None else stamps[m], accel[m], gyro[m], row_label)
+            for m, name in enumerate(names)}

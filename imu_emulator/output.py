@@ -83,6 +83,8 @@ class Writer(FinishOnExit):
             arrays["temperature_c"] = data.temperature_c
         if self.increments:
             arrays.update(dtheta=data.dtheta, dvel=data.dvel)
+        if data.time_offset_s is not None:      # [[imu]] time_offset_s: each IMU's own stamps, (imu, n)
+            arrays["t_imu"] = data.imu_t_s()
         if self.truth:
             arrays.update(data.truth)
         if self.conventions:
@@ -94,10 +96,12 @@ class Writer(FinishOnExit):
 
 
 def open_writer(path: str | Path, imu_names, truth: bool, bias_truth: bool = False, temperature: bool = False,
-                increments: bool = False, metadata: dict | None = None, conventions: list[str] | None = None):
+                increments: bool = False, metadata: dict | None = None, conventions: list[str] | None = None,
+                covariances: dict | None = None):
     """The writer for the output file's suffix: .mcap is a ROS 2 bag (imu_emulator.output_mcap; it carries no
-    temperature, and no increments: sensor_msgs/Imu has no field for them); .parquet is a table with `metadata`
-    (scene hash, seed, versions) in its footer (imu_emulator.output_parquet)."""
+    temperature, and no increments: sensor_msgs/Imu has no field for them; it takes the noise covariances per
+    IMU, effects.noise.variances); .parquet is a table with `metadata` (scene hash, seed, versions) in its
+    footer (imu_emulator.output_parquet)."""
     if Path(path).suffix.lower() == ".parquet":
         from imu_emulator.output_parquet import ParquetWriter
         return ParquetWriter(check_path(path), imu_names, truth, bias_truth=bias_truth, temperature=temperature,
@@ -107,7 +111,7 @@ def open_writer(path: str | Path, imu_names, truth: bool, bias_truth: bool = Fal
             raise ImuEmulatorError(f"{path}: --increments: a ROS 2 bag's sensor_msgs/Imu has no field for "
                                    "integrated outputs; write .csv or .npz")
         from imu_emulator.output_mcap import McapWriter
-        return McapWriter(check_path(path), imu_names, truth)
+        return McapWriter(check_path(path), imu_names, truth, covariances)
     return Writer(path, imu_names, truth, bias_truth=bias_truth, temperature=temperature, increments=increments,
                   conventions=conventions)
 
@@ -149,7 +153,9 @@ def block_columns(block: SampleBlock, imu_names, truth: bool, bias_truth: bool =
     def interleaved(per_imu):      # (n_imu, n, k) -> (n * n_imu, k), IMU index fastest
         return np.ascontiguousarray(per_imu.transpose(1, 0, 2)).reshape(n * n_imu, -1)
 
-    columns = {"t_ns" if time_ns else "t": np.repeat(block.time_ns() if time_ns else block.t_s, n_imu),
+    stamps = (np.stack([block.time_ns(block.imu_offset_ns(m)) for m in range(n_imu)]) if time_ns
+              else block.imu_t_s())   # (n_imu, n): each IMU's own stamps ([[imu]] time_offset_s)
+    columns = {"t_ns" if time_ns else "t": stamps.T.ravel(),
                "imu": pa.DictionaryArray.from_arrays(np.tile(np.arange(n_imu, dtype=np.int32), n),
                                                      pa.array(list(imu_names)))}
     numeric = [interleaved(block.accel), interleaved(block.gyro)]

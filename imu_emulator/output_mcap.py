@@ -4,8 +4,8 @@ frame_id = the IMU's name), and with truth a `nav_msgs/msg/Odometry` topic `/tru
 frame as REP 147 / nav_msgs ask). Written with mcap-ros2-support (CDR), readable by `ros2 bag` and Foxglove
 without a ROS installation; block by block, so memory does not grow with the run.
 
-Covariances: given per IMU (gyro and accelerometer variance, (rad/s)^2 and (m/s^2)^2) when a sensor noise
-model supplies them, on the diagonal; otherwise all zeros, which sensor_msgs/Imu defines as "covariance
+Covariances: given per IMU (gyro and accelerometer variance per axis, (rad/s)^2 and (m/s^2)^2) when a sensor
+noise model supplies them (the noise effect's per-sample variance, effects.noise.variances), on the diagonal; otherwise all zeros, which sensor_msgs/Imu defines as "covariance
 unknown" (-1 in element 0 would instead say "this field carries no data", and consumers would drop it).
 Orientation: the sensor frame's attitude (the emulator's truth, sensor -> navigation) when the simulation
 provides it, else orientation_covariance[0] = -1 ("no orientation estimate"), as the message asks.
@@ -52,6 +52,10 @@ ODOMETRY_DEFINITION = _definition(
     "MSG: geometry_msgs/Twist\ngeometry_msgs/Vector3 linear\ngeometry_msgs/Vector3 angular\n", _MSG_VEC)
 
 
+def _stamps(ns) -> list[dict]:
+    return [{"sec": int(t // 1_000_000_000), "nanosec": int(t % 1_000_000_000)} for t in ns]
+
+
 def ros_name(name: str) -> str:
     """A ROS graph-name token from an IMU name: letters, digits and underscores, not starting with a digit."""
     token = re.sub(r"[^A-Za-z0-9_]", "_", name)
@@ -84,12 +88,13 @@ class McapWriter(FinishOnExit):
         variance = self.covariances.get(name)
         if variance is None:
             return [0.0] * 9
-        return list(np.diag([variance[which]] * 3).ravel())
+        return [float(x) for x in np.diag(np.broadcast_to(variance[which], 3)).ravel()]
 
     def write(self, block: SampleBlock) -> None:
-        ns = block.time_ns()
-        stamps = [{"sec": int(t // 1_000_000_000), "nanosec": int(t % 1_000_000_000)} for t in ns]
+        scene_ns = block.time_ns()
         for m, (name, topic) in enumerate(zip(self.imu_names, self.topics)):
+            ns = scene_ns + block.imu_offset_ns(m)         # [[imu]] time_offset_s
+            stamps = _stamps(ns)
             gyro_cov, acc_cov = self._covariance(name, 0), self._covariance(name, 1)
             no_orientation = [-1.0] + [0.0] * 8
             for j, stamp in enumerate(stamps):
@@ -108,7 +113,7 @@ class McapWriter(FinishOnExit):
                     "linear_acceleration": {"x": float(a[0]), "y": float(a[1]), "z": float(a[2])},
                     "linear_acceleration_covariance": acc_cov}, log_time=int(ns[j]), publish_time=int(ns[j]))
         if self.truth:
-            self._write_truth(block, ns, stamps)
+            self._write_truth(block, scene_ns, _stamps(scene_ns))
 
     def _write_truth(self, block: SampleBlock, ns, stamps) -> None:
         from imu_emulator.rotations import euler_to_matrix, matrix_to_quat

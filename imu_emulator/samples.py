@@ -26,6 +26,8 @@ class SampleBlock:
                                               # temperature effect on (else None: formats send their default)
     dtheta: np.ndarray | None = None   # (n_imu, n, 3) integral of the gyro's rate over (t_k-1, t_k], rad, and
     dvel: np.ndarray | None = None     # of the specific force, m/s (imu_emulator.increments); None unless asked
+    time_offset_s: np.ndarray | None = None   # (n_imu,) [[imu]] time_offset_s, added to each IMU's stamps in
+                                              # every output; None when every IMU's is 0
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
@@ -43,11 +45,21 @@ class SampleBlock:
                                                                   for k, v in self.truth.items()},
                            temperature_c=None if self.temperature_c is None else self.temperature_c[:, start:stop],
                            dtheta=None if self.dtheta is None else self.dtheta[:, start:stop],
-                           dvel=None if self.dvel is None else self.dvel[:, start:stop])
+                           dvel=None if self.dvel is None else self.dvel[:, start:stop],
+                           time_offset_s=self.time_offset_s)
 
     def time_ns(self, offset_ns: int = 0) -> np.ndarray:
         """Sample times as integer nanoseconds (exact to the ns for any sane t0), plus an offset."""
         return np.rint(self.t_s * 1e9).astype(np.int64) + np.int64(offset_ns)
+
+    def imu_offset_ns(self, imu: int) -> int:
+        """IMU `imu`'s time_offset_s in integer nanoseconds, to add to time_ns()."""
+        return 0 if self.time_offset_s is None else int(round(float(self.time_offset_s[imu]) * 1e9))
+
+    def imu_t_s(self) -> np.ndarray:
+        """(n_imu, n) each IMU's time stamps in seconds: t_s plus its time_offset_s."""
+        offsets = np.zeros(self.n_imu) if self.time_offset_s is None else self.time_offset_s
+        return self.t_s[None, :] + offsets[:, None]
 
 
 def _along_samples(array: np.ndarray, start: int, stop: int) -> np.ndarray:
@@ -67,7 +79,8 @@ def concatenate(blocks: list[SampleBlock]) -> SampleBlock:
                        truth=truth, temperature_c=None if first.temperature_c is None else
                        np.concatenate([b.temperature_c for b in blocks], axis=1),
                        dtheta=None if first.dtheta is None else np.concatenate([b.dtheta for b in blocks], axis=1),
-                       dvel=None if first.dvel is None else np.concatenate([b.dvel for b in blocks], axis=1))
+                       dvel=None if first.dvel is None else np.concatenate([b.dvel for b in blocks], axis=1),
+                       time_offset_s=first.time_offset_s)
 
 
 def counts_text(counts: dict[str, dict[str, int]]) -> str:

@@ -38,6 +38,7 @@ MAX_LEVER_ARM_M = 1e3
 MAX_ANGLE_DEG = 1e4            # mounting angles, initial heading
 MAX_TRACK_ANGLE_RAD = 1e9      # track angles may be unwrapped over long runs
 MAX_FREQUENCY_HZ = 1e6         # circle shape
+MAX_TIME_OFFSET_S = 1e6        # [[imu]] time_offset_s: a clock offset, not a second epoch
 MAX_IMUS = 64                  # each IMU adds its lines to the kernel; compile time grows with them
 # Time stamps t0 + k/rate are float64: the spacing of floats at the latest stamp must stay below this
 # fraction of the sample period, or stamps collide (t0_s = 1e16 s: spacing 2 s, every stamp equal).
@@ -70,6 +71,9 @@ class ImuSpec:
     the parameter's unit; parameters not given hold their defaults, so the kernel key sees all of them."""
     name: str
     values: Mapping[str, Any] = field(default_factory=dict)
+    # added to this IMU's time stamps in every output (its own clock's offset; not a kernel parameter: the
+    # samples are taken at the scene's instants, only their stamps move)
+    time_offset_s: float = 0.0
 
     @property
     def lever_arm_m(self) -> tuple[float, float, float]:
@@ -168,13 +172,13 @@ def _vector3(table: Mapping, key: str, where: str, bound: float, unit: str) -> t
     return tuple(float(v) for v in value)
 
 
-def _check_time_resolution(t0: float, duration: float, rate: float) -> None:
+def _check_time_resolution(t0: float, duration: float, rate: float, key: str = "scene.t0_s") -> None:
     latest = max(abs(t0), abs(t0 + duration))
     dt = 1.0 / rate
     if float(np.spacing(latest)) > TIME_RESOLUTION * dt:
         # floats below 2**(e+1) are spaced 2**(e-52) apart at most
         limit = 2.0 ** (math.floor(52 + math.log2(TIME_RESOLUTION * dt)) + 1)
-        raise SceneError(f"scene.t0_s: time stamps reach {latest:g} s, where float64 time stamps are "
+        raise SceneError(f"{key}: time stamps reach {latest:g} s, where float64 time stamps are "
                          f"{float(np.spacing(latest)):g} s apart, more than {TIME_RESOLUTION:g} of the sample "
                          f"period ({dt:g} s); at {rate:g} Hz keep |t0_s| + duration_s below {limit:g} s")
 
@@ -255,6 +259,24 @@ def _noise(table: Mapping, key: str, where: str, derivative: str, warnings: list
 
 
 LOG_KEYS = {"position_source", "attitude_source", "max_gap_s"}
+
+
+def _noise_from_velocity(log, derivative: str, warnings: list[str]) -> float:
+    """position_noise_m = "velocity": the smoothing chosen from the log's own velocity (logs/velocity.py)."""
+    from imu_emulator.logs.velocity import noise_from_velocity
+    where = "trajectory.position_noise_m"
+    if derivative != "smooth":
+        raise SceneError(f"{where}: \"velocity\" chooses the smoothing of derivative 'smooth' (this one is "
+                         f"{derivative!r})")
+    if log.velocity is None:
+        raise SceneError(f"{where}: \"velocity\": {log.source.name} logs no velocity beside "
+                         f"{log.position.name}; state the noise in metres")
+    try:
+        sigma, _ = noise_from_velocity(log.position, log.velocity, f"{where}: {log.source.name}")
+    except DataError as exc:
+        raise SceneError(str(exc)) from None
+    warnings.append(f"{where}: {sigma:g} m, chosen from the logged velocity {log.velocity.name}")
+    return sigma
 
 
 def _is_log(table: Mapping) -> bool:
@@ -375,7 +397,7 @@ def _imu(table, where: str, effects: frozenset[str], taken: set[str], warnings: 
         raise SceneError(f"{where}: expected a table")
     declared = all_params()
     subtables = {p.table.split(".", 1)[1] for _, p in declared if p.table != "imu"}
-    _no_unknown(table, {"name", "model", *subtables,
+    _no_unknown(table, {"name", "model", "time_offset_s", *subtables,
                         *(k for _, p in declared if p.table == "imu" for k in (p.key, *p.aliases))}, where)
     name = table.get("name", where.replace("[", "").replace("]", ""))
     # names become CSV cells and labels on the wire: one printable line, no comma
@@ -427,7 +449,8 @@ def _imu(table, where: str, effects: frozenset[str], taken: set[str], warnings: 
     for effect in EFFECTS.values():
         if effect.name in effects and effect.validate is not None:
             effect.validate(values, where)
-    return ImuSpec(name, values)
+    time_offset = _number(table, "time_offset_s", where, default=0.0, bound=MAX_TIME_OFFSET_S, unit=" s")
+    return ImuSpec(name, values, time_offset)
 
 
 def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | None = None) -> Scene:
@@ -462,9 +485,12 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
         _no_unknown(traj_table, {"file", "derivative", "position_noise_m"} | LOG_KEYS, "trajectory")
         derivative = _check_derivative(traj_table.get("derivative", DEFAULT_DERIVATIVE), "trajectory.derivative")
         log = _load_log(traj_table, "trajectory", base_dir)
+        if traj_table.get("position_noise_m") == "velocity":
+            noise = _noise_from_velocity(log, derivative, warnings)
+        else:
+            noise = _noise(traj_table, "position_noise_m", "trajectory", derivative, warnings)
         trajectory = SampledData(t=log.position.t, values=log.position.values, derivative=derivative,
-                                 source=f"{log.source}:{log.position.name}",
-                                 noise=_noise(traj_table, "position_noise_m", "trajectory", derivative, warnings))
+                                 source=f"{log.source}:{log.position.name}", noise=noise)
         warnings.extend(log.notes)
     elif "file" in traj_table or "t" in traj_table:
         _no_unknown(traj_table, {"file", "derivative", "t", "position", "euler", "quat", "position_noise_m"},
@@ -562,6 +588,8 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
     imus: list[ImuSpec] = []
     for i, table in enumerate(imu_list):
         imus.append(_imu(table, f"imu[{i}]", effects, {imu.name for imu in imus}, warnings))
+        if imus[-1].time_offset_s:
+            _check_time_resolution(t0 + imus[-1].time_offset_s, duration, rate, f"imu[{i}].time_offset_s")
 
     streams = raw.get("stream", [])
     if isinstance(streams, Mapping):

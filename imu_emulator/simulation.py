@@ -46,6 +46,8 @@ class Simulation:
         self._position = self._series(scene.trajectory, 3 if scene.attitude_mode == "tangent" else 2, "trajectory")
         self._euler = self._series(scene.attitude, 2, "attitude")
         self.kernel = compile_kernel(scene, attitude=attitude, truth=truth, increments=self.increments)
+        offsets = np.array([imu.time_offset_s for imu in scene.imus])
+        self._time_offsets = offsets if offsets.any() else None     # SampleBlock.time_offset_s
         # Tangent attitude holds the last defined heading (cos, sin) and pitch (cos, sin) across blocks.
         h = scene.initial_heading_rad
         self._hold = np.array([np.cos(h), np.sin(h), 1.0, 0.0])
@@ -147,7 +149,8 @@ class Simulation:
                            truth=self._new_truth(n) if self.truth else None,
                            temperature_c=np.empty((n_imu, n)) if self.temperature else None,
                            dtheta=np.empty((n_imu, n, 3)) if self.increments else None,
-                           dvel=np.empty((n_imu, n, 3)) if self.increments else None)
+                           dvel=np.empty((n_imu, n, 3)) if self.increments else None,
+                           time_offset_s=self._time_offsets)
 
     def _new_truth(self, n: int) -> dict:
         truth = {k: np.empty((n, 3)) for k in TRUTH_KEYS}

@@ -214,6 +214,7 @@ class Stream:
     def samples(self, block, time_ns: np.ndarray):
         from firmware_protocols import Samples
         i = self.imu_index
+        time_ns = time_ns + block.imu_offset_ns(i)      # the IMU's own clock ([[imu]] time_offset_s)
         # the simulated temperature (temperature effect) for formats that carry one
         temperature = None if block.temperature_c is None else block.temperature_c[i]
         increments = {}

@@ -192,3 +192,50 @@ def test_a_gap_in_the_bag_is_an_error_naming_the_time(tmp_path):
     scene = scene_from_dict({"scene": {"rate_hz": 100, "duration_s": 1.0},
                              "trajectory": {"file": str(bag)}, "imu": [{}]})
     assert scene.n_samples == 100
+
+
+def test_replay_splits_at_a_gap_and_each_part_matches_the_symbolic_twin(tmp_path, capsys):
+    """`replay --gaps split` (the default): one scene per part between gaps, written to one file; the stamps
+    jump across the gap; inside each part the output is the sympy twin's (spline5c at 100 Hz, regular stamps:
+    4e-9 m/s^2 and 3e-12 rad/s inside a whole bag, test above; bounds 1e-6 and 1e-9 leave room for the parts'
+    ends, 0.3 s away)."""
+    from imu_emulator.cli import main
+    times = 0.01 * np.arange(1, 401)
+    bag = tmp_path / "gap.mcap"
+    write_bag(bag, times, drop=range(150, 200))        # nothing after t = 1.50 s until 2.01 s
+    out = tmp_path / "out.npz"
+    assert main(["replay", str(bag), "-o", str(out), "--scene", str(_overrides(tmp_path))]) == 0
+    err = capsys.readouterr().err
+    assert "replayed 2 parts" in err
+    data = np.load(out)
+    t = data["t"]
+    first, second = t[t <= 1.5 + 1e-9], t[t > 1.5 + 1e-9]
+    assert first.size and second.size and second[0] >= 2.01 - 1e-9
+    np.testing.assert_allclose(np.diff(first), 0.01, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.diff(second), 0.01, rtol=0, atol=1e-9)
+    assert first[-1] > 1.49 and second[-1] > 3.99
+    ref = imu_functions([sp.sympify(e, locals={"t": T}) for e in POSITION],
+                        [sp.sympify(e, locals={"t": T}) for e in EULER])
+    for part in (first, second):
+        inner = (t > part[0] + 0.3) & (t < part[-1] - 0.3)
+        acc, gyro = ref(t[inner])
+        assert np.abs(data["accel"][0][inner] - acc).max() < 1e-6
+        assert np.abs(data["gyro"][0][inner] - gyro).max() < 1e-9
+
+
+def test_replay_with_gaps_error_names_the_time(tmp_path, capsys):
+    from imu_emulator.cli import main
+    times = 0.01 * np.arange(1, 401)
+    bag = tmp_path / "gap.mcap"
+    write_bag(bag, times, drop=range(150, 200))
+    code = main(["replay", str(bag), "-o", str(tmp_path / "out.csv"), "--gaps", "error",
+                 "--scene", str(_overrides(tmp_path))])
+    assert code == 2
+    assert "/odom: no sample for 0.510 s after t = 1.500000 s" in capsys.readouterr().err
+    assert not (tmp_path / "out.csv").exists()
+
+
+def _overrides(tmp_path):
+    path = tmp_path / "over.toml"
+    path.write_text("[scene]\nrate_hz = 100\n")
+    return path

@@ -8,6 +8,14 @@ noise of 1 mm and 1 cm (fixed seeds). For each: RMS of the acceleration error (i
 spline5c, spline3, smooth (s = (n + sqrt(2n)) sigma^2 from the stated sigma), and of the same quintic FITPACK
 spline with s = c n sigma^2 for c on a grid from 0.25 to 30 (the scan); the best of the scan and the ratios.
 Then the rounding floor: a 1 kHz circle at the origin and at 6.4e6 m, noise-free, spline5c and smooth.
+With --ecef-floor, where the ECEF floor comes from (issue 14): the same 1 kHz circle at 6.4e6 m carries the
+rounding of its input values (2.7e-10 m RMS, a uniform error over one ulp), which no subtraction of a reference
+point afterwards can remove (SampledSeries already fits relative to the first sample); what is left is how well
+a smoother separates 2.7e-10 m of white noise from a 5 m, 1 Hz circle. Printed: FITPACK with s = c n sigma^2
+over c, and least-squares splines of degree 5 and 7 on fixed uniform knots over their spacing.
+With --timing, the cost of fitting `smooth`: one column of 15 k, 60 k and 240 k samples (100 Hz, 1 cm noise),
+wall time and the CPU time of the fitting thread (FITPACK is single-threaded; on a shared machine the wall time
+is mostly waiting).
 Prints figures; asserts nothing.
 """
 from __future__ import annotations
@@ -73,10 +81,58 @@ def ecef_case(offset):
     return res
 
 
+def ecef_floor_scan():
+    from scipy.interpolate import make_lsq_spline
+    t = np.arange(5001) * 1e-3
+    w = 2 * np.pi
+    truth = -5 * w * w * np.cos(w * t)
+    inner = (t > 0.25) & (t < 4.75)
+    sigma = float(np.spacing(6.4e6)) / np.sqrt(12.0)
+    print("\nECEF floor: 1 kHz circle at 6.4e6 m, max interior |acceleration error| (m/s^2)")
+    print(f"  origin, spline5c / smooth: {ecef_case(0.0)['spline5c']:.3g} / {ecef_case(0.0)['smooth']:.3g}; "
+          f"6.4e6 m: {ecef_case(6.4e6)['spline5c']:.3g} / {ecef_case(6.4e6)['smooth']:.3g}")
+    y = 6.4e6 + 5 * np.cos(w * t)
+    y = y - y[0]
+    line = []
+    for c in (0.5, 1, 2, 5, 10):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            fit = UnivariateSpline(t, y, k=5, s=c * t.size * sigma ** 2)
+        line.append(f"c={c:g} {np.abs(fit(t, 2) - truth)[inner].max():.2g}")
+    print("  FITPACK quintic, s = c n sigma^2: " + ", ".join(line))
+    for k in (5, 7):
+        line = []
+        for spacing in (0.01, 0.015, 0.02, 0.03, 0.05):
+            m = int(round(t[-1] / spacing))
+            knots = np.r_[[0.0] * (k + 1), np.linspace(0, t[-1], m + 1)[1:-1], [t[-1]] * (k + 1)]
+            fit = make_lsq_spline(t, y, knots, k=k)
+            line.append(f"{spacing * 1e3:g} ms {np.abs(fit(t, 2) - truth)[inner].max():.2g}")
+        print(f"  least squares, degree {k}, uniform knots: " + ", ".join(line))
+
+
+def timing(sizes=(15_000, 60_000, 240_000)):
+    print("\nsmooth fit of one column, 100 Hz, 1 cm noise: wall / thread CPU (s), knots FITPACK placed")
+    for n in sizes:
+        t = np.arange(n) * 0.01
+        y = 5 * np.cos(W_CIRCLE * t)[:, None] + np.random.default_rng(0).normal(0, 0.01, (n, 1))
+        wall, cpu = time.perf_counter(), time.thread_time()
+        series = SampledSeries(t, y, "smooth", 2, noise=0.01)
+        wall, cpu = time.perf_counter() - wall, time.thread_time() - cpu
+        print(f"  {n} samples: {wall:.2f} / {cpu:.2f} s, {len(series._fit.splines[0].get_knots())} knots")
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=20.0)
+    parser.add_argument("--timing", action="store_true", help="only the fitting cost (see above)")
+    parser.add_argument("--ecef-floor", action="store_true", help="only the ECEF floor study (see above)")
     args = parser.parse_args(argv)
+    if args.timing or args.ecef_floor:
+        if args.ecef_floor:
+            ecef_floor_scan()
+        if args.timing:
+            timing()
+        return
     print("acceleration error, RMS over the interior (m/s^2); smooth's fit time in s")
     print("| rate | noise | spline3 | spline5c | smooth | fit s | best fixed (c) | smooth / best | spline5c / smooth |")
     print("|---|---|---|---|---|---|---|---|---|")

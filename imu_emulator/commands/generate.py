@@ -49,10 +49,12 @@ def _generate(args, scene, stopped) -> int:
     from imu_emulator.kernel import EffectPlan
     bias_truth = EffectPlan(scene).bias_truth    # the realized-bias columns, known before compiling
     from imu_emulator import earth_truth
+    from imu_emulator.effects.noise import variances
     conventions = earth_truth.conventions(scene) if earth_truth.on(scene) else None
     with open_writer(args.output, scene.imu_names, args.truth, bias_truth=bias_truth,
                      temperature="temperature" in scene.effects, increments=bool(args.increments),
-                     metadata=run_metadata(scene), conventions=conventions) as writer:
+                     metadata=run_metadata(scene), conventions=conventions,
+                     covariances=variances(scene)) as writer:
         check_output(scene, args.output, args.truth, args.allow_large)
         # a ROS Imu message has an orientation field: fill it from the sensor frame's attitude
         attitude = args.output.lower().endswith(".mcap")

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 AXES = "xyz"
+MIN_PART_SAMPLES = 20       # a part between gaps shorter than this is left out (and named)
 
 
 def register(subparsers) -> None:
@@ -20,6 +21,10 @@ def register(subparsers) -> None:
     rep.add_argument("--imu-source", help="the recorded IMU to compare with (topic[:instance], message[:instance])")
     rep.add_argument("--lowpass-hz", type=float, help="cut-off of the low-passed figures (default: 0.4 x the "
                                                      "slower of the log's position and attitude rates)")
+    rep.add_argument("--gaps", choices=("split", "error"), default="split",
+                     help="a gap in the log's position or attitude longer than max_gap_s: replay each part between "
+                          "gaps (split, the default; the output's time stamps jump across the gap) or stop with "
+                          "an error naming the time")
     rep.add_argument("--quiet", action="store_true", help="no summary on stderr")
     rep.set_defaults(func=cmd_replay)
 
@@ -31,15 +36,53 @@ def _merge(base: dict, extra: dict) -> dict:
     return out
 
 
-def build_scene(log: Path, overrides: dict, recorded_rate_hz: float | None):
-    """The replay scene: the log as trajectory and attitude, gravity on, one IMU at the reference point, output
-    at the recorded IMU's rate (or 100 Hz); anything in `overrides` wins, except the log file itself."""
-    from imu_emulator.scene import from_dict
+def build_scene_table(log: Path, overrides: dict, recorded_rate_hz: float | None) -> dict:
+    """The replay scene as a table: the log as trajectory and attitude, gravity on, one IMU at the reference
+    point, output at the recorded IMU's rate (or 100 Hz); anything in `overrides` wins, except the log file."""
     base = {"scene": {"rate_hz": round(recorded_rate_hz or 100.0, 6)},
             "trajectory": {}, "imu": [{"name": "imu0"}], "effects": {"gravity": True}}
     raw = _merge(base, overrides)
     raw["trajectory"] = dict(raw["trajectory"], file=str(log.resolve()))
-    return from_dict(raw, base_dir=log.parent, path=str(log))
+    return raw
+
+
+def build_scene(log: Path, overrides: dict, recorded_rate_hz: float | None):
+    from imu_emulator.scene import from_dict
+    return from_dict(build_scene_table(log, overrides, recorded_rate_hz), base_dir=log.parent, path=str(log))
+
+
+def _parts(log: Path, overrides: dict, recorded_rate_hz: float | None) -> list[dict]:
+    """The overrides of one scene per part of the log between gaps (within the overrides' own t0_s and
+    duration_s). Parts too short for the derivative method are left out and named in an error if none is
+    left."""
+    import numpy as np
+
+    from imu_emulator import logs
+    from imu_emulator.errors import DataError
+    probe = build_scene_table(log, overrides, recorded_rate_hz)
+    table, head = probe["trajectory"], probe["scene"]
+    numbers = [head.get(k, 0.0) for k in ("t0_s", "duration_s", "rate_hz")] + [table.get("max_gap_s", 1.0)]
+    if not isinstance(table, dict) or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                              for x in numbers):
+        return [overrides]          # the scene's own validation names what is wrong
+    motion = logs.load_log(log, table.get("position_source"), table.get("attitude_source"))
+    t_lo = head.get("t0_s")
+    t_hi = None if t_lo is None or "duration_s" not in head else t_lo + head["duration_s"]
+    rate = head["rate_hz"]
+    parts, short = [], []
+    for lo, hi in logs.segments(motion, table.get("max_gap_s"), t_lo, t_hi):
+        n = int(np.floor((hi - lo) * rate + 1e-9)) + 1        # samples lo, lo + 1/rate, ... <= hi
+        if n < MIN_PART_SAMPLES:
+            short.append(f"{lo:.3f}..{hi:.3f} s")
+            continue
+        parts.append(_merge(overrides, {"scene": {"t0_s": lo, "duration_s": n / rate}}))
+    if not parts:
+        raise DataError(f"{log.name}: no part between gaps holds {MIN_PART_SAMPLES} output samples "
+                        f"(parts: {', '.join(short) or 'none'})")
+    if short:
+        print(f"note: parts between gaps too short to replay (under {MIN_PART_SAMPLES} samples), left out: "
+              f"{', '.join(short)}", file=sys.stderr)
+    return parts
 
 
 def _read_overrides(path: str | None) -> dict:
@@ -79,15 +122,30 @@ def cmd_replay(args) -> int:
 
     recorded = logs.load_recorded_imu(log, args.imu_source)
     rate = 1.0 / float(np.median(np.diff(recorded.t))) if recorded is not None else None
-    scene = build_scene(log, _read_overrides(args.scene), rate)
-    for warning in scene.warnings:
-        print(f"warning: {warning}", file=sys.stderr)
-    out = Simulation(scene).run()
-    writer = open_writer(output, scene.imu_names, truth=False)
-    writer.write(out)
+    overrides = _read_overrides(args.scene)
+    parts = _parts(log, overrides, rate) if args.gaps == "split" else [overrides]
+    from imu_emulator.effects.noise import variances
+    writer, out, written = None, None, 0
+    for i, part in enumerate(parts):
+        scene = build_scene(log, part, rate)
+        for warning in scene.warnings if i == 0 else ():
+            print(f"warning: {warning}", file=sys.stderr)
+        block = Simulation(scene).run()
+        if writer is None:
+            writer = open_writer(output, scene.imu_names, truth=False, covariances=variances(scene))
+        writer.write(block)
+        written += len(block)
+        if out is None or len(block) > len(out):    # the fidelity report compares the longest part
+            out, compared = block, scene
     writer.close()
+    if len(parts) > 1:
+        spans = ", ".join(f"{p['scene']['t0_s']:.3f}..{p['scene']['t0_s'] + p['scene']['duration_s']:.3f} s"
+                          for p in parts)
+        print(f"note: the log has gaps; replayed {len(parts)} parts ({spans}); the report compares the longest",
+              file=sys.stderr)
+    scene = compared
     if not args.quiet:
-        print(f"wrote {out.t_s.size} samples x {len(scene.imus)} IMU(s) to {output}", file=sys.stderr)
+        print(f"wrote {written} samples x {len(scene.imus)} IMU(s) to {output}", file=sys.stderr)
     if report is None:
         return 0
     if recorded is None:

@@ -5,13 +5,28 @@ import math
 from imu_emulator.effects._record import AXES, TRIADS, Effect, Stage, triad_params
 
 
+def per_sample_sigma(density: float, rate_hz: float) -> float:
+    return density * math.sqrt(rate_hz)
+
+
+def variances(scene) -> dict:
+    """{IMU name: (gyro variances (3,) in (rad/s)^2, accel variances (3,) in (m/s^2)^2)}: the per-sample
+    variance of the white noise this effect adds, per axis; {} when the effect is off (for sensor_msgs/Imu
+    covariances)."""
+    if EFFECT.name not in scene.effects:
+        return {}
+    return {imu.name: tuple([per_sample_sigma(d, scene.rate_hz) ** 2 for d in imu.values[f"imu.{triad}.noise_density"]]
+                            for triad in ("gyro", "accel"))
+            for imu in scene.imus}
+
+
 def emit(ctx) -> list[str]:
     lines = []
     for triad in TRIADS:
         out = TRIADS[triad][1]
         for axis, density in enumerate(ctx.value(f"imu.{triad}.noise_density")):
             if density:
-                sigma = density * math.sqrt(ctx.scene.rate_hz)
+                sigma = per_sample_sigma(density, ctx.scene.rate_hz)
                 lines.append(f"{out}{AXES[axis]} += {sigma!r} * {ctx.normal(f'{triad}.{AXES[axis]}')}")
     return lines
 

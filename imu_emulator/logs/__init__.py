@@ -112,18 +112,58 @@ def window(s: Series, t_lo: float, t_hi: float, where: str, max_gap_s: float | N
            margin: int = 20) -> Series:
     """The part of s that a replay of [t_lo, t_hi] uses (with `margin` samples either side, so the fit's
     ends lie outside the span), checked for gaps."""
-    i0 = max(int(np.searchsorted(s.t, t_lo, side="right")) - 1 - margin, 0)
-    i1 = min(int(np.searchsorted(s.t, t_hi, side="left")) + 1 + margin, s.t.size)
+    lo = max(int(np.searchsorted(s.t, t_lo, side="right")) - 1, 0)
+    hi = min(int(np.searchsorted(s.t, t_hi, side="left")) + 1, s.t.size)
+    i0, i1 = max(lo - margin, 0), min(hi + margin, s.t.size)
+    # the margins stop at a gap: a gap outside the span does not matter (a replay split at gaps ends there)
+    if s.t.size > 1:
+        limit = gap_limit(s, max_gap_s)
+        before = np.nonzero(np.diff(s.t[i0:lo + 1]) > limit)[0]
+        if before.size:
+            i0 += int(before[-1]) + 1
+        after = np.nonzero(np.diff(s.t[hi - 1:i1]) > limit)[0]
+        if after.size:
+            i1 = hi + int(after[0])
     part = Series(s.name, s.t[i0:i1], s.values[i0:i1])
     check_gaps(part, where, max_gap_s)
     return part
+
+
+def gap_limit(s: Series, max_gap_s: float | None) -> float:
+    """The longest step between samples that is not a gap: max_gap_s, or GAP_FACTOR times the median step."""
+    return GAP_FACTOR * float(np.median(np.diff(s.t))) if max_gap_s is None else max_gap_s
+
+
+def segments(motion: "LogMotion", max_gap_s: float | None, t_lo: float | None = None,
+             t_hi: float | None = None) -> list[tuple[float, float]]:
+    """The spans [first, last] (s, log clock) where both position and attitude are logged without a gap, within
+    [t_lo, t_hi] when given: a replay split at gaps runs one scene per span."""
+    start = max(motion.position.t[0], motion.attitude.t[0])
+    stop = min(motion.position.t[-1], motion.attitude.t[-1])
+    if t_lo is not None:
+        start = max(start, t_lo)
+    if t_hi is not None:
+        stop = min(stop, t_hi)
+    holes = []
+    for s in (motion.position, motion.attitude):
+        steps = np.diff(s.t)
+        for i in np.nonzero(steps > gap_limit(s, max_gap_s))[0]:
+            holes.append((float(s.t[i]), float(s.t[i + 1])))
+    spans, lo = [], float(start)
+    for a, b in sorted(holes):
+        if a > lo and a <= stop:
+            spans.append((lo, a))
+        lo = max(lo, b)
+    if lo < stop:
+        spans.append((lo, float(stop)))
+    return spans
 
 
 def check_gaps(s: Series, where: str, max_gap_s: float | None) -> None:
     if s.t.size < 2:
         raise DataError(f"{where}: {s.name} has {s.t.size} sample(s); a motion needs more")
     steps = np.diff(s.t)
-    limit = GAP_FACTOR * float(np.median(steps)) if max_gap_s is None else max_gap_s
+    limit = gap_limit(s, max_gap_s)
     too_long = steps > limit
     if too_long.any():
         i = int(np.argmax(too_long))
