@@ -70,14 +70,7 @@ def time_interleaved(scenes, rounds: int) -> tuple[dict, dict]:
     for label, scene in scenes:
         sim = Simulation(scene, attitude=False)
         sims.append((label, sim, sim.block(0, BLOCK), scene.n_samples))
-    cpu = {label: [] for label, *_ in sims}
-    wall = {label: [] for label, *_ in sims}
-    for _ in range(rounds):
-        for label, sim, out, n in sims:
-            c, w = time_run(sim, n, out)
-            cpu[label].append(c / n)
-            wall[label].append(w / n)
-    return cpu, wall
+    return interleave(sims, rounds)
 
 
 def rows(cpu: dict, wall: dict, width: int):
