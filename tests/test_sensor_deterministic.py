@@ -176,10 +176,13 @@ def test_resolution_rounds_to_the_lsb_after_range():
     ("accel", "resolution", "-1 mg", r"imu\[0\]\.accel\.resolution: the LSB is positive"),
     ("accel", "misalignment", "1 m/s", r"imu\[0\]\.accel\.misalignment: .* wrong dimension"),
     ("gyro", "g_sensitivity", "0.1 deg/s", r"imu\[0\]\.gyro\.g_sensitivity: .* wrong dimension"),
+    ("gyro", "noise_density", "-0.01 deg/s/sqrt(Hz)", r"imu\[0\]\.gyro\.noise_density: a noise density is >= 0"),
+    ("accel", "random_walk", "-1e-4 m/s^2/sqrt(s)", r"imu\[0\]\.accel\.random_walk: a random walk coefficient"),
 ])
 def test_bad_values_name_the_key(table, key, value, message):
     with pytest.raises(SceneError, match=message):
-        turning_scene(("range", "resolution", "misalignment", "g_sensitivity"), **{table: {key: value}})
+        turning_scene(("range", "resolution", "misalignment", "g_sensitivity", "noise", "random_walk"),
+                      **{table: {key: value}})
 
 
 RANGE_SCENE = """

@@ -2,6 +2,7 @@
 its Allan deviation, N / sqrt(tau), does not depend on the sample rate (not a per-sample sigma: gz-sensors)."""
 import math
 
+from imu_emulator.effects._linear import nonnegative
 from imu_emulator.effects._record import AXES, TRIADS, Effect, Stage, triad_params
 
 
@@ -35,6 +36,7 @@ EFFECT = Effect(
     name="noise",
     description="white noise: angle / velocity random walk given as a noise density",
     stage=Stage.SENSOR, order=90, emit=emit, random=True,
+    validate=nonnegative("noise_density", "a noise density is >= 0"),
     params=triad_params("noise_density", "rad/s/sqrt(Hz)", "m/s^2/sqrt(Hz)", "noise density N (root PSD)",
                         gyro_aliases=("arw",), accel_aliases=("vrw",),
                         gyro_datasheet="`0.007 deg/s/sqrt(Hz)`, arw `0.42 deg/sqrt(h)`, `2.8 mdps/sqrt(Hz)`",

@@ -2,6 +2,7 @@
 starting at 0 (the turn-on bias is the `bias` effect's). sqrt(dt), not dt (NaveGo's bug)."""
 import math
 
+from imu_emulator.effects._linear import nonnegative
 from imu_emulator.effects._record import AXES, TRIADS, Effect, Stage, triad_params
 
 
@@ -21,5 +22,6 @@ EFFECT = Effect(
     name="random_walk",
     description="rate random walk (gyro) and acceleration random walk (accelerometer) of the bias",
     stage=Stage.SENSOR, order=62, emit=emit, random=True, state=("walk",),
+    validate=nonnegative("random_walk", "a random walk coefficient is >= 0"),
     params=triad_params("random_walk", "rad/s/sqrt(s)", "m/s^2/sqrt(s)", "random walk K of the bias",
                         gyro_datasheet="`0.5 deg/h/sqrt(h)`", accel_datasheet="`0.01 m/s/h/sqrt(h)`"))
