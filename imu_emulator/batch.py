@@ -97,8 +97,9 @@ def realize(task: Task) -> dict:
            "kernel_load_s": None, "skipped": False}
     if path.exists():
         found = read_metadata(path).get("batch", {})
-        if {k: found.get(k) for k in identity} != json.loads(json.dumps(identity)):
-            raise ImuEmulatorError(f"{path}: written by another batch (its seed or draws differ); "
+        if ({k: found.get(k) for k in identity} != json.loads(json.dumps(identity))
+                or bool(found.get("truth", False)) != task.truth):
+            raise ImuEmulatorError(f"{path}: written by another batch (its seed, draws or --truth differ); "
                                    "write this batch to a new directory")
         row["skipped"] = True
     else:
@@ -122,7 +123,7 @@ def _write(task: Task, path: Path, identity: dict) -> float | None:
     if not loaded_before:
         load_s = KERNEL_LOADS[key] = time.perf_counter() - start
     with open_writer(path, scene.imu_names, task.truth, bias_truth=sim.bias_truth,
-                     temperature=sim.temperature, metadata=run_metadata(scene, batch=identity)) as writer:
+                     temperature=sim.temperature, metadata=run_metadata(scene, batch={**identity, "truth": task.truth})) as writer:
         for k0 in range(0, sim.n_samples, task.block):
             writer.write(sim.block(k0, min(task.block, sim.n_samples - k0)))
     return load_s

@@ -245,3 +245,14 @@ def test_killed_batch_restarts_without_recomputing(tmp_path, cache):
     # the restarted files are the batch's: realization 39 equals a fresh run of it alone
     alone = batch.run(scene, runs, ROOT_SEED, tmp_path / "alone", indices=[runs - 1])
     assert alone.ok and _same_file(out / "run-00039.parquet", tmp_path / "alone" / "run-00039.parquet")
+
+
+def test_restart_with_truth_does_not_take_files_written_without_it(tmp_path, cache):
+    # A rerun asking for --truth must not skip files that lack the truth columns: it says so instead.
+    scene = _scene(tmp_path)
+    out = tmp_path / "out"
+    assert batch.run(scene, 2, ROOT_SEED, out).ok
+    again = batch.run(scene, 2, ROOT_SEED, out, truth=True)
+    assert [f["index"] for f in again.failures] == [0, 1]
+    assert all("--truth differ" in f["error"] for f in again.failures)
+    assert batch.run(scene, 2, ROOT_SEED, out).ok     # the same batch again still restarts cleanly
