@@ -214,6 +214,9 @@ CLASSIC_FRAME_DTYPE = _frame_dtype(8)
 FD_FRAME_DTYPE = _frame_dtype(64)
 CAN_FRAME_DTYPE = FD_FRAME_DTYPE     # wide enough for any frame
 FRAME_DTYPES = (CLASSIC_FRAME_DTYPE, FD_FRAME_DTYPE)
+#: CAN FD data lengths (ISO 11898-1); a frame's payload is padded up to the next one: FD_LENGTH_TABLE[n].
+FD_LENGTHS = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
+FD_LENGTH_TABLE = np.array([next(L for L in FD_LENGTHS if L >= n) for n in range(65)], dtype=np.int64)
 
 
 def empty_frames(count: int, fd: bool = False) -> np.ndarray:

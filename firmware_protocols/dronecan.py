@@ -48,14 +48,11 @@ import math
 import numba
 import numpy as np
 
-from firmware_protocols.base import (CLASSIC_FRAME_DTYPE, FD_FRAME_DTYPE, CanStreamDecoder, DecoderStats, EncodeError,
-                                     Packet, SaturationStats, Samples, empty_frames, integration_intervals)
+from firmware_protocols.base import (CLASSIC_FRAME_DTYPE, FD_FRAME_DTYPE, FD_LENGTH_TABLE, CanStreamDecoder,
+                                     DecoderStats, EncodeError, Packet, SaturationStats, Samples, empty_frames,
+                                     integration_intervals)
 from firmware_protocols.crc import crc16_ccitt, crc16_ccitt_bytes
 from firmware_protocols.registry import FormatInfo, register
-
-#: CAN FD data lengths (ISO 11898-1); a frame is padded up to the next one.
-FD_LENGTHS = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
-FD_LENGTH_TABLE = np.array([next(L for L in FD_LENGTHS if L >= n) for n in range(65)], dtype=np.int64)
 
 FLOAT16_MAX = 65504.0
 FLOAT32_MAX = float(np.finfo(np.float32).max)

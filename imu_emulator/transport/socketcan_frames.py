@@ -15,13 +15,12 @@ import socket
 
 import numpy as np
 
+from firmware_protocols.base import FD_LENGTH_TABLE
+
 CAN_EFF_FLAG = 0x80000000
 CANFD_BRS = 0x01
 CANFD_FDF = 0x04
 CAN_MTU, CANFD_MTU = 16, 72
-# Payload lengths a CAN FD frame can carry; a payload is padded with zeros up to the next one.
-_FD_LENGTHS = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64])
-_PADDED = _FD_LENGTHS[np.searchsorted(_FD_LENGTHS, np.arange(65))]
 
 
 def _layout(data_bytes: int) -> np.dtype:
@@ -43,7 +42,7 @@ def pack(rows: np.ndarray, bitrate_switch: bool = False) -> tuple[bytes, int]:
     out["dlc"] = length
     width = out["data"].shape[1]
     out["data"] = rows["data"][:, :width] * (np.arange(width) < length[:, None])
-    out["len"] = _PADDED[length] if fd else length
+    out["len"] = FD_LENGTH_TABLE[length] if fd else length
     if fd:
         out["flags"] = CANFD_FDF | (CANFD_BRS if bitrate_switch else 0)
     return out.tobytes(), out.dtype.itemsize
