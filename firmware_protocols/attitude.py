@@ -79,3 +79,47 @@ def from_ned(quat: np.ndarray, frame: str) -> np.ndarray:
         return quat
     reference = Q_NED_FROM_ENU if frame == "ENU" else np.array([0.0, 1.0, 0.0, 0.0])  # both are their own inverse
     return canonical(multiply(reference, quat))
+
+
+def from_rotation_vector(theta: np.ndarray) -> np.ndarray:
+    """(n, 3) rotation vectors -> (n, 4) unit quaternions (w, x, y, z); exact near zero via sinc."""
+    theta = np.asarray(theta, dtype=np.float64)
+    angle = np.sqrt(np.einsum("...i,...i->...", theta, theta))
+    half = 0.5 * angle
+    # sin(half) / angle = 0.5 * sinc(half / pi), with numpy's sinc(x) = sin(pi x) / (pi x)
+    k = 0.5 * np.sinc(half / np.pi)
+    return np.concatenate((np.cos(half)[..., None], theta * k[..., None]), axis=-1)
+
+
+def to_rotation_vector(q: np.ndarray) -> np.ndarray:
+    """(n, 4) unit quaternions -> (n, 3) rotation vectors of angle <= pi (the inverse of from_rotation_vector)."""
+    q = canonical(np.asarray(q, dtype=np.float64))
+    vector = q[..., 1:]
+    sine = np.sqrt(np.einsum("...i,...i->...", vector, vector))
+    angle = 2.0 * np.arctan2(sine, q[..., 0])
+    # angle / sin(angle / 2), by its series below 1e-4 rad (the division loses digits there)
+    scale = np.where(sine > 1e-8, angle / np.where(sine > 1e-8, sine, 1.0), 2.0 + angle ** 2 / 12.0)
+    return vector * scale[..., None]
+
+
+def attitude_change(quat: np.ndarray, quat_before: np.ndarray, dtheta: np.ndarray, dtheta_before: np.ndarray,
+                    gyro_errors: bool = True) -> np.ndarray:
+    """The sensor's attitude change over each sample interval, q(t_k-1)^-1 (x) q(t_k), as Xsens' DeltaQ
+    defines it: (n, 4), from the true attitudes at the interval's ends (sensor -> navigation frame, any fixed
+    reference: it cancels) and the measured increments.
+
+    The true attitudes give the exact change, coning included, which the rotation by the summed increment
+    Δθ misses (for two non-commuting rotations the two differ by ½∫α×ω dt, the coning term). Without
+    gyro_errors (the caller knows the gyro senses exactly the true attitude's rate) that is the answer.
+    Otherwise what the gyro adds to the truth (its errors; the navigation frame's rotation when the gyros
+    sense the Earth's rate) enters as the rotation vector ε = Δθ − (φ − c), where φ is the true change's
+    rotation vector and c = Δθ_k−1 × Δθ_k / 12 the two-sample coning estimate of φ − ∫ω dt (Savage,
+    Strapdown Analytics §7.1.1.1): ε is the increment's error to first order, plus the estimate's residual
+    (c's error, small against c itself while the motion is slow against the sample rate).
+    quat_before, dtheta_before: the samples before each row."""
+    exact = multiply(conjugate(quat_before), quat)
+    if not gyro_errors:
+        return canonical(exact)
+    coning = np.cross(dtheta_before, dtheta) / 12.0
+    error = dtheta - (to_rotation_vector(exact) - coning)
+    return canonical(multiply(exact, from_rotation_vector(error)))

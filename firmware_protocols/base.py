@@ -33,6 +33,9 @@ class Samples:
     delta_theta:    (n, 3) integrated rate over the sample period, rad      (optional)
     delta_velocity: (n, 3) integrated specific force over the period, m/s   (optional)
     delta_time_s:   (n,) the period the two above span, s (the sensor's own clock)  (optional)
+    attitude_change: (n, 4) the sensor's exact attitude change over the period, q(t_k-1)^-1 (x) q(t_k), coning
+                    included (attitude.attitude_change); formats carrying a delta quaternion use it, else the
+                    rotation by delta_theta  (optional)
     position_llh:   (n, 3) geodetic latitude, longitude (deg), height above the WGS-84 ellipsoid (m)  (optional)
     velocity_ned:   (n, 3) velocity north, east, down, m/s                  (optional)
     linear_accel_ned: (n, 3) acceleration without gravity, north, east, down, m/s^2  (optional)
@@ -51,6 +54,7 @@ class Samples:
     delta_theta: np.ndarray | None = None
     delta_velocity: np.ndarray | None = None
     delta_time_s: np.ndarray | None = None
+    attitude_change: np.ndarray | None = None
     position_llh: np.ndarray | None = None
     velocity_ned: np.ndarray | None = None
     linear_accel_ned: np.ndarray | None = None
@@ -109,6 +113,7 @@ INCREMENT_FIELDS = ("delta_theta", "delta_velocity")
 _FIELD_WIDTHS = {
     "accel": 3, "gyro": 3, "mag": 3, "quat": 4, "euler": 3,
     "temperature_c": 0, "pressure_pa": 0, "delta_theta": 3, "delta_velocity": 3, "delta_time_s": 0,
+    "attitude_change": 4,
     "position_llh": 3, "velocity_ned": 3, "linear_accel_ned": 3,
 }
 

@@ -43,7 +43,8 @@ Items, units on the wire, source in `Samples`:
 | acceleration       | 0x4020 | 3 reals m/s^2                      | accel                        |
 | acceleration_hr    | 0x4040 | 3 reals m/s^2                      | accel                        |
 | rate_of_turn       | 0x8020 | 3 reals rad/s                      | gyro                         |
-| delta_q            | 0x8030 | 4 reals (w, x, y, z)               | delta_theta (rotation vector)|
+| delta_q            | 0x8030 | 4 reals (w, x, y, z)               | attitude_change, else the    |
+|                    |        |                                    | rotation by delta_theta      |
 | rate_of_turn_hr    | 0x8040 | 3 reals rad/s                      | gyro                         |
 | magnetic_field     | 0xC020 | 3 reals, arbitrary units           | mag / mag_reference_gauss    |
 | temperature        | 0x0810 | 1 real, deg C                      | temperature_c (default 25)   |
@@ -175,15 +176,6 @@ _DEFAULTS = {"quat": (1.0, 0.0, 0.0, 0.0), "euler": (0.0, 0.0, 0.0), "pressure_p
 
 
 
-def rotation_vector_to_quat(theta: np.ndarray) -> np.ndarray:
-    """(n, 3) rotation vectors -> (n, 4) unit quaternions (w, x, y, z); exact near zero via sinc."""
-    angle = np.sqrt(np.einsum("ij,ij->i", theta, theta))
-    half = 0.5 * angle
-    # sin(half) / angle = 0.5 * sinc(half / pi), with numpy's sinc(x) = sin(pi x) / (pi x)
-    k = 0.5 * np.sinc(half / np.pi)
-    return np.column_stack((np.cos(half), theta * k[:, None]))
-
-
 class XsensEncoder:
     """Samples -> MTData2 packets, one per sample. Stateful: the packet counter continues across calls."""
 
@@ -267,9 +259,14 @@ class XsensEncoder:
 
     def encode(self, samples: Samples) -> SerialBatch:
         extra = {}
-        if self._wants_delta_q and samples.delta_theta is not None:
+        if self._wants_delta_q and samples.attitude_change is not None:
+            samples.require_finite(["attitude_change"])
+            extra["delta_q"] = samples.attitude_change
+        elif self._wants_delta_q and samples.delta_theta is not None:
+            # without the attitudes at the interval's ends (an encoder fed increments alone): the rotation by
+            # the increment, which leaves out coning
             samples.require_finite(["delta_theta"])     # name the caller's field, not the derived one
-            extra["delta_q"] = rotation_vector_to_quat(samples.delta_theta)
+            extra["delta_q"] = attitude.from_rotation_vector(samples.delta_theta)
         if self._wants_attitude and self.frame != "NED":
             # Samples carry sensor -> NED attitude; the XDI declares this encoder's frame, so convert here
             quat = samples.quat if samples.quat is not None else (

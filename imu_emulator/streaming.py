@@ -207,6 +207,8 @@ class Stream:
         self.ignored_input = 0      # bytes or frames that arrived on a link without a device
         self.queue_max = None       # most bytes seen waiting in the link's queue (sampled twice a second)
         self.link = {}              # what the link itself reported, read just before closing it
+        self._before = None         # (next k, attitude, increment) of the last sample: see _attitude_change
+        self.exact_gyro = False     # the gyro senses the true attitude's rate exactly (run_streams)
 
     def open(self) -> None:
         self.transport = open_target(self.spec, self.info.kind, self.config.target_options)
@@ -217,13 +219,14 @@ class Stream:
         time_ns = time_ns + block.imu_offset_ns(i)      # the IMU's own clock ([[imu]] time_offset_s)
         # the simulated temperature (temperature effect) for formats that carry one
         temperature = None if block.temperature_c is None else block.temperature_c[i]
-        increments = {}
-        if block.dtheta is not None:   # over one sample period, by the sensor's own (nominal) clock
-            increments = {"delta_theta": block.dtheta[i], "delta_velocity": block.dvel[i],
-                          "delta_time_s": np.full(len(time_ns), self.period_s)}
         # Wire formats reference attitude to NED (Samples.quat is sensor -> NED): an ENU scene's is converted.
         # (ECEF and ECI scenes give attitude relative to local NED already)
         quat = attitude.to_ned(block.quat[i], "ENU" if self.frame == "ENU" else "NED")
+        increments = {}
+        if block.dtheta is not None:   # over one sample period, by the sensor's own (nominal) clock
+            increments = {"delta_theta": block.dtheta[i], "delta_velocity": block.dvel[i],
+                          "delta_time_s": np.full(len(time_ns), self.period_s),
+                          "attitude_change": self._attitude_change(block, quat)}
         if self.device is None:
             return Samples(time_ns, block.accel[i], block.gyro[i], quat=quat, temperature_c=temperature,
                            **increments)
@@ -237,6 +240,21 @@ class Stream:
                                     *self.navigation)
         return Samples(time_ns, block.accel[i], block.gyro[i], quat=quat, euler=quat_to_euler(quat),
                        temperature_c=temperature, **nav, **increments)
+
+    def _attitude_change(self, block, quat: np.ndarray) -> np.ndarray:
+        """Each interval's attitude change from the true attitudes at its ends (attitude.attitude_change); the
+        last sample of the previous block is kept for the next block's first interval. The stream's first
+        sample, and the first after a loop restarts the scene, has no attitude before it: its change is the
+        rotation by its increment."""
+        dtheta = block.dtheta[self.imu_index]
+        if self._before is not None and self._before[0] == block.k0:
+            quat_first, dtheta_first = self._before[1], self._before[2]
+        else:
+            dtheta_first = dtheta[:1]
+            quat_first = attitude.multiply(quat[:1], attitude.conjugate(attitude.from_rotation_vector(dtheta_first)))
+        self._before = (block.k0 + len(block), quat[-1:].copy(), dtheta[-1:].copy())
+        return attitude.attitude_change(quat, np.concatenate((quat_first, quat[:-1])), dtheta,
+                                        np.concatenate((dtheta_first, dtheta[:-1])), not self.exact_gyro)
 
     def encode(self, block, time_ns: np.ndarray) -> tuple[list, int]:
         """Per-sample prepared payloads for one block, and the saturation count after it. A device stream
@@ -774,10 +792,17 @@ def needs_increments(configs: list[StreamConfig]) -> bool:
     return False
 
 
+# Effects that leave the gyro's increment the integral of the true attitude's rate (they act on the
+# accelerometer, or on the rate outputs only, not on increments): with no other, a delta quaternion is the true
+# attitude change alone (attitude.attitude_change).
+_TRUE_RATE_EFFECTS = frozenset({"gravity", "lever_arm", "range", "resolution"})
+
+
 def run_streams(scene, sim, configs: list[StreamConfig], options: RunOptions) -> dict:
     streams = build_streams(configs, tuple(sim.imu_names), float(scene.rate_hz))
     for stream in streams:
         stream.frame = scene.frame
+        stream.exact_gyro = scene.effects <= _TRUE_RATE_EFFECTS
         if stream.device is not None and stream.info.device_navigation:
             from imu_emulator.earth_motion import position_frame
             stream.navigation = (scene.frame, float(scene.gravity_mps2), scene.origin, scene.gravity_model,

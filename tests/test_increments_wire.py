@@ -206,3 +206,128 @@ def test_a_divided_device_output_carries_the_increments_since_its_last_packet():
         np.testing.assert_allclose(values[0], (i - previous) / 800, rtol=F32)
         np.testing.assert_allclose(np.radians(values[1:4]), samples.delta_theta[span].sum(axis=0), rtol=4 * F32)
         np.testing.assert_allclose(values[4:7], samples.delta_velocity[span].sum(axis=0), rtol=4 * F32)
+
+
+# Coning: roll = a sin(w t), pitch = a cos(w t), yaw 0 (R = Rz(yaw) Ry(pitch) Rx(roll), body -> ENU). The body
+# rate's direction turns within each interval, so the attitude change is not the rotation by the summed rate.
+CONING_RATE, CONING_N, CONING_A, CONING_W = 100, 60, 0.2, 2 * math.pi * 5.0
+
+
+def _coning_attitude(t, w=CONING_W):
+    return Rotation.from_euler("ZYX", np.column_stack([np.zeros_like(t), CONING_A * np.cos(w * t),
+                                                       CONING_A * np.sin(w * t)]))
+
+
+def _coning_rate(t, w=CONING_W):
+    """The closed-form body rate of z-y-x Euler angles with yaw 0: ω = (roll', pitch' cos roll, -pitch' sin roll)."""
+    roll, droll = CONING_A * np.sin(w * t), CONING_A * w * np.cos(w * t)
+    dpitch = -CONING_A * w * np.sin(w * t)
+    return np.stack([droll, dpitch * np.cos(roll), -dpitch * np.sin(roll)], axis=-1)
+
+
+def _coning_increments(t0, t1, nodes=24):
+    """∫ω dt over each interval by Gauss-Legendre on the closed-form body rate of z-y-x Euler angles with yaw
+    0: ω = (roll', pitch' cos roll, -pitch' sin roll) (24 nodes: exact to double precision at ωT = 0.31)."""
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    h = (t1 - t0)[:, None]
+    t = t0[:, None] + (x[None, :] + 1) / 2 * h
+    return np.einsum("nk,nki->ni", w[None, :] * h / 2, _coning_rate(t))
+
+
+def _coning_delta_q(tmp_path, w=CONING_W, extra=""):
+    """Xsens DeltaQ (scalar first) of the coning scene streamed to a file, one row per sample."""
+    scene = tmp_path / "coning.toml"
+    scene.write_text(f"""
+[scene]
+rate_hz = {CONING_RATE}
+duration_s = 1.0
+
+[trajectory]
+x = "0"
+y = "0"
+z = "0"
+
+[attitude]
+mode = "euler"
+roll = "{CONING_A}*sin({w!r}*t)"
+pitch = "{CONING_A}*cos({w!r}*t)"
+yaw = "0"
+
+[[imu]]
+name = "imu0"
+{extra}""")
+    target = tmp_path / "out.bin"
+    assert main(["stream", str(scene), "--format", "xsens-mtdata2", "--to", f"file:{target}", "--speed", "0",
+                 "--count", str(CONING_N), "--quiet", "--realtime", "off", "--option", "items=delta_q"]) == 0
+    data = target.read_bytes()
+    size = 4 + 3 + 16 + 1                       # FA FF 36 len, XDI size, 4 x f32, checksum
+    dq = np.array([struct.unpack_from(">4f", data, i + 7) for i in range(0, len(data), size)])
+    assert len(dq) == CONING_N
+    return dq
+
+
+def test_xsens_delta_q_is_the_exact_attitude_change_with_coning(tmp_path):
+    dq = _coning_delta_q(tmp_path)
+    t = np.arange(-1, CONING_N) / CONING_RATE   # t_-1 .. t_N-1
+    truth = _coning_attitude(t)
+    exact = (truth[:-1].inv() * truth[1:]).as_quat()[:, [3, 0, 1, 2]]
+    exact *= np.sign(exact[:, :1])
+    # The first sample has no attitude before it in the stream: its DeltaQ is the rotation by its increment.
+    assert_f32_close(dq[1:], exact[1:], 1.0)
+    # ... which is what the exact change is not: the rotation by the increment (∫ω dt, integrated here from
+    # the closed-form rate) misses the coning term, over a hundred times the tolerance in this motion.
+    by_increment = Rotation.from_rotvec(_coning_increments(t[:-1], t[1:])).as_quat()[:, [3, 0, 1, 2]]
+    assert np.abs(by_increment[1:] - exact[1:]).max() > 100 * 2 * F32
+    assert_f32_close(dq[:1], by_increment[:1], 1.0)
+
+
+def test_xsens_delta_q_carries_the_gyro_errors(tmp_path):
+    # A constant gyro bias b: the sensed attitude change is the solution of q' = q (ω + b) / 2 over the
+    # interval, integrated here by RK4 (400 steps: error far below float32) from the true attitude at t_k-1.
+    # DeltaQ applies the bias as the rotation by ε ≈ b T after the exact change; the neglected terms are the
+    # commutator ½|bT||Δθ| (6e-7 here, 1 Hz coning) plus the two-sample coning estimate's residual (below
+    # 1e-8 at ωT = 0.06), so 2e-6 bounds the difference; leaving the bias out would miss by |bT|/2 = 5e-5.
+    b = np.array([0.01, 0.005, -0.01])
+    w = 2 * math.pi * 1.0
+    dq = _coning_delta_q(tmp_path, w, "[imu.gyro]\nbias = [0.01, 0.005, -0.01]\n[effects]\nbias = true\n")
+    t = np.arange(-1, CONING_N) / CONING_RATE
+    truth = _coning_attitude(t, w)
+    steps, expected = 400, []
+    for k in range(1, CONING_N):
+        q, h = np.array([1.0, 0, 0, 0]), (t[k + 1] - t[k]) / steps
+
+        def derivative(tau, q):
+            wx, wy, wz = _coning_rate(np.array([tau]), w)[0] + b
+            return 0.5 * np.array([-q[1] * wx - q[2] * wy - q[3] * wz, q[0] * wx + q[2] * wz - q[3] * wy,
+                                   q[0] * wy - q[1] * wz + q[3] * wx, q[0] * wz + q[1] * wy - q[2] * wx])
+        for j in range(steps):
+            tau = t[k] + j * h
+            k1 = derivative(tau, q)
+            k2 = derivative(tau + h / 2, q + h / 2 * k1)
+            k3 = derivative(tau + h / 2, q + h / 2 * k2)
+            k4 = derivative(tau + h, q + h * k3)
+            q = q + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        expected.append(q / np.linalg.norm(q))
+    expected = np.array(expected)
+    np.testing.assert_allclose(dq[1:], expected, rtol=0, atol=2e-6)
+    exact = (truth[1:-1].inv() * truth[2:]).as_quat()[:, [3, 0, 1, 2]]
+    assert np.abs(exact * np.sign(exact[:, :1]) - expected).max() > 2e-5
+
+
+def test_increments_since_the_last_output_multiply_the_attitude_changes_in_order():
+    # With an output divider the DeltaQ of a packet spans the sub-intervals since the previous one:
+    # q(t_0)^-1 q(t_3) = the product of the three changes, against scipy's composition of the true attitudes.
+    from firmware_protocols.base import Samples
+    from firmware_protocols.devices.base import SinceLastOutput, single
+    t = np.arange(4) / CONING_RATE
+    truth = _coning_attitude(t)
+    changes = (truth[:-1].inv() * truth[1:]).as_quat()[:, [3, 0, 1, 2]]
+    n = len(changes)
+    samples = Samples(np.arange(n), np.zeros((n, 3)), np.zeros((n, 3)), delta_theta=np.zeros((n, 3)),
+                      delta_velocity=np.zeros((n, 3)), delta_time_s=np.full(n, 0.01), attitude_change=changes)
+    since = SinceLastOutput()
+    for i in range(n):
+        since.add(samples, i)
+    got = since.attach(single(samples, n - 1)).attitude_change[0]
+    expected = (truth[0].inv() * truth[-1]).as_quat()[[3, 0, 1, 2]]
+    np.testing.assert_allclose(got * np.sign(got[0]), expected * np.sign(expected[0]), rtol=0, atol=1e-15)

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from firmware_protocols import attitude
 from firmware_protocols.base import Samples
 
 
@@ -103,24 +104,32 @@ class SinceLastOutput:
     """The integrated outputs since the device last sent them. Real parts reset their integrals at each output
     that carries them (VectorNav's DeltaTheta/DeltaVel description; Xsens DeltaQ/DeltaV and MIP delta
     fields alike), so with an output divider a packet's increments span every sample since the previous one,
-    paused time included. Nothing happens when the samples carry no increments."""
+    paused time included: Δθ and Δv summed, the attitude change multiplied in order (q(t_a)^-1 q(t_c) =
+    [q(t_a)^-1 q(t_b)] [q(t_b)^-1 q(t_c)]). Nothing happens when the samples carry no increments."""
 
-    __slots__ = ("theta", "velocity", "time_s")
+    __slots__ = ("theta", "velocity", "time_s", "change")
 
     def __init__(self):
-        self.theta = self.velocity = self.time_s = None
+        self.theta = self.velocity = self.time_s = self.change = None
 
-    def add(self, samples: Samples, i: int) -> None:
+    def add(self, samples: Samples, i: int, increments=None) -> None:
+        """Sample i's interval; `increments` (Δθ, Δv) replaces the sample's own (a device that re-expresses
+        them, e.g. VectorNav's NED integration frame, before summing)."""
         if samples.delta_theta is None:
             return
+        theta, velocity = increments if increments is not None else (samples.delta_theta[i],
+                                                                      samples.delta_velocity[i])
         period = 0.0 if samples.delta_time_s is None else float(samples.delta_time_s[i])
+        change = None if samples.attitude_change is None else samples.attitude_change[i]
         if self.theta is None:
-            self.theta, self.velocity = samples.delta_theta[i].copy(), samples.delta_velocity[i].copy()
-            self.time_s = period
+            self.theta, self.velocity = np.array(theta, dtype=float), np.array(velocity, dtype=float)
+            self.time_s, self.change = period, None if change is None else change.copy()
         else:
-            self.theta += samples.delta_theta[i]
-            self.velocity += samples.delta_velocity[i]
+            self.theta += theta
+            self.velocity += velocity
             self.time_s += period
+            if change is not None and self.change is not None:
+                self.change = attitude.multiply(self.change, change)
 
     def attach(self, one: Samples) -> Samples:
         """`one` (a sample alone) carrying the sums so far instead of its own interval's."""
@@ -128,12 +137,14 @@ class SinceLastOutput:
             one.delta_theta, one.delta_velocity = self.theta[None, :].copy(), self.velocity[None, :].copy()
             if one.delta_time_s is not None:
                 one.delta_time_s = np.array([self.time_s])
+            if self.change is not None and one.attitude_change is not None:
+                one.attitude_change = self.change[None, :].copy()
         return one
 
     def sent(self, encoder) -> None:
         """Start over when the packet just encoded carried increments."""
         if getattr(encoder, "uses_increments", False):
-            self.theta = self.velocity = self.time_s = None
+            self.theta = self.velocity = self.time_s = self.change = None
 
 
 class Divider:
