@@ -123,3 +123,23 @@ def attitude_change(quat: np.ndarray, quat_before: np.ndarray, dtheta: np.ndarra
     coning = np.cross(dtheta_before, dtheta) / 12.0
     error = dtheta - (to_rotation_vector(exact) - coning)
     return canonical(multiply(exact, from_rotation_vector(error)))
+
+
+def increments_in_reference(quat: np.ndarray, dtheta: np.ndarray, dvel: np.ndarray) -> tuple:
+    """One interval's increments (sensor axes) re-expressed in the reference frame of `quat` (sensor ->
+    reference at the interval's end), as an integrating device does in a fixed frame: ∫C(t)ω dt and ∫C(t)f dt.
+
+    With the rate and the specific force constant in sensor axes over the interval, C(t) = C_k exp([φ×](t −
+    t_k)/T) and ∫C f dt = C_k J(−φ) Δv, where φ = Δθ and J(x) = I + (1 − cos θ)/θ² [x×] + (θ − sin θ)/θ³ [x×]²
+    (the integral of the rotation over the interval: exact for that motion, the closed form the tests use);
+    J(−φ) φ = φ, so the angle increment is C_k Δθ. (3,) arrays in, (3,) arrays out."""
+    matrix_k = matrix(quat)
+    dtheta, dvel = np.asarray(dtheta, dtype=np.float64), np.asarray(dvel, dtype=np.float64)
+    angle = float(np.sqrt(dtheta @ dtheta))
+    if angle < 1e-4:     # the series, to where its next terms (θ⁴/720, θ⁴/5040) are below 1e-19
+        first, second = 0.5 - angle ** 2 / 24.0, 1.0 / 6.0 - angle ** 2 / 120.0
+    else:
+        first, second = (1.0 - np.cos(angle)) / angle ** 2, (angle - np.sin(angle)) / angle ** 3
+    cross = np.cross(dtheta, dvel)
+    integral = dvel - first * cross + second * np.cross(dtheta, cross)
+    return matrix_k @ dtheta, matrix_k @ integral

@@ -331,3 +331,55 @@ def test_increments_since_the_last_output_multiply_the_attitude_changes_in_order
     got = since.attach(single(samples, n - 1)).attitude_change[0]
     expected = (truth[0].inv() * truth[-1]).as_quat()[[3, 0, 1, 2]]
     np.testing.assert_allclose(got * np.sign(got[0]), expected * np.sign(expected[0]), rtol=0, atol=1e-15)
+
+
+def _vn_command(device, body: str) -> bytes:
+    from functools import reduce
+    return b"".join(device.receive(b"$" + body.encode() + b"*%02X\r\n" % reduce(lambda a, b: a ^ b, body.encode(), 0)))
+
+
+def test_vectornav_register_82_layout_read_write_and_refusals():
+    # VectorNav's C library reads register 82 as five fields: u8 IntegrationFrame (BODY 0, NED 1), u8
+    # GyroCompensation, u8 AccelCompensation (NONE 0, BIAS 1), u8 Reserved1, u16 Reserved2; factory: all 0.
+    from firmware_protocols import create_device
+    device = create_device("vectornav-binary", 800.0)
+    assert b"$VNRRG,82,0,0,0,0,0*" in _vn_command(device, "VNRRG,82")
+    assert b"$VNWRG,82,1,1,0,0,0*" in _vn_command(device, "VNWRG,82,1,1,0,0,0")
+    assert b"$VNRRG,82,1,1,0,0,0*" in _vn_command(device, "VNRRG,82")
+    assert b"$VNERR,07*" in _vn_command(device, "VNWRG,82,2,0,0,0,0")      # no integration frame 2
+    assert b"$VNERR,07*" in _vn_command(device, "VNWRG,82,0,0,0,0,65536")  # Reserved2 is 16 bits
+    assert b"$VNERR,05*" in _vn_command(device, "VNWRG,82,1,0,0")
+    assert b"$VNRRG,82,1,1,0,0,0*" in _vn_command(device, "VNRRG,82")      # refused writes changed nothing
+
+
+@pytest.mark.parametrize("divisor", [1, 3])
+def test_vectornav_ned_integration_frame_against_the_closed_form(divisor):
+    # Constant yaw rate Ω about down with a constant body specific force f = (fx, 0, fz): the body -> NED
+    # attitude is Rz(Ω t), so over (t_a, t_b] ∫C f dt = (fx (sin Ωt_b − sin Ωt_a)/Ω, −fx (cos Ωt_b − cos Ωt_a)/Ω,
+    # fz (t_b − t_a)) and ∫C ω dt = (0, 0, Ω (t_b − t_a)). With a divisor the packet spans the samples since
+    # the previous one, summed in NED. Register 82 = 1 (NED) selects it; 0 (body) gives f T back.
+    from firmware_protocols import create_device
+    from firmware_protocols.base import Samples
+    rate, omega, fx, fz, n = 800.0, 1.7, 2.5, -9.8, 12
+    t = np.arange(n) / rate + 0.3
+    quat = np.column_stack([np.cos(omega * t / 2), np.zeros(n), np.zeros(n), np.sin(omega * t / 2)])
+    samples = Samples((t * 1e9).astype(np.int64), np.tile([fx, 0, fz], (n, 1)), np.tile([0, 0, omega], (n, 1)),
+                      quat=quat, delta_theta=np.tile([0, 0, omega / rate], (n, 1)),
+                      delta_velocity=np.tile([fx / rate, 0, fz / rate], (n, 1)), delta_time_s=np.full(n, 1 / rate))
+    for frame in (1, 0):
+        device = create_device("vectornav-binary", rate)
+        _vn_command(device, f"VNWRG,75,1,{divisor},04,00C0")      # IMU group: DeltaTheta | DeltaVel
+        _vn_command(device, f"VNWRG,82,{frame},0,0,0,0")
+        packets = [device.output(samples, i) for i in range(n)]
+        sent = [i for i, p in enumerate(packets) if p]
+        assert sent == list(range(0, n, divisor))
+        for previous, i in zip([-1] + sent[:-1], sent):
+            values = np.array(struct.unpack_from("<7f", packets[i], 4))
+            t_a, t_b = t[previous + 1] - 1 / rate, t[i]
+            if frame == 1:
+                dvel = [fx * (np.sin(omega * t_b) - np.sin(omega * t_a)) / omega,
+                        -fx * (np.cos(omega * t_b) - np.cos(omega * t_a)) / omega, fz * (t_b - t_a)]
+            else:
+                dvel = [fx * (t_b - t_a), 0.0, fz * (t_b - t_a)]
+            assert_f32_close(np.radians(values[1:4]), [0, 0, omega * (t_b - t_a)], omega * (t_b - t_a))
+            assert_f32_close(values[4:7], dvel, 4 * abs(fz) * (t_b - t_a))

@@ -23,7 +23,9 @@ number, 4 firmware version (read-only: a write answers error 8), 5 baud rate (96
 goes out at the old rate, then the link follows), 6 async ASCII type (0 off, 1 VNYPR, 14 VNYMR, 19 VNIMU; other
 types are error 7: the emulator cannot produce them) and 7 its frequency (1 ... 200 Hz as the device
 allows), both with an optional serial port argument; 30 communication protocol control (7 integers),
-32 synchronization control (9), 35 VPE basic control (4): stored and read back, and register 30's
+32 synchronization control (9), 35 VPE basic control (4), 82 delta theta and delta velocity configuration
+(5: IntegrationFrame 0 body / 1 NED, GyroCompensation, AccelCompensation 0 none / 1 bias, two reserved; NED
+re-expresses DeltaTheta/DeltaVel in NED before summing, see _integration_frame): stored and read back, and register 30's
 SerialChecksum field (1 8-bit, 2 CRC-16; the `checksum` option sets it at start) picks the checksum of the
 asynchronous ASCII sentences (replies always use the command's kind); 75-77 binary outputs 1-3:
 `asyncMode, rateDivisor, outputGroup (hex), groupField (hex) per set group bit`. A binary output is sent at
@@ -41,6 +43,7 @@ command line is ignored and counted; a line cut by a new `$` is answered as what
 """
 from __future__ import annotations
 
+from firmware_protocols import attitude
 from firmware_protocols.base import Samples
 from firmware_protocols.devices.base import Device, LinkRequest, SinceLastOutput, single
 from firmware_protocols.registry import attach_device
@@ -52,7 +55,14 @@ ASCII_TYPES = {0: None, 1: "VNYPR", 14: "VNYMR", 19: "VNIMU"}
 ASCII_RATES = (1, 2, 4, 5, 10, 20, 25, 40, 50, 100, 200)
 BAUD_RATES = (9600, 19200, 38400, 57600, 115200, 128000, 230400, 460800, 921600)
 _CHECKSUM_CODE = {"xor": 1, "crc": 2}
-_INT_REGISTERS = {30: (0, 0, 0, 0, 1, 0, 1), 32: (3, 0, 0, 0, 0, 0, 0, 100000000, 0), 35: (1, 1, 1, 1)}
+_INT_REGISTERS = {30: (0, 0, 0, 0, 1, 0, 1), 32: (3, 0, 0, 0, 0, 0, 0, 100000000, 0), 35: (1, 1, 1, 1),
+                  82: (0, 0, 0, 0, 0)}
+# Register 82, Delta Theta and Delta Velocity Configuration (VectorNav's C library, VnSensor_read/
+# writeDeltaThetaAndDeltaVelocityConfiguration: u8 IntegrationFrame, u8 GyroCompensation, u8 AccelCompensation,
+# u8 Reserved1 (EarthRateCorrection in the newer SDK), u16 Reserved2; enums VnIntegrationFrame BODY 0 / NED 1,
+# VnCompensationMode NONE 0 / BIAS 1): each field's allowed values.
+_DELTA_CONFIG_VALUES = (range(2), range(2), range(2), range(256), range(65536))
+INTEGRATION_NED = 1
 _MAX_LINE = 256
 
 # Presets: what a driver's parser expects before (or instead of) configuring the unit.
@@ -170,7 +180,7 @@ class VectorNavDevice(Device):
     def output(self, samples: Samples, i: int) -> bytes:
         tick = self.tick
         self.tick += 1
-        self.increments.add(samples, i)
+        self.increments.add(samples, i, self._integration_frame(samples, i))
         if self.paused:
             return b""
         parts = []
@@ -183,6 +193,17 @@ class VectorNavDevice(Device):
         if self.ascii_type and tick % max(1, int(round(self.rate_hz / self.ascii_rate))) == 0:
             parts.append(self._ascii_encoder().encode(one or single(samples, i)).data)
         return b"".join(parts)
+
+    def _integration_frame(self, samples: Samples, i: int):
+        """Register 82's IntegrationFrame NED: each interval's increments re-expressed in NED before they are
+        summed (the device integrates in that frame), from the sample's attitude; None keeps body axes.
+        GyroCompensation/AccelCompensation BIAS subtract the device's own filter's bias estimate, which this
+        emulation does not run (its estimate is zero); Reserved1 (EarthRateCorrection in newer firmware) and
+        Reserved2 are stored and read back, not applied."""
+        if self.ints[82][0] != INTEGRATION_NED or samples.delta_theta is None:
+            return None
+        quat = samples.quat[i] if samples.quat is not None else (1.0, 0.0, 0.0, 0.0)
+        return attitude.increments_in_reference(quat, samples.delta_theta[i], samples.delta_velocity[i])
 
     # - input -
     def _receive(self, data: bytes, now_ns: int) -> list:
@@ -316,7 +337,10 @@ class VectorNavDevice(Device):
         elif register in self.ints:
             expected = len(_INT_REGISTERS[register])
             _count(values, expected, expected)
-            self.ints[register] = tuple(_integer(v) for v in values)
+            numbers = tuple(_integer(v) for v in values)
+            if register == 82 and any(v not in allowed for v, allowed in zip(numbers, _DELTA_CONFIG_VALUES)):
+                raise _Reject(ERR_PARAMETER)
+            self.ints[register] = numbers
         else:
             self.binary[register - 75] = output = self._binary_output(values, self._encoding)
             if output.encoder is not None:
