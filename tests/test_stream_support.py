@@ -149,15 +149,29 @@ def check_highres_against_scene(messages, scene, accel, gyro, k=None) -> np.ndar
     return k
 
 
-def dronecan_rawimu(frames):
-    """Decode (can_id, data) pairs into RawIMU transfers with the dronecan library's own machinery."""
+def candump_frames(text: str, data_type_id: int = 1003) -> list:
+    """(can_id, data) of the frames of one DroneCAN data type (RawIMU by default: a device adds NodeStatus) in
+    `candump -L` output; classic lines are ID#DATA, CAN FD lines ID##<flags nibble>DATA."""
+    frames = []
+    for line in text.splitlines():
+        can_id, _, data = line.split()[2].partition("#")
+        if data.startswith("#"):
+            data = data[2:]
+        if (int(can_id, 16) >> 8) & 0xFFFF == data_type_id:
+            frames.append((int(can_id, 16), bytes.fromhex(data)))
+    return frames
+
+
+def dronecan_rawimu(frames, fd: bool = False):
+    """Decode (can_id, data) pairs into RawIMU transfers with the dronecan library's own machinery (fd: the
+    frames are CAN FD frames)."""
     import dronecan
     from dronecan.transport import Frame, Transfer
     transfers, pending = [], []
     for can_id, data in frames:
         if data[-1] & 0x80:   # start of transfer: whatever was pending is incomplete
             pending = []
-        pending.append(Frame(can_id, bytearray(data)))
+        pending.append(Frame(can_id, bytearray(data), canfd=fd))
         if data[-1] & 0x40:   # end of transfer
             transfer = Transfer()
             try:

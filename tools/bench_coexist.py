@@ -11,9 +11,11 @@ the emulator streams and the run reports, per case:
 
 Cases: mavlink-highres at 1 kHz over a pty on the host, without and with CPU-bound competitors (one busy
 loop per usable CPU by default); inside the one-CPU User Mode Linux guest: the same pty case and
-dronecan-rawimu at 100 Hz and 1 kHz to vcan0 recorded by `candump -L` (with --allow-overload: 7 frames at
-1 kHz exceed a 1 Mbit/s bus's worst-case budget, which vcan does not have; the guest's figures are for
-completeness; its system calls cost ~50 us, so its lateness says little about a real machine).
+dronecan-rawimu at 100 Hz and 1 kHz to vcan0 recorded by `candump -L` (classic CAN at 1 kHz needs
+--allow-overload: 7 frames at 1 kHz exceed a 1 Mbit/s bus's worst-case budget, which vcan does not have), and
+at 1 kHz over CAN FD (one 64-byte frame per sample, within a 1/5 Mbit/s budget: the admissible configuration).
+The guest's figures are for completeness; its system calls cost ~50 us, so its lateness says little about a
+real machine. Each run ends with a markdown table: min / median / max over the --repeat windows.
 Modes are interleaved (default, spin, fifo, off, default, ...) so that load from others hits all alike.
 
     python tools/bench_coexist.py [--seconds 10] [--repeat 1] [--modes auto spin fifo off] [--no-guest] [--no-host]
@@ -24,6 +26,7 @@ import argparse
 import json
 import os
 import resource
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -33,7 +36,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "tests"))
 from bench_stream import SCENE, read_until_exit  # noqa: E402  (tools/ is on the path: this script's folder)
-from test_stream_support import dronecan_rawimu  # noqa: E402  (the tests' receiver: dronecan reassembles)
+from test_stream_support import candump_frames, dronecan_rawimu  # noqa: E402  (the tests' receiver: dronecan reassembles)
 MODES = ("auto", "spin", "fifo", "off")
 BUSY = "while True: pass"
 
@@ -88,30 +91,33 @@ def pty_case(directory: Path, rate: float, seconds: float, mode: str) -> dict:
     return {**summary, "due": len(due), "received": len(got & set(due)), "missing": missing[:10]}
 
 
-def vcan_case(directory: Path, rate: float, seconds: float, mode: str) -> dict:
-    """dronecan-rawimu to vcan0 recorded by candump at normal priority; complete transfers reassembled."""
+def vcan_case(directory: Path, rate: float, seconds: float, mode: str, fd: bool = False) -> dict:
+    """dronecan-rawimu to vcan0 recorded by candump at normal priority; complete transfers reassembled.
+    Classic CAN: 7 frames per sample, which at 1 kHz exceed a 1 Mbit/s bus with worst-case stuffing (vcan has
+    no bit rate to mind: --allow-overload); CAN FD: one 64-byte frame per sample, within a 1/5 Mbit/s budget."""
     log = directory / "candump.log"
+    link = (["--fd", "--bitrate", "1000000", "--data-bitrate", "5000000", "--option", "fd=true"] if fd
+            else ["--allow-overload"])
     with open(log, "w") as out:
         candump = subprocess.Popen(["candump", "-L", "vcan0"], stdout=out)
         try:
-            # 7 frames at 1 kHz exceed a 1 Mbit/s bus with worst-case stuffing: vcan has no bit rate to mind.
-            proc, stats = emulator(directory, "dronecan-rawimu", "can:socketcan:vcan0", rate, seconds, mode,
-                                   "--allow-overload")
+            proc, stats = emulator(directory, "dronecan-rawimu", "can:socketcan:vcan0", rate, seconds, mode, *link)
             proc.stdout.readline()
             summary = finish(proc, stats, seconds)
             time.sleep(0.5)   # candump drains what is queued for it
         finally:
             candump.terminate()
             candump.wait()
-    frames = []
-    for line in log.read_text().splitlines():
-        can_id, _, data = line.split()[2].partition("#")
-        if (int(can_id, 16) >> 8) & 0xFFFF == 1003:   # RawIMU frames only (a device may add NodeStatus)
-            frames.append((int(can_id, 16), bytes.fromhex(data)))
+    frames = candump_frames(log.read_text())
     due = int(round(seconds * rate))
-    transfers = dronecan_rawimu(frames)
+    transfers = dronecan_rawimu(frames, fd)
     got = {round(t.payload.timestamp.usec * 1e-6 * rate) for t in transfers}
-    return {**summary, "due": due, "received": len(got & set(range(due))), "frames": len(frames)}
+    return {**summary, "due": due, "received": len(got & set(range(due))), "frames": len(frames),
+            "frames_per_sample": 1 if fd else 7}
+
+
+def vcan_fd_case(directory: Path, rate: float, seconds: float, mode: str) -> dict:
+    return vcan_case(directory, rate, seconds, mode, fd=True)
 
 
 def run_cases(cases, modes, repeat: int, seconds: float, competitors: int, place: str, emit) -> None:
@@ -138,7 +144,7 @@ def row_text(r: dict) -> str:
     link = r["streams"][0]["link"]
     refused = sum(link.get("send_errors", {}).values())
     moved = {k: v for k, v in link.get("interface", {}).items() if v}
-    frames = f" frames {r['frames']}/{7 * r['due']}" if "frames" in r else ""
+    frames = f" frames {r['frames']}/{r.get('frames_per_sample', 7) * r['due']}" if "frames" in r else ""
     return (f"{r['place']:5s} {r['case']:22s} {r['rate']:>5.0f} Hz  busy {r['competitors']}  {r['mode']:4s} "
             f"({r['scheduling']:4s})  received {r['received']}/{r['due']} ({100 * r['received'] / r['due']:6.2f} %)"
             f"{frames}  sent {r['streams'][0]['sent']} dropped {r['dropped']} refused {refused}"
@@ -148,10 +154,36 @@ def row_text(r: dict) -> str:
             f"{r['sender_cpu_ratio'] * 100:.1f} %, whole process {r['cpu_per_s'] * 100:.0f} %")
 
 
+def _spread(values, digits: int = 0) -> str:
+    """min / median / max of the windows, or the one value."""
+    values = sorted(values)
+    shown = [f"{v:.{digits}f}" for v in (values[0], statistics.median(values), values[-1])]
+    return shown[0] if len(set(shown)) == 1 else " / ".join(shown)
+
+
+def markdown_table(rows: list) -> str:
+    """One line per case and mode over the repeated windows, for the README: min / median / max."""
+    groups = {}
+    for r in rows:
+        key = (r["place"], r["case"], r["rate"], r["competitors"], r["mode"], r["scheduling"])
+        groups.setdefault(key, []).append(r)
+    lines = ["| where | case | busy loops | mode | windows | received % | late p50 µs | late p99 µs | "
+             "late p99.9 µs | sender CPU % |", "|" + "---|" * 10]
+    for (place, case, rate, busy, mode, scheduling), rs in groups.items():
+        chosen = mode if mode == scheduling else f"{mode} ({scheduling})"
+        lines.append(f"| {place} | {case} {rate:g} Hz | {busy} | {chosen} | {len(rs)} | "
+                     f"{_spread([100 * r['received'] / r['due'] for r in rs], 2)} | "
+                     f"{_spread([r['lateness']['p50_us'] for r in rs])} | "
+                     f"{_spread([r['lateness']['p99_us'] for r in rs])} | "
+                     f"{_spread([r['lateness']['p999_us'] for r in rs])} | "
+                     f"{_spread([100 * r['sender_cpu_ratio'] for r in rs], 1)} |")
+    return "\n".join(lines)
+
+
 def guest(args) -> int:
     """The one-CPU guest's half (runs inside UML): rows as JSON lines on stdout."""
     cases = [("pty mavlink-highres", pty_case, 1000.0), ("vcan dronecan-rawimu", vcan_case, 100.0),
-             ("vcan dronecan-rawimu", vcan_case, 1000.0)]
+             ("vcan dronecan-rawimu", vcan_case, 1000.0), ("vcanfd dronecan-rawimu", vcan_fd_case, 1000.0)]
     cases = [c for c in cases if f"{c[0].split()[0]}{c[2]:g}" in args.guest_cases]
     run_cases(cases, args.modes, args.repeat, args.seconds, args.guest_competitors, "guest",
               lambda row: print("ROW " + json.dumps(row), flush=True))
@@ -189,8 +221,8 @@ def main() -> int:
     parser.add_argument("--competitors", type=int, default=len(os.sched_getaffinity(0)),
                         help="CPU-bound busy loops on the host in the loaded runs (default: one per usable CPU)")
     parser.add_argument("--guest-competitors", type=int, default=0, help="busy loops in the guest (default none)")
-    parser.add_argument("--guest-cases", nargs="+", choices=("pty1000", "vcan100", "vcan1000"),
-                        default=["pty1000", "vcan100", "vcan1000"])
+    parser.add_argument("--guest-cases", nargs="+", choices=("pty1000", "vcan100", "vcan1000", "vcanfd1000"),
+                        default=["pty1000", "vcan100", "vcan1000", "vcanfd1000"])
     parser.add_argument("--no-host", action="store_true")
     parser.add_argument("--no-guest", action="store_true")
     parser.add_argument("--json", metavar="PATH", help="also write every row as JSON lines")
@@ -199,8 +231,10 @@ def main() -> int:
     if args.inside_guest:
         return guest(args)
     out = open(args.json, "w") if args.json else None
+    rows = []
 
     def show(row):
+        rows.append(row)
         print(row_text(row), flush=True)
         if out:
             out.write(json.dumps(row) + "\n")
@@ -212,6 +246,9 @@ def main() -> int:
     if not args.no_guest:
         boot_guest(args, show)
     print(f"load average {os.getloadavg()[0]:.1f} at end")
+    if rows:
+        print("\nmin / median / max over the windows (--repeat), markdown:\n")
+        print(markdown_table(rows))
     return 0
 
 
