@@ -52,6 +52,23 @@ FIFO_PRIORITY = 1
 # holds at 1 kHz.
 _BEHIND_NS = 100_000_000
 MODES = ("auto", "spin", "fifo", "off")
+# A thread CPU clock that moves in steps above this is too coarse to time one sample's work by.
+_FINE_CPU_CLOCK_NS = 100_000
+
+
+def cpu_clock_step_ns(limit_ns: int = 50_000_000) -> int:
+    """How far the thread CPU clock moves per step: nanoseconds on a kernel that accounts CPU time precisely,
+    a whole tick (10 ms) in the User Mode Linux guest (clock_getres says 1 ns on both). Busy-waits up to two
+    steps, at most limit_ns."""
+    give_up = time.monotonic_ns() + limit_ns
+    first = time.thread_time_ns()
+    while (second := time.thread_time_ns()) == first:      # the first change may be a partial step
+        if time.monotonic_ns() > give_up:
+            return limit_ns
+    while (third := time.thread_time_ns()) == second:
+        if time.monotonic_ns() > give_up:
+            return limit_ns
+    return third - second
 
 
 def usable_cpus() -> int:
@@ -150,6 +167,7 @@ class Pacer:
         self._sent_ns = 0            # when the last wait ended
         self._spaced = not fifo      # catch up spaced out (normal scheduling from the start)
         self._behind_cpu_ns = 0      # thread CPU time at the previous sample, while behind and spaced
+        self._cpu_step_ns = None     # the thread CPU clock's step, measured the first time the sender is behind
         self.serve_margin_ns = _SERVE_MARGIN_NS
         self.serve_cost_ns = 0       # the dearest answer's thread CPU time so far
         # When the descriptors were last looked at: at high rates the whole period may be spin and margin,
@@ -217,8 +235,16 @@ class Pacer:
             # system call costs tens of microseconds) would never sleep: then it sleeps as long as it worked
             # (its CPU time since the previous sample, read only while behind), so a reader sharing the CPU
             # keeps at least half of it and the sender ends late instead.
+            # Where CPU time is accounted per tick (the User Mode Linux guest: thread CPU time moves in 10 ms
+            # steps), the CPU clock reads 0 for most samples and the sender would not sleep at all, bursting
+            # through candump's receive buffer: there the work is the wall time since the previous wake.
             cpu = time.thread_time_ns()
-            worked = cpu - self._behind_cpu_ns if self._behind_cpu_ns else 0
+            if self._cpu_step_ns is None:
+                self._cpu_step_ns = cpu_clock_step_ns()
+            if self._cpu_step_ns > _FINE_CPU_CLOCK_NS:
+                worked = now - self._sent_ns
+            else:
+                worked = cpu - self._behind_cpu_ns if self._behind_cpu_ns else 0
             gap = max(self._sent_ns + self.period_ns // 2 - now, min(worked, self._behind_ns))
             if gap > 0:
                 time.sleep(gap / 1e9)

@@ -273,3 +273,29 @@ def test_serve_margin_follows_the_dearest_answer_within_its_bounds():
     fresh = Pacer(fifo=False)
     fresh._answered(1_000)
     assert fresh.serve_margin_ns == 50_000
+
+
+def test_cpu_clock_step_is_fine_here_and_the_pacer_times_work_by_wall_time_where_it_is_coarse(monkeypatch):
+    # This host accounts CPU time to the ns; the UML guest moves it in 10 ms ticks. There a behind sender
+    # reading its CPU time would see 0 for most samples and never sleep: it must then sleep as long as the
+    # wall time its previous sample took (2 ms of work here, at a 1 ms period).
+    assert realtime.cpu_clock_step_ns() < realtime._FINE_CPU_CLOCK_NS
+    fine = time.thread_time_ns
+    monkeypatch.setattr(realtime.time, "thread_time_ns", lambda: fine() // 10_000_000 * 10_000_000)
+    assert realtime.cpu_clock_step_ns() == 10_000_000
+    period, work = 1_000_000, 2_000_000
+    woke = []
+
+    def send():
+        pacer = Pacer(fifo=False, period_ns=period, spin=False)
+        past = time.monotonic_ns() - 1_000 * period
+        for k in range(6):
+            woke.append(pacer.wait_until(past + k * period))
+            start = time.monotonic_ns()
+            while time.monotonic_ns() - start < work:
+                pass
+
+    thread = threading.Thread(target=send)
+    thread.start()
+    thread.join()
+    assert min(np.diff(woke[1:])) >= 2 * work
