@@ -24,9 +24,9 @@ goes out at the old rate, then the link follows), 6 async ASCII type (0 off, 1 V
 types are error 7: the emulator cannot produce them) and 7 its frequency (1 ... 200 Hz as the device
 allows), both with an optional serial port argument; 30 communication protocol control (7 integers),
 32 synchronization control (9), 35 VPE basic control (4), 82 delta theta and delta velocity configuration
-(5: IntegrationFrame 0 body / 1 NED, GyroCompensation, AccelCompensation 0 none / 1 bias, two reserved; NED
-re-expresses DeltaTheta/DeltaVel in NED before summing, see _integration_frame): stored and read back, and register 30's
-SerialChecksum field (1 8-bit, 2 CRC-16; the `checksum` option sets it at start) picks the checksum of the
+(5: IntegrationFrame 0 body / 1 NED, GyroCompensation, AccelCompensation 0 none / 1 bias, two reserved;
+NED re-expresses DeltaTheta/DeltaVel in NED before summing, see _integration_frame): stored and read
+back, and register 30's SerialChecksum field (1 8-bit, 2 CRC-16; the `checksum` option sets it at start) picks the checksum of the
 asynchronous ASCII sentences (replies always use the command's kind); 75-77 binary outputs 1-3:
 `asyncMode, rateDivisor, outputGroup (hex), groupField (hex) per set group bit`. A binary output is sent at
 sample rate * rateDivisor^-1 scaled by base_rate_hz (the IMU rate the divisor divides: default the scene's
