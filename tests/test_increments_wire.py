@@ -383,3 +383,17 @@ def test_vectornav_ned_integration_frame_against_the_closed_form(divisor):
                 dvel = [fx * (t_b - t_a), 0.0, fz * (t_b - t_a)]
             assert_f32_close(np.radians(values[1:4]), [0, 0, omega * (t_b - t_a)], omega * (t_b - t_a))
             assert_f32_close(values[4:7], dvel, 4 * abs(fz) * (t_b - t_a))
+
+
+def test_xsens_alignment_rotation_turns_the_attitude_change_into_the_object_frame():
+    # RotSensor q_OS: vectors x_O = R_OS x_S, so a rotation R_S seen in O is R_OS R_S R_OS^-1 (scipy composes).
+    from firmware_protocols.base import Samples
+    from firmware_protocols.devices.xsens import aligned
+    sensor = Rotation.from_rotvec([0.3, -1.1, 0.7])
+    change = Rotation.from_rotvec([0.01, 0.02, -0.015])
+    one = Samples(np.array([0]), np.zeros((1, 3)), np.zeros((1, 3)), delta_theta=change.as_rotvec()[None, :],
+                  delta_velocity=np.zeros((1, 3)), attitude_change=change.as_quat()[None, [3, 0, 1, 2]])
+    out = aligned(one, sensor.as_quat()[[3, 0, 1, 2]], (1.0, 0.0, 0.0, 0.0), "NED")
+    expected = (sensor * change * sensor.inv()).as_quat()[[3, 0, 1, 2]]
+    np.testing.assert_allclose(out.attitude_change[0], expected * np.sign(expected[0]), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(out.delta_theta[0], sensor.apply(change.as_rotvec()), rtol=0, atol=1e-15)

@@ -71,6 +71,9 @@ def aligned(one: Samples, sensor, local, frame: str) -> Samples:
     quat = one.quat if one.quat is not None else np.array([_IDENTITY])
     changes = {name: attitude.rotate(sensor, getattr(one, name))
                for name in ("accel", "gyro", "mag", "delta_velocity", "delta_theta") if getattr(one, name) is not None}
+    if one.attitude_change is not None:     # the sensor's attitude change, seen in the object frame
+        changes["attitude_change"] = attitude.canonical(attitude.multiply(
+            attitude.multiply(np.array(sensor), one.attitude_change), attitude.conjugate(np.array(sensor))))
     quat = attitude.multiply(quat, attitude.conjugate(np.array(sensor)))
     to_frame = attitude.from_ned(np.array(_IDENTITY), frame)            # q_LN
     local_ned = attitude.multiply(attitude.multiply(attitude.conjugate(to_frame), np.array(local)), to_frame)
