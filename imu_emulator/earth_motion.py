@@ -70,14 +70,16 @@ def _affine(out: str, r0, c, names) -> list[str]:
     return lines
 
 
-def geometry_lines(scene) -> list[str]:
+def geometry_lines(scene, jerk: bool = False) -> list[str]:
     """The Earth geometry, after the motion's lines: geodetic position, local-NED velocity and acceleration
-    (e_*), and ax ay az replaced by the Earth-fixed acceleration in the level axes (the navigation stage's
-    f starts from them)."""
+    (e_*; and jerk e_jn.. with `jerk`), and ax ay az replaced by the Earth-fixed acceleration in the level
+    axes (the navigation stage's f starts from them)."""
     r0, c = tangent_to_ecef(position_frame(scene), scene.origin)
     a, e2 = repr(wgs84.A), repr(wgs84.E2)
     lines = _affine("e_r", r0, c, ("px", "py", "pz")) + _affine("e_v", None, c, ("vx", "vy", "vz"))
     lines += _affine("e_a", None, c, ("ax", "ay", "az"))
+    if jerk:
+        lines += _affine("e_j", None, c, ("jx", "jy", "jz"))
     lines += [
         "e_p = math.sqrt(e_rx * e_rx + e_ry * e_ry)",
         "if e_p > 0.0:",
@@ -111,12 +113,60 @@ def geometry_lines(scene) -> list[str]:
     # local NED at the current position: rows of C_e^n
     rows = {"n": ("-e_sl * e_co", "-e_sl * e_so", "e_cl"), "e": ("-e_so", "e_co", None),
             "d": ("-e_cl * e_co", "-e_cl * e_so", "-e_sl")}
-    for vec in ("v", "a"):
+    for vec in ("v", "a", "j") if jerk else ("v", "a"):
         for axis, row in rows.items():
             terms = [f"({r}) * e_{vec}{c}" for r, c in zip(row, "xyz") if r is not None]
             lines.append(f"e_{vec}{axis} = {' + '.join(terms)}")
     fx, fy, fz = level(scene, "e_an", "e_ae", "e_ad")
     return lines + [f"ax = {fx}", f"ay = {fy}", f"az = {fz}"]
+
+
+def _cross(name: str, u: tuple[str, str, str], v: tuple[str, str, str]) -> list[str]:
+    """name{n,e,d} = u x v (NED components)."""
+    return [f"{name}n = {u[1]} * {v[2]} - {u[2]} * {v[1]}", f"{name}e = {u[2]} * {v[0]} - {u[0]} * {v[2]}",
+            f"{name}d = {u[0]} * {v[1]} - {u[1]} * {v[0]}"]
+
+
+def _ned(name: str) -> tuple[str, str, str]:
+    return (f"{name}n", f"{name}e", f"{name}d")
+
+
+def tangent_level_lines(scene) -> list[str]:
+    """Velocity and its first two time derivatives as components in the local level frame at the current
+    position (t_v.., t_a.., t_j.. in the scene's level axes), for tangent attitude: heading and pitch
+    follow the Earth-referenced velocity over the curved Earth. After geometry_lines(scene, jerk=True).
+
+    The level frame turns at rho = omega_en^n relative to the Earth (C_e^n' = -[rho x] C_e^n), so the NED
+    components v^n = C_e^n v^e change as v^n' = a^n - rho x v^n and v^n'' = j^n - rho x a^n - rho' x v^n -
+    rho x v^n', with a^n, j^n the Earth-fixed acceleration and jerk resolved in NED (e_a.., e_j..).
+    rho = (v_E / (R_E + h), -v_N / (R_N + h), -v_E tan L / (R_E + h)) (Groves 2nd ed. eq. 5.44), and rho'
+    follows from L' = v_N / (R_N + h), h' = -v_D, dR_E/dL = a e2 sin L cos L / w^3 and
+    dR_N/dL = 3 a (1 - e2) e2 sin L cos L / w^5 (w = sqrt(1 - e2 sin^2 L)). tan L: the level frame's
+    heading is undefined at the poles."""
+    a, e2 = wgs84.A, wgs84.E2
+    lines = [
+        "t_tl = e_sl / e_cl",
+        "t_rhn = e_ve / e_re",
+        "t_rhe = -e_vn / e_rn",
+        "t_rhd = -t_rhn * t_tl",
+    ]
+    rho = _ned("t_rh")
+    lines += _cross("t_rv", rho, _ned("e_v")) + [f"t_d{axis} = e_a{axis} - t_rv{axis}" for axis in "ned"]
+    lines += _cross("t_ra", rho, _ned("e_a")) + _cross("t_rd", rho, _ned("t_d"))
+    lines += [
+        "t_ld = e_vn / e_rn",                                           # L'
+        "t_scw = e_sl * e_cl / (e_w * e_w * e_w)",
+        f"t_red = {a * e2!r} * t_scw * t_ld - e_vd",                    # (R_E + h)'
+        f"t_rnd = {3.0 * a * (1.0 - e2) * e2!r} * t_scw / (e_w * e_w) * t_ld - e_vd",   # (R_N + h)'
+        "t_rpn = (t_de - t_rhn * t_red) / e_re",
+        "t_rpe = -(t_dn + t_rhe * t_rnd) / e_rn",
+        "t_rpd = -t_rpn * t_tl - t_rhn * t_ld / (e_cl * e_cl)",
+    ]
+    lines += _cross("t_rq", _ned("t_rp"), _ned("e_v"))
+    lines += [f"t_j{axis} = e_j{axis} - t_ra{axis} - t_rq{axis} - t_rd{axis}" for axis in "ned"]
+    for out, src in (("t_v", "e_v"), ("t_a", "t_d"), ("t_j", "t_j")):
+        lines += [f"{out}{axis} = {value}" for axis, value in zip("xyz", level(scene, *_ned(src)))]
+    return lines
 
 
 def eci_to_ecef(xyz, t):

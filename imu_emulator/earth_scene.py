@@ -41,9 +41,6 @@ def earth_keys(head: Mapping, frame: str, effects: frozenset[str], attitude_mode
         if frame == "ECI":
             raise SceneError("trajectory.lat_deg: a geodetic trajectory is fixed to the Earth; use frame = \"NED\", "
                              "\"ENU\" (the attitude's level axes) or \"ECEF\"")
-        if attitude_mode == "tangent":
-            raise SceneError("attitude.mode: 'tangent' is not built for geodetic trajectories yet; give roll, pitch, "
-                             "yaw relative to local level")
         if origin is not None:
             warnings.append("scene.origin is ignored: the trajectory is geodetic")
         return None, model
@@ -54,9 +51,6 @@ def earth_keys(head: Mapping, frame: str, effects: frozenset[str], attitude_mode
         if frame == "ECI" and getattr(trajectory, "keys", None) is None:
             raise SceneError("trajectory: frame = \"ECI\" takes x, y, z expressions of t (sampled ECI "
                              "trajectories are not built yet)")
-        if attitude_mode == "tangent":
-            raise SceneError(f"attitude.mode: 'tangent' is not built for frame = \"{frame}\" yet (it assumes the "
-                             "frame's z axis is vertical); give roll, pitch, yaw relative to local NED")
         if frame == "ECI":
             missing = [name for name in EARTH_EFFECTS if name not in effects]
             if missing:
@@ -65,14 +59,7 @@ def earth_keys(head: Mapping, frame: str, effects: frozenset[str], attitude_mode
         if origin is not None:
             warnings.append(f"scene.origin is ignored with frame = \"{frame}\" (positions are {frame} already)")
             origin = None
-    elif earth and attitude_mode == "tangent":
-        warnings.append("attitude.mode: 'tangent' follows the velocity in the frame tangent at the origin, not in "
-                        "the local level frame the Earth effects use (they differ by distance / 6371 km rad)")
     if frame in ("ENU", "NED") and earth and origin is None:
-        # a default, said out loud: the devices have always used it for their GNSS fields
-        from imu_emulator.geodesy import DEFAULT_ORIGIN
-        origin = DEFAULT_ORIGIN
-        warnings.append(f"scene.origin is not given: effects.{earth[0]} puts the {frame} frame's origin at "
-                        f"{origin[0]} deg N, {origin[1]} deg E, {origin[2]} m (set origin = {{ lat_deg = ..., "
-                        "lon_deg = ..., height_m = ... }})")
+        raise SceneError(f"scene.origin: effects.{earth[0]} needs the point where the {frame} frame is tangent to "
+                         "the Earth (origin = { lat_deg = ..., lon_deg = ..., height_m = ... })")
     return origin, model

@@ -224,8 +224,11 @@ def sampled_quaternion_lines(angles: bool) -> list[str]:
     return lines
 
 
-def tangent_lines(angles: bool) -> list[str]:
+def tangent_lines(angles: bool, v: str = "v", a: str = "a", j: str = "j") -> list[str]:
     """Attitude along the velocity (roll 0), from v, a, j, without trig: cos/sin come from v itself.
+    v, a, j name the velocity and its first two time derivatives in the level axes ({v}x, {v}y, {v}z): the
+    frame's own vx.. by default; with the Earth model on, the components in the local level frame at the
+    current position (imu_emulator.earth_motion.tangent_level_lines).
 
     Where |v| vanishes the last defined attitude is held; where v is vertical the last heading is
     held. The held cos/sin live in `hold` so they carry across blocks.
@@ -233,21 +236,21 @@ def tangent_lines(angles: bool) -> list[str]:
     # Reciprocals once: divisions are the slow part of this block. The held cos/sin are locals
     # (hcy, hsy, hcp, hsp) loaded before the loop and stored after it, so nothing aliases the outputs.
     lines = [
-        "v2 = vx * vx + vy * vy + vz * vz",
-        "h2 = vx * vx + vy * vy",
+        f"v2 = {v}x * {v}x + {v}y * {v}y + {v}z * {v}z",
+        f"h2 = {v}x * {v}x + {v}y * {v}y",
         "if v2 > EPS_V2:",
         "    if h2 > EPS_V2:",
         "        ih = 1.0 / math.sqrt(h2)",
         "        h = h2 * ih",
         "        ih2 = ih * ih",
-        "        cy = vx * ih",
-        "        sy = vy * ih",
-        "        cross = vx * ay - vy * ax",
-        "        dot = vx * ax + vy * ay",
+        f"        cy = {v}x * ih",
+        f"        sy = {v}y * ih",
+        f"        cross = {v}x * {a}y - {v}y * {a}x",
+        f"        dot = {v}x * {a}x + {v}y * {a}y",
         "        hd = dot * ih",
         "        dy = cross * ih2",
-        "        ddy = ((vx * jy - vy * jx) - 2.0 * cross * dot * ih2) * ih2",
-        "        hdd = (ax * ax + ay * ay + vx * jx + vy * jy - hd * hd) * ih",
+        f"        ddy = (({v}x * {j}y - {v}y * {j}x) - 2.0 * cross * dot * ih2) * ih2",
+        f"        hdd = ({a}x * {a}x + {a}y * {a}y + {v}x * {j}x + {v}y * {j}y - hd * hd) * ih",
         "        hcy = cy",
         "        hsy = sy",
         "    else:",
@@ -261,11 +264,11 @@ def tangent_lines(angles: bool) -> list[str]:
         "    iv = 1.0 / math.sqrt(v2)",
         "    iv2 = iv * iv",
         "    cp = h * iv",
-        "    sp = -vz * iv",
+        f"    sp = -{v}z * iv",
         # pitch = -atan2(vz, h): differentiate the N/D form once and twice
-        "    num = h * az - vz * hd",
+        f"    num = h * {a}z - {v}z * hd",
         "    dp = -num * iv2",
-        "    ddp = -((h * jz - vz * hdd) - num * 2.0 * (vz * az + h * hd) * iv2) * iv2",
+        f"    ddp = -((h * {j}z - {v}z * hdd) - num * 2.0 * ({v}z * {a}z + h * hd) * iv2) * iv2",
         "    hcp = cp",
         "    hsp = sp",
         "else:",
@@ -299,7 +302,13 @@ def motion_code(scene: Scene, angles: bool) -> MotionCode:
         lines += sampled_translational_lines(order)
     attitude_lines: list[str] = []
     rotation_given = False
-    if tangent:
+    from imu_emulator.earth_motion import geometry_lines, model_on, tangent_level_lines
+    earth = model_on(scene)
+    if tangent and earth:
+        # heading and pitch from the velocity in the local level frame at the current position
+        attitude_lines = (geometry_lines(scene, jerk=True) + tangent_level_lines(scene)
+                          + tangent_lines(angles, "t_v", "t_a", "t_j"))
+    elif tangent:
         attitude_lines = tangent_lines(angles)
     elif isinstance(scene.attitude, Expressions):
         symbolic_parts += attitude_parts(scene.attitude, scene, angles)
@@ -309,8 +318,7 @@ def motion_code(scene: Scene, angles: bool) -> MotionCode:
     else:
         assert isinstance(scene.attitude, SampledData)
         attitude_lines = sampled_attitude_lines(angles)
-    from imu_emulator.earth_motion import geometry_lines, model_on
-    if model_on(scene):   # after the attitude: tangent attitude reads the frame's own a
+    if earth and not tangent:
         attitude_lines = attitude_lines + geometry_lines(scene)
     if not symbolic_parts:
         return MotionCode(lines=lines + attitude_lines, constants={}, needs_jerk=tangent,

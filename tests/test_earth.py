@@ -122,7 +122,7 @@ def test_equator_eastward_travel_eotvos_and_centripetal():
 
 def test_effects_off_add_nothing_and_a_missing_origin_is_said():
     """Without Earth effects the origin changes nothing (flat, non-rotating frame as before); with them and no
-    origin, the devices' default origin is used and a warning says so."""
+    origin, the scene is refused naming the key."""
     flat = scene_from_dict({"scene": {"rate_hz": 10, "duration_s": 0.2, "frame": "NED"},
                             "trajectory": {"shape": "static"}, "imu": [{"name": "a"}], "effects": {"gravity": True}})
     with_origin = scene_from_dict({"scene": {"rate_hz": 10, "duration_s": 0.2, "frame": "NED",
@@ -131,11 +131,9 @@ def test_effects_off_add_nothing_and_a_missing_origin_is_said():
                                    "effects": {"gravity": True}})
     from imu_emulator.kernel import generate_source
     assert generate_source(flat, True, True) == generate_source(with_origin, True, True)
-    defaulted = scene_from_dict({"scene": {"rate_hz": 10, "duration_s": 0.2}, "trajectory": {"shape": "static"},
-                                 "imu": [{"name": "a"}], "effects": {"earth_rate": True}})
-    from imu_emulator.geodesy import DEFAULT_ORIGIN
-    assert defaulted.origin == DEFAULT_ORIGIN
-    assert any(w.startswith("scene.origin is not given: effects.earth_rate") for w in defaulted.warnings)
+    with pytest.raises(SceneError, match=r"^scene.origin: effects.earth_rate needs the point where the ENU frame"):
+        scene_from_dict({"scene": {"rate_hz": 10, "duration_s": 0.2}, "trajectory": {"shape": "static"},
+                         "imu": [{"name": "a"}], "effects": {"earth_rate": True}})
     with pytest.raises(SceneError, match=r"scene.origin.lat_deg: 91.0 is out of range"):
         earth_scene("NED", 91.0)
     with pytest.raises(SceneError, match=r"scene.gravity_model: 'egm96' is not one of"):
