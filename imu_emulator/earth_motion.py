@@ -35,7 +35,8 @@ GEODETIC_UPDATES = 2
 def position_frame(scene) -> str:
     """The frame of the kernel's px..pz: the scene's, except ECEF for ECI (rewritten) and geodetic
     trajectories (converted to ECEF, below)."""
-    geodetic = getattr(scene.trajectory, "keys", ("x", "y", "z")) != ("x", "y", "z")
+    geodetic = (getattr(scene.trajectory, "keys", ("x", "y", "z")) != ("x", "y", "z")
+                or getattr(scene.trajectory, "geodetic", False))
     return "ECEF" if geodetic or scene.frame in ("ECEF", "ECI") else scene.frame
 
 
@@ -169,11 +170,40 @@ def tangent_level_lines(scene) -> list[str]:
     return lines
 
 
+#: omega_ie as the exact decimal WGS-84 states (phase constants are formed from it exactly)
+OMEGA_IE_TEXT = "7.292115e-5"
+
+
+def sampled_eci_lines(scene, index: int) -> tuple[dict, list[str], list[str]]:
+    """(constants, phase lines, lines) turning the kernel's sampled ECI p, v, a[, j] into ECEF in place.
+
+    The Earth rotation angle theta = omega_ie t is phase slot `index`, reduced exactly like the symbolic
+    path's periodic phases (imu_emulator.motion). With R = R_z(-theta), r_e = R r_i and d/dt (R u) =
+    R (u' - w x u), so the k-th derivative of r_e is R D^k r_i, D u = u' - w x u, w = (0, 0, omega_ie):
+    v_e = R (v - w x r), a_e = R (a - 2 w x v + w x (w x r)), j_e = R (j - 3 w x a + 3 w x (w x v) - w x (w x (w x r)))."""
+    import sympy
+
+    from imu_emulator.motion import _phase_constants, _phase_lines
+    constants = _phase_constants(sympy.Rational(OMEGA_IE_TEXT), sympy.Integer(0), scene, index)
+    w = float(OMEGA_IE_TEXT)
+    w2, w3 = repr(w * w), repr(w * w * w)
+    parts = {"p": ("px", "py"),
+             "v": (f"vx + {w!r} * py", f"vy - {w!r} * px"),
+             "a": (f"ax + {2 * w!r} * vy - {w2} * px", f"ay - {2 * w!r} * vx - {w2} * py")}
+    if scene.attitude_mode == "tangent":
+        parts["j"] = (f"jx + {3 * w!r} * ay - {3 * w * w!r} * vx - {w3} * py",
+                      f"jy - {3 * w!r} * ax - {3 * w * w!r} * vy + {w3} * px")
+    s, c = f"sph{index}", f"cph{index}"
+    lines = [f"u{prefix}{axis} = {value}" for prefix, (ux, uy) in parts.items() for axis, value in (("x", ux), ("y", uy))]
+    for prefix in parts:
+        lines += [f"{prefix}x = {c} * u{prefix}x + {s} * u{prefix}y", f"{prefix}y = {c} * u{prefix}y - {s} * u{prefix}x"]
+    return constants, _phase_lines(index), lines
+
+
 def eci_to_ecef(xyz, t):
     """[x, y, z] sympy expressions of t in ECI -> the same point in ECEF: r_e = R_z(-theta) r_i."""
     import sympy
-    # omega_ie as the exact decimal WGS-84 states, so the phase constants are formed from it exactly
-    theta = sympy.Rational("7.292115e-5") * t
+    theta = sympy.Rational(OMEGA_IE_TEXT) * t
     c, s = sympy.cos(theta), sympy.sin(theta)
     x, y, z = xyz
     return [c * x + s * y, -s * x + c * y, z]

@@ -36,7 +36,7 @@ def earth_keys(head: Mapping, frame: str, effects: frozenset[str], attitude_mode
             earth.append("gravity")
             if "gravity_mps2" in head:
                 warnings.append("scene.gravity_mps2 is ignored: gravity_model = \"wgs84\" computes gravity")
-    geodetic = getattr(trajectory, "keys", None) == GEODETIC_KEYS
+    geodetic = getattr(trajectory, "keys", None) == GEODETIC_KEYS or getattr(trajectory, "geodetic", False)
     if geodetic:
         if frame == "ECI":
             raise SceneError("trajectory.lat_deg: a geodetic trajectory is fixed to the Earth; use frame = \"NED\", "
@@ -48,9 +48,6 @@ def earth_keys(head: Mapping, frame: str, effects: frozenset[str], attitude_mode
         if shape:
             raise SceneError(f"trajectory.shape: shapes are built in a local frame; with frame = \"{frame}\" give "
                              f"x, y, z expressions{' or a file' if frame == 'ECEF' else ''} in {frame} metres")
-        if frame == "ECI" and getattr(trajectory, "keys", None) is None:
-            raise SceneError("trajectory: frame = \"ECI\" takes x, y, z expressions of t (sampled ECI "
-                             "trajectories are not built yet)")
         if frame == "ECI":
             missing = [name for name in EARTH_EFFECTS if name not in effects]
             if missing:
@@ -63,3 +60,22 @@ def earth_keys(head: Mapping, frame: str, effects: frozenset[str], attitude_mode
         raise SceneError(f"scene.origin: effects.{earth[0]} needs the point where the {frame} frame is tangent to "
                          "the Earth (origin = { lat_deg = ..., lon_deg = ..., height_m = ... })")
     return origin, model
+
+
+def sampled_geodetic(track, derivative: str, noise: float):
+    """A track's lat_deg, lon_deg, height_m columns as ECEF samples (WGS-84, imu_emulator.frames): the
+    derivatives are fitted in ECEF, where the motion is smooth across the antimeridian and the poles."""
+    import numpy as np
+
+    from imu_emulator import frames
+    from imu_emulator.scene import SampledData
+    lat, height = track.position[:, 0], track.position[:, 2]
+    for column, values, bound in (("lat_deg", lat, 90.0), ("height_m", height, MAX_ORIGIN_HEIGHT_M)):
+        bad = np.abs(values) > bound
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise SceneError(f"trajectory.file: {track.source.name}: {track.row_label(i)}, column '{column}': "
+                             f"{float(values[i])!r} is out of range (|value| <= {bound:g})")
+    ecef = frames.geodetic_to_ecef(lat, track.position[:, 1], height)
+    return SampledData(t=track.t, values=np.ascontiguousarray(ecef), derivative=derivative,
+                       source=str(track.source), noise=noise, geodetic=True)

@@ -320,10 +320,21 @@ def motion_code(scene: Scene, angles: bool) -> MotionCode:
         attitude_lines = sampled_attitude_lines(angles)
     if earth and not tangent:
         attitude_lines = attitude_lines + geometry_lines(scene)
-    if not symbolic_parts:
+    sym = (_symbolic(symbolic_parts, scene) if symbolic_parts
+           else MotionCode(lines=[], constants={}, needs_jerk=tangent))
+    if scene.frame == "ECI" and isinstance(scene.trajectory, SampledData):
+        from imu_emulator.earth_motion import sampled_eci_lines
+        if not sym.phase_lines:     # k split once for Dekker's product, as _symbolic does
+            sym.phase_lines = ["kf = float(k)", "_s = 134217729.0 * kf", "kh = _s - (_s - kf)", "kl = kf - kh"]
+        index = len(sym.phase_vars) // 2
+        constants, phase_lines, eci = sampled_eci_lines(scene, index)
+        sym.constants.update(constants)
+        sym.phase_lines += phase_lines
+        sym.phase_vars += [f"sph{index}", f"cph{index}"]
+        lines += eci
+    if not symbolic_parts and not sym.phase_lines:
         return MotionCode(lines=lines + attitude_lines, constants={}, needs_jerk=tangent,
                           rotation_given=rotation_given)
-    sym = _symbolic(symbolic_parts, scene)
     if isinstance(scene.trajectory, Expressions):
         # Position and velocity feed no output in euler mode, yet an undefined position (log(400.0001 - t)
         # past t = 400) must stop the run: x - x is 0 for a finite x and NaN otherwise, so a non-finite p

@@ -62,6 +62,7 @@ class SampledData:
     source: str                               # file path or "<array>", for messages
     kind: str = "euler"                       # attitude only: "euler" (roll, pitch, yaw) or "quaternion" (qw..qz)
     noise: float = 0.0                        # stated noise (m or rad, 1 sigma), for derivative = "smooth"
+    geodetic: bool = False                    # trajectory only: ECEF metres converted from lat/lon/height columns
 
 
 @dataclass(frozen=True)
@@ -233,6 +234,9 @@ def _sampled_from_track(track, columns: str, derivative: str, noise: float = 0.0
     if columns == "attitude" and track.quat is not None:
         return SampledData(t=track.t, values=track.quat, derivative=derivative, source=str(track.source),
                            kind="quaternion", noise=noise)
+    if columns == "position" and track.geodetic:
+        from imu_emulator.earth_scene import sampled_geodetic
+        return sampled_geodetic(track, derivative, noise)
     values = track.position if columns == "position" else track.euler
     bound, unit, names = ((MAX_POSITION_M, "m", "xyz") if columns == "position"
                           else (MAX_TRACK_ANGLE_RAD, "rad", ("roll", "pitch", "yaw")))

@@ -1,7 +1,8 @@
 """Sampled tracks from files: time, position and optionally roll/pitch/yaw, in SI units (s, m, rad).
 
 CSV: comma-separated, UTF-8 (a byte-order mark is accepted), a header row naming the columns, in any
-order: t, x, y, z and optionally roll, pitch, yaw (all three or none).  Names are matched after stripping
+order: t, x, y, z and optionally roll, pitch, yaw (all three or none); or t, lat_deg, lon_deg, height_m
+(WGS-84 geodetic, for scenes with the Earth model: imu_emulator.earth_scene.sampled_geodetic).  Names are matched after stripping
 spaces and ignoring case.  Any other column is an error: a column we silently dropped (a "yaw_deg", a
 second time base) is a column the user believed we used.  Blank lines and lines starting with '#' are
 skipped; error messages give line numbers as an editor shows them (the header is usually line 1, so the
@@ -31,6 +32,7 @@ from imu_emulator.derivatives import SampledSeries, unwrap_angles, validate_samp
 from imu_emulator.errors import DataError
 
 POSITION_COLUMNS = ("x", "y", "z")
+GEODETIC_COLUMNS = ("lat_deg", "lon_deg", "height_m")   # instead of x, y, z: WGS-84 geodetic (deg, deg, m)
 EULER_COLUMNS = ("roll", "pitch", "yaw")
 QUAT_COLUMNS = ("qw", "qx", "qy", "qz")     # attitude body -> navigation, scalar first, any sign
 
@@ -43,6 +45,7 @@ class Track:
     source: Path
     lines: np.ndarray | None = None  # (n,) line number in the file of each sample (CSV), else None
     quat: np.ndarray | None = None   # (n, 4) qw, qx, qy, qz as given (normalised later), or None
+    geodetic: bool = False          # position holds lat_deg, lon_deg, height_m (GEODETIC_COLUMNS), not x, y, z
 
     def row_label(self, i: int) -> str:
         """How error messages point at sample i: a line of the CSV, an index of the NPZ arrays."""
@@ -109,7 +112,8 @@ def _from_arrays(t, position, euler, source: Path) -> Track:
 def _validated(track: Track) -> Track:
     """The track, checked for finite values and increasing time, with its arrays made read-only."""
     values = track.position if track.euler is None else np.hstack([track.position, track.euler])
-    columns = POSITION_COLUMNS + (EULER_COLUMNS if track.euler is not None else ())
+    columns = ((GEODETIC_COLUMNS if track.geodetic else POSITION_COLUMNS)
+               + (EULER_COLUMNS if track.euler is not None else ()))
     if track.quat is not None:
         values, columns = np.hstack([values, track.quat]), columns + QUAT_COLUMNS
     validate_samples(track.t, values, where=track.source.name, columns=columns, row_label=track.row_label)
@@ -126,15 +130,21 @@ def _check_names(where: str, names: list[str], kind: str) -> bool:
         if name in seen:
             raise DataError(f"{where}: {kind} '{name}' appears twice")
         seen.add(name)
-    missing = [c for c in ("t",) + POSITION_COLUMNS if c not in seen]
+    position = GEODETIC_COLUMNS if seen & set(GEODETIC_COLUMNS) else POSITION_COLUMNS
+    missing = [c for c in ("t",) + position if c not in seen]
     if missing:
         raise DataError(f"{where}: missing {kind}{'s' if len(missing) > 1 else ''} {', '.join(missing)} "
-                        "(need t, x, y, z)")
-    unknown = [c for c in names if c not in ("t",) + POSITION_COLUMNS + EULER_COLUMNS + QUAT_COLUMNS]
+                        f"(need t, {', '.join(position)})")
+    unknown = [c for c in names if c not in ("t",) + position + EULER_COLUMNS + QUAT_COLUMNS]
     if unknown:
-        raise DataError(f"{where}: unexpected {kind} '{unknown[0]}' (expected t, x, y, z and optionally "
-                        "roll, pitch, yaw or qw, qx, qy, qz)")
+        raise DataError(f"{where}: unexpected {kind} '{unknown[0]}' (expected t, {', '.join(position)} and "
+                        "optionally roll, pitch, yaw or qw, qx, qy, qz)")
     return _all_or_none(where, seen, EULER_COLUMNS)
+
+
+def _position_columns(names) -> tuple[str, ...]:
+    """x, y, z, or lat_deg, lon_deg, height_m (_check_names has refused a mix)."""
+    return GEODETIC_COLUMNS if GEODETIC_COLUMNS[0] in names else POSITION_COLUMNS
 
 
 def _all_or_none(where: str, names, group: tuple[str, ...]) -> bool:
@@ -187,9 +197,11 @@ def _load_csv(path: Path) -> Track:
     lines = np.array([number for number, _ in data])
     table = _parse_table(where, names, data)
     col = {name: table[:, j] for j, name in enumerate(names)}
+    position = _position_columns(names)
     track = Track(
         t=col["t"].copy(),
-        position=np.column_stack([col[c] for c in POSITION_COLUMNS]),
+        position=np.column_stack([col[c] for c in position]),
+        geodetic=position == GEODETIC_COLUMNS,
         euler=np.column_stack([col[c] for c in EULER_COLUMNS]) if has_euler else None,
         source=path,
         lines=lines,
@@ -252,7 +264,9 @@ def _load_npz(path: Path) -> Track:
     def stacked(names):
         return np.column_stack([_numeric(where, c, arrays[c], (n,)) for c in names])
 
-    track = _from_arrays(t, stacked(POSITION_COLUMNS), stacked(EULER_COLUMNS) if has_euler else None, path)
+    position = _position_columns(list(arrays))
+    track = _from_arrays(t, stacked(position), stacked(EULER_COLUMNS) if has_euler else None, path)
+    track = dataclasses.replace(track, geodetic=position == GEODETIC_COLUMNS)
     if _all_or_none(where, list(arrays), QUAT_COLUMNS):
         track = _with_quaternions(track, stacked(QUAT_COLUMNS))
     return track
