@@ -86,7 +86,8 @@ def fill(scene, t: np.ndarray, truth: dict) -> None:
     truth["earth_rate_ned"][:] = w_ie
     truth["transport_rate_ned"][:] = w_en
     truth["coriolis_ned"][:] = 2.0 * np.cross(w_ie, v_n)
-    truth["gravity_ned"][:] = np.column_stack([np.zeros_like(g), np.zeros_like(g), g])
+    g_n = wgs84.normal_gravity_north(lat, h) if scene.gravity_model == "wgs84" else np.zeros_like(g)
+    truth["gravity_ned"][:] = np.column_stack([g_n, np.zeros_like(g), g])
     if scene.frame == "ECI":
         w = np.array([0.0, 0.0, wgs84.OMEGA_IE])
         truth["position"][:] = frames.ecef_to_eci(r_e, t)

@@ -33,3 +33,20 @@ def radii(lat_rad):
     """(R_N meridian, R_E transverse) radii of curvature, m."""
     w2 = 1.0 - E2 * np.sin(lat_rad) ** 2
     return A * (1.0 - E2) / w2 ** 1.5, A / np.sqrt(w2)
+
+
+#: g_N = -NORTH_GRAVITY_COEF * sin 2L * (K w^2 + (1 + K sin^2 L) E2 / 2) * h (see normal_gravity_north)
+NORTH_GRAVITY_COEF = GAMMA_E / (A * (1.0 - E2))
+
+
+def normal_gravity_north(lat_rad, h_m):
+    """North component of normal gravity at height h above the ellipsoid, m/s^2 (zero on it, where gravity is
+    along the ellipsoid normal). The field is curl-free, so dg_N/dh = dg_up/dx_N = -(1/R_N) dgamma_0/dL, to
+    first order in h/R: g_N = -h/R_N dgamma_0/dL with Somigliana's gamma_0, i.e.
+    -gamma_e sin 2L (k w^2 + (1 + k sin^2 L) e2/2) h / (a (1 - e2)), w^2 = 1 - e2 sin^2 L: about -8.14e-9 h sin 2L
+    (Groves 2nd ed. eq. 2.142 rounds it to -8.08e-9 h sin 2L; tests/test_earth_gravity_north.py checks it
+    against the J2 + J4 gravitational potential)."""
+    s = np.sin(lat_rad)
+    s2 = s * s
+    return (-NORTH_GRAVITY_COEF * 2.0 * s * np.cos(lat_rad)
+            * (K_SOMIGLIANA * (1.0 - E2 * s2) + (1.0 + K_SOMIGLIANA * s2) * (0.5 * E2)) * h_m)

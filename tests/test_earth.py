@@ -35,6 +35,15 @@ def gamma(lat_deg, h):
     return g0 * (1 - 2 / A * (1 + F + m - 2 * F * s2) * h + 3 / A ** 2 * h ** 2)
 
 
+def gamma_north(lat_deg, h):
+    """North component of normal gravity at height h: -h / R_N dgamma_0/dL (gravity is curl-free, so
+    dg_N/dh = dg_up/dx_N; Groves 2nd ed. eq. 2.142 gives the same to its rounding, -8.08e-9 h sin 2L), with
+    dgamma_0/dL from mpmath's differentiation of Somigliana's formula above."""
+    L = mpmath.radians(lat_deg)
+    r_n = A * (1 - E2) / (1 - E2 * mpmath.sin(L) ** 2) ** mpmath.mpf(1.5)
+    return -h / r_n * mpmath.diff(lambda x: gamma(mpmath.degrees(x), 0), L)
+
+
 def earth_scene(frame="NED", lat=45.0, lon=10.0, h=0.0, trajectory=None, attitude=None, effects=None,
                 rate_hz=10, duration_s=0.3, **head):
     return scene_from_dict({
@@ -68,11 +77,11 @@ def test_normal_gravity_closed_values():
 @pytest.mark.parametrize("lat", [0.0, 45.0, 89.9, -60.0])
 @pytest.mark.parametrize("h", [0.0, 10e3])
 def test_static_level_facing_north_ned(lat, h):
-    """NED, body forward-right-down: omega = omega_ie (cos L, 0, -sin L), f = (0, 0, -gamma(L, h))."""
+    """NED, body forward-right-down: omega = omega_ie (cos L, 0, -sin L), f = (-g_N(L, h), 0, -gamma(L, h))."""
     f, w = run(earth_scene("NED", lat, 123.0, h))
     L = mpmath.radians(lat)
     want_w = np.array([float(OMEGA * mpmath.cos(L)), 0.0, float(-OMEGA * mpmath.sin(L))])
-    want_f = np.array([0.0, 0.0, -float(gamma(lat, h))])
+    want_f = np.array([-float(gamma_north(lat, h)), 0.0, -float(gamma(lat, h))])
     np.testing.assert_allclose(w, np.broadcast_to(want_w, w.shape), rtol=0, atol=1e-12 * float(OMEGA))
     np.testing.assert_allclose(f, np.broadcast_to(want_f, f.shape), rtol=0, atol=1e-12 * want_f[2] * -1)
 
@@ -81,11 +90,11 @@ def test_static_level_facing_north_ned(lat, h):
 @pytest.mark.parametrize("h", [0.0, 10e3])
 def test_static_level_facing_north_enu(lat, h):
     """ENU, body forward-left-up facing north (yaw 90° from east): omega = omega_ie (cos L, 0, sin L),
-    f = (0, 0, +gamma)."""
+    f = (-g_N, 0, +gamma)."""
     f, w = run(earth_scene("ENU", lat, -75.0, h, attitude={"roll": "0", "pitch": "0", "yaw": "pi/2"}))
     L = mpmath.radians(lat)
     want_w = np.array([float(OMEGA * mpmath.cos(L)), 0.0, float(OMEGA * mpmath.sin(L))])
-    want_f = np.array([0.0, 0.0, float(gamma(lat, h))])
+    want_f = np.array([-float(gamma_north(lat, h)), 0.0, float(gamma(lat, h))])
     np.testing.assert_allclose(w, np.broadcast_to(want_w, w.shape), rtol=0, atol=1e-12 * float(OMEGA))
     np.testing.assert_allclose(f, np.broadcast_to(want_f, f.shape), rtol=0, atol=1e-12 * want_f[2])
 
@@ -98,7 +107,8 @@ def test_static_far_above_the_ellipsoid():
     L = mpmath.radians(lat)
     np.testing.assert_allclose(w[0], [float(OMEGA * mpmath.cos(L)), 0.0, float(-OMEGA * mpmath.sin(L))], rtol=0,
                                atol=1e-12 * float(OMEGA))
-    np.testing.assert_allclose(f[0], [0.0, 0.0, -float(gamma(lat, h))], rtol=0, atol=1e-12 * abs(float(gamma(lat, h))))
+    np.testing.assert_allclose(f[0], [-float(gamma_north(lat, h)), 0.0, -float(gamma(lat, h))], rtol=0,
+                               atol=1e-12 * abs(float(gamma(lat, h))))
 
 
 def test_equator_eastward_travel_eotvos_and_centripetal():
@@ -223,6 +233,7 @@ def test_truth_geodetic_ned_velocity_and_earth_terms():
     np.testing.assert_allclose(tr["earth_rate_ned"], np.column_stack(
         [float(OMEGA) * np.cos(lat), 0 * lat, -float(OMEGA) * np.sin(lat)]), rtol=0, atol=1e-18)
     np.testing.assert_allclose(tr["gravity_ned"][:, 2], [float(gamma(la, h)) for la, _, h in want], rtol=1e-12)
+    np.testing.assert_allclose(tr["gravity_ned"][:, 0], [float(gamma_north(la, h)) for la, _, h in want], rtol=1e-9)
     # attitude w.r.t. local NED of a forward-right-down body: scipy's ZYX of the ENU/FLU attitude re-expressed
     from scipy.spatial.transform import Rotation
     enu = Rotation.from_euler("ZYX", tr["euler"][:, ::-1]).as_matrix()

@@ -7,8 +7,9 @@ Rate samples are the values at the sample instants, so the integrator is RK4 ove
 k, k+1, k+2 are the start, middle and end of one 0.02 s step): its truncation error is O(h^5) per step, far
 below the goal, so what is left is what the emulator got wrong. The same loop fed exact increments is below.
 
-Gravity here is the spec's: Somigliana with TR8350.2's height term along the ellipsoid normal, from geodetic
-coordinates computed below by Bowring's formula iterated (not imu_emulator.frames).
+Gravity here is the spec's: Somigliana with TR8350.2's height term along the ellipsoid normal, plus its north
+component off the ellipsoid, from geodetic coordinates computed below by Bowring's formula iterated (not
+imu_emulator.frames).
 """
 from __future__ import annotations
 
@@ -46,7 +47,13 @@ def gravity_ecef(r):
     g = GE * (1 + K * s2) / math.sqrt(1 - E2 * s2) * (1 - 2 / A * (1 + F + M - 2 * F * s2) * h + 3 / A ** 2 * h * h)
     lon = math.atan2(y, x)
     down = np.array([-math.cos(lat) * math.cos(lon), -math.cos(lat) * math.sin(lon), -math.sin(lat)])
-    return g * down
+    north = np.array([-math.sin(lat) * math.cos(lon), -math.sin(lat) * math.sin(lon), math.cos(lat)])
+    # off the ellipsoid gravity leans north by g_N = -h / R_N dgamma_0/dL (curl-free field; Groves eq. 2.142),
+    # dgamma_0/dL here by a central difference of Somigliana's formula
+    gamma0 = lambda x: GE * (1 + K * math.sin(x) ** 2) / math.sqrt(1 - E2 * math.sin(x) ** 2)   # noqa: E731
+    r_n = A * (1 - E2) / (1 - E2 * s2) ** 1.5
+    g_n = -h / r_n * (gamma0(lat + 1e-5) - gamma0(lat - 1e-5)) / 2e-5
+    return g * down + g_n * north
 
 
 def skew(w):
