@@ -144,6 +144,18 @@ def tangent_level_lines(scene) -> list[str]:
     follows from L' = v_N / (R_N + h), h' = -v_D, dR_E/dL = a e2 sin L cos L / w^3 and
     dR_N/dL = 3 a (1 - e2) e2 sin L cos L / w^5 (w = sqrt(1 - e2 sin^2 L)). tan L: the level frame's
     heading is undefined at the poles."""
+    lines = rho_lines()
+    lines += _cross("t_ra", _ned("t_rh"), _ned("e_a")) + _cross("t_rd", _ned("t_rh"), _ned("t_d"))
+    lines += _cross("t_rq", _ned("t_rp"), _ned("e_v"))
+    lines += [f"t_j{axis} = e_j{axis} - t_ra{axis} - t_rq{axis} - t_rd{axis}" for axis in "ned"]
+    for out, src in (("t_v", "e_v"), ("t_a", "t_d"), ("t_j", "t_j")):
+        lines += [f"{out}{axis} = {value}" for axis, value in zip("xyz", level(scene, *_ned(src)))]
+    return lines
+
+
+def rho_lines() -> list[str]:
+    """rho = omega_en^n (t_rh..), v^n' (t_d..) and rho' (t_rp..) in NED, from the geometry's e_* (see
+    tangent_level_lines)."""
     a, e2 = wgs84.A, wgs84.E2
     lines = [
         "t_tl = e_sl / e_cl",
@@ -153,7 +165,6 @@ def tangent_level_lines(scene) -> list[str]:
     ]
     rho = _ned("t_rh")
     lines += _cross("t_rv", rho, _ned("e_v")) + [f"t_d{axis} = e_a{axis} - t_rv{axis}" for axis in "ned"]
-    lines += _cross("t_ra", rho, _ned("e_a")) + _cross("t_rd", rho, _ned("t_d"))
     lines += [
         "t_ld = e_vn / e_rn",                                           # L'
         "t_scw = e_sl * e_cl / (e_w * e_w * e_w)",
@@ -163,10 +174,56 @@ def tangent_level_lines(scene) -> list[str]:
         "t_rpe = -(t_dn + t_rhe * t_rnd) / e_rn",
         "t_rpd = -t_rpn * t_tl - t_rhn * t_ld / (e_cl * e_cl)",
     ]
-    lines += _cross("t_rq", _ned("t_rp"), _ned("e_v"))
-    lines += [f"t_j{axis} = e_j{axis} - t_ra{axis} - t_rq{axis} - t_rd{axis}" for axis in "ned"]
-    for out, src in (("t_v", "e_v"), ("t_a", "t_d"), ("t_j", "t_j")):
-        lines += [f"{out}{axis} = {value}" for axis, value in zip("xyz", level(scene, *_ned(src)))]
+    return lines
+
+
+def reference_lines(scene, angles: bool, index: int | None) -> list[str]:
+    """Lines after R, w, alpha are formed from the scene's attitude relative to X = [attitude] reference (ECEF,
+    or ECI with its rotation angle in phase slot `index`): they turn them into the attitude relative to the
+    local level frame L at the current position, which the navigation stage works in.
+
+    R_Lb = C_X^L R_Xb. The gyros then add R^T w_n, the level frame's rate the Earth effects name (omega_ie^n
+    with earth_rate, rho = omega_en^n with coriolis), so w = omega_Xb - R^T u with u the part of omega_Xn^n
+    those effects add back: rho (coriolis) for X = ECEF, and omega_ie^n (earth_rate) + rho (coriolis) for ECI.
+    The gyros read omega_Xb + omega_iX as far as the named effects reach (ECI: omega_ib; ECEF with earth_rate:
+    omega_eb + omega_ie). alpha = d/dt w = alpha_Xb - (R^T u' - w x R^T u), with
+    omega_ie^n' = -rho x omega_ie^n (omega_ie^e is constant) and rho' from rho_lines."""
+    w = repr(wgs84.OMEGA_IE)
+    eci = scene.attitude_reference == "ECI"
+    lines = rho_lines()
+    if eci:   # C_i^n = C_e^n R_z(-theta): C_e^n at the celestial longitude lon + theta
+        lines += [f"m_co = e_co * cph{index} - e_so * sph{index}", f"m_so = e_so * cph{index} + e_co * sph{index}"]
+    else:
+        lines += ["m_co = e_co", "m_so = e_so"]
+    rows = {"n": ("-e_sl * m_co", "-e_sl * m_so", "e_cl"), "e": ("-m_so", "m_co", "0.0"),
+            "d": ("-e_cl * m_co", "-e_cl * m_so", "-e_sl")}
+    lines += [f"m_{axis}{c} = {value}" for axis, row in rows.items() for c, value in zip("xyz", row)]
+    level_rows = level(scene, "m_n", "m_e", "m_d")   # each a row name, "-(m_d)" for ENU's up
+    for i, row in enumerate(level_rows):
+        sign, name = ("-", row[2:-1]) if row.startswith("-(") else ("", row)
+        for j in range(3):
+            lines.append(f"q{i}{j} = {sign}({name}x * r0{j} + {name}y * r1{j} + {name}z * r2{j})")
+    lines += [f"r{i}{j} = q{i}{j}" for i in range(3) for j in range(3)]
+    u, du = [], []
+    if "coriolis" in scene.effects:
+        u.append(_ned("t_rh"))
+        du.append(_ned("t_rp"))
+    if eci and "earth_rate" in scene.effects:
+        lines += [f"m_wn = {w} * e_cl", f"m_wd = -{w} * e_sl"] + _cross("m_dw", _ned("t_rh"), ("m_wn", "0.0", "m_wd"))
+        u.append(("m_wn", "0.0", "m_wd"))
+        du.append(("-m_dwn", "-m_dwe", "-m_dwd"))
+    if u:
+        lines += [f"m_u{axis} = {' + '.join(v[i] for v in u)}" for i, axis in enumerate("ned")]
+        lines += [f"m_du{axis} = {' + '.join(v[i] for v in du)}" for i, axis in enumerate("ned")]
+        for name in ("m_u", "m_du"):
+            lx, ly, lz = level(scene, *_ned(name))
+            lines += [f"{name}b{c} = r0{c} * ({lx}) + r1{c} * ({ly}) + r2{c} * ({lz})" for c in "012"]
+        lines += [f"w{axis} -= m_ub{c}" for c, axis in zip("012", "xyz")]
+        lines += _cross("m_wu", ("wx", "wy", "wz"), ("m_ub0", "m_ub1", "m_ub2"))
+        lines += [f"al{axis} -= m_dub{c} - m_wu{ned}" for c, axis, ned in zip("012", "xyz", "ned")]
+    if angles:
+        lines += ["roll = math.atan2(r21, r22)", "pitch = math.atan2(-r20, math.hypot(r21, r22))",
+                  "yaw = math.atan2(r10, r00)"]
     return lines
 
 

@@ -6,6 +6,9 @@ from typing import Mapping
 from imu_emulator.errors import SceneError
 from imu_emulator.scene import GRAVITY_MODELS, _choice, _no_unknown, _number, _table
 
+#: [attitude] reference: what roll, pitch, yaw (or a file's attitude) are relative to
+REFERENCES = ("local_level", "ECEF", "ECI")
+
 ORIGIN_KEYS = ("lat_deg", "lon_deg", "height_m")
 GEODETIC_KEYS = ORIGIN_KEYS     # a geodetic trajectory's [trajectory] keys
 MAX_ORIGIN_HEIGHT_M = 1e7      # beyond geostationary orbit is not a place to put a tangent frame
@@ -79,3 +82,18 @@ def sampled_geodetic(track, derivative: str, noise: float):
     ecef = frames.geodetic_to_ecef(lat, track.position[:, 1], height)
     return SampledData(t=track.t, values=np.ascontiguousarray(ecef), derivative=derivative,
                        source=str(track.source), noise=noise, geodetic=True)
+
+
+def attitude_reference(att_table: Mapping, frame: str, effects, trajectory, gravity_model: str) -> str:
+    """[attitude] reference, validated: another frame than local level needs the Earth model (the attitude is
+    converted to local level at the current position, imu_emulator.earth_motion.reference_lines)."""
+    from types import SimpleNamespace
+
+    from imu_emulator.earth_motion import model_on
+    reference = _choice(att_table, "reference", "attitude", REFERENCES, "local_level")
+    if reference != "local_level":
+        scene = SimpleNamespace(frame=frame, effects=effects, trajectory=trajectory, gravity_model=gravity_model)
+        if not model_on(scene):
+            raise SceneError(f"attitude.reference: \"{reference}\" needs the Earth model (frame = \"ECEF\" or "
+                             "\"ECI\", a geodetic trajectory, or effects.earth_rate / coriolis with an origin)")
+    return reference

@@ -258,6 +258,7 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
     body = [f"{name} = phases[jj, {i}]" for i, name in enumerate(motion.phase_vars)] + motion.lines
     if not motion.rotation_given:   # attitude given as a rotation matrix (e.g. quaternion logs)
         body += _rotation_and_rates()
+    body += motion.after_rotation   # [attitude] reference other than local level (imu_emulator.earth_motion)
     navigation = list(plan.navigation)
     if plan.nav_rate:
         navigation = ["wnx = 0.0", "wny = 0.0", "wnz = 0.0"] + navigation
@@ -313,7 +314,8 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
         node_motion = inc.sampled_at_nodes(motion.lines)   # sampled motion: node rows after the samples'
         integrate = inc.node_lines(
             increments, n_imu=len(scene.imus), clock=plan.clock, phase_lines=motion.phase_lines,
-            motion=node_motion + ([] if motion.rotation_given else _rotation_and_rates()), navigation=navigation,
+            motion=node_motion + ([] if motion.rotation_given else _rotation_and_rates()) + motion.after_rotation,
+            navigation=navigation,
             imu_frames=frames, t0=float(scene.t0_s), dt=1.0 / scene.rate_hz)
     return fill(
         KERNEL_TEMPLATE, imports=imports, eps_v2=repr(EPS_SPEED ** 2), chunk=CHUNK,

@@ -35,6 +35,7 @@ class MotionCode:
     phase_lines: list[str] = field(default_factory=list)  # computes sph_i, cph_i from k; run as a stage
     phase_vars: list[str] = field(default_factory=list)   # of its own so samples overlap in the CPU
     rotation_given: bool = False  # the lines define R (r00..r22), w and alpha themselves (quaternion input)
+    after_rotation: list[str] = field(default_factory=list)   # run after R, w, alpha (attitude reference)
 
 
 def _phase_constants(coef, offset, scene: Scene, index: int) -> dict[str, float]:
@@ -324,24 +325,40 @@ def motion_code(scene: Scene, angles: bool) -> MotionCode:
            else MotionCode(lines=[], constants={}, needs_jerk=tangent))
     if scene.frame == "ECI" and isinstance(scene.trajectory, SampledData):
         from imu_emulator.earth_motion import sampled_eci_lines
-        if not sym.phase_lines:     # k split once for Dekker's product, as _symbolic does
-            sym.phase_lines = ["kf = float(k)", "_s = 134217729.0 * kf", "kh = _s - (_s - kf)", "kl = kf - kh"]
-        index = len(sym.phase_vars) // 2
-        constants, phase_lines, eci = sampled_eci_lines(scene, index)
+        constants, phase_lines, eci = sampled_eci_lines(scene, _earth_rotation_slot(sym))
         sym.constants.update(constants)
         sym.phase_lines += phase_lines
-        sym.phase_vars += [f"sph{index}", f"cph{index}"]
         lines += eci
+    reference = getattr(scene, "attitude_reference", "local_level")
+    if reference != "local_level":
+        from imu_emulator.earth_motion import reference_lines, sampled_eci_lines
+        index = None
+        if reference == "ECI":
+            index = _earth_rotation_slot(sym)
+            constants, phase_lines, _ = sampled_eci_lines(scene, index)
+            sym.constants.update(constants)
+            sym.phase_lines += phase_lines
+        sym.after_rotation = reference_lines(scene, angles, index)
     if not symbolic_parts and not sym.phase_lines:
         return MotionCode(lines=lines + attitude_lines, constants={}, needs_jerk=tangent,
-                          rotation_given=rotation_given)
+                          rotation_given=rotation_given, after_rotation=sym.after_rotation)
     if isinstance(scene.trajectory, Expressions):
         # Position and velocity feed no output in euler mode, yet an undefined position (log(400.0001 - t)
         # past t = 400) must stop the run: x - x is 0 for a finite x and NaN otherwise, so a non-finite p
         # or v makes a non-finite and the finite check names the expression.
         sym.lines += [f"a{axis} += (p{axis} - p{axis}) + (v{axis} - v{axis})" for axis in AXES]
     return MotionCode(lines=sym.lines + lines + attitude_lines, constants=sym.constants, needs_jerk=tangent,
-                      phase_lines=sym.phase_lines, phase_vars=sym.phase_vars, rotation_given=rotation_given)
+                      phase_lines=sym.phase_lines, phase_vars=sym.phase_vars, rotation_given=rotation_given,
+                      after_rotation=sym.after_rotation)
+
+
+def _earth_rotation_slot(sym: MotionCode) -> int:
+    """A new phase slot for the Earth rotation angle (its lines come from earth_motion.sampled_eci_lines)."""
+    if not sym.phase_lines:     # k split once for Dekker's product, as _symbolic does
+        sym.phase_lines = ["kf = float(k)", "_s = 134217729.0 * kf", "kh = _s - (_s - kf)", "kl = kf - kh"]
+    index = len(sym.phase_vars) // 2
+    sym.phase_vars += [f"sph{index}", f"cph{index}"]
+    return index
 
 
 def _keyed_expressions(scene: Scene):

@@ -105,6 +105,7 @@ class Scene:
     seed: int = 0                                # root of every random stream (imu_emulator.counter_rng)
     origin: tuple[float, float, float] | None = None   # lat deg, lon deg, height m where ENU/NED is tangent
     gravity_model: str = "constant"              # "constant" (gravity_mps2) or "wgs84" (normal gravity)
+    attitude_reference: str = "local_level"      # what roll, pitch, yaw are relative to (earth_scene.REFERENCES)
 
     @property
     def dt(self) -> float:
@@ -518,7 +519,7 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
     heading = math.radians(_number(att_table, "initial_heading_deg", "attitude", default=0.0,
                                    bound=MAX_ANGLE_DEG, unit=" deg"))
     if mode == "euler":
-        _no_unknown(att_table, {"mode", "roll", "pitch", "yaw"}, "attitude")
+        _no_unknown(att_table, {"mode", "roll", "pitch", "yaw", "reference"}, "attitude")
         if track is not None and (track.euler is not None or track.quat is not None) \
                 and not {"roll", "pitch", "yaw"} & set(att_table):
             # Zero rotation while the file holds angles is what the user least expects: say how to use them.
@@ -531,7 +532,7 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
         _no_unknown(att_table, {"mode", "initial_heading_deg"}, "attitude")
         attitude = None
     else:
-        _no_unknown(att_table, {"mode", "derivative", "attitude_noise_rad"}, "attitude")
+        _no_unknown(att_table, {"mode", "derivative", "attitude_noise_rad", "reference"}, "attitude")
         if log is None and (track is None or (track.euler is None and track.quat is None)):
             raise SceneError("attitude.mode: 'file' needs a trajectory file with roll, pitch, yaw or qw, qx, qy, "
                              "qz columns")
@@ -582,6 +583,8 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
     from imu_emulator.earth_scene import earth_keys
     origin, gravity_model = earth_keys(head, frame, effects, mode, "shape" in traj_table,
                                        trajectory, warnings)
+    from imu_emulator.earth_scene import attitude_reference
+    reference = attitude_reference(att_table, frame, effects, trajectory, gravity_model)
     imu_list = raw.get("imu", [])
     if isinstance(imu_list, Mapping):
         imu_list = [imu_list]
@@ -605,7 +608,7 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
                  params=params, trajectory=trajectory, attitude_mode=mode, attitude=attitude,
                  initial_heading_rad=heading, imus=tuple(imus), effects=effects,
                  streams=tuple(dict(s) for s in streams), path=path, warnings=tuple(warnings), seed=seed,
-                 origin=origin, gravity_model=gravity_model)
+                 origin=origin, gravity_model=gravity_model, attitude_reference=reference)
 
 
 def load_scene(path: str | Path) -> Scene:
