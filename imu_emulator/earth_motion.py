@@ -15,6 +15,10 @@ level axes as ax ay az. The Earth effects (imu_emulator/effects/earth_rate.py, c
 The formulas are written once, in NED (Groves 2nd ed. §2.4, §5.4); `level` maps NED components to the scene's
 level axes (ENU: x = E, y = N, z = -D).
 
+Tangent attitude (tangent_level_lines) follows the Earth-referenced velocity in the local level frame, with
+the frame's own turning in its derivatives; [attitude] reference = "ECEF" | "ECI" (reference_lines) turns
+an attitude given w.r.t. those axes into the local level one after R, w and alpha are formed.
+
 ECI here has its axes on ECEF's at scene time t = 0 and turns by the Earth rotation angle theta = omega_ie t
 about z (no precession, nutation or polar motion: the issue's ECI).
 """
