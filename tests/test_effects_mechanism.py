@@ -60,11 +60,13 @@ def _imu_with(values: dict) -> dict:
 def test_every_parameter_of_every_effect_changes_key_and_source():
     everything = {name: True for name in EFFECTS}
     base = {param: _sample_value(param, 1.0) for _, param in all_params()}
-    reference = _scene(everything, _imu_with(base))
+    origin = {"lat_deg": 47.0, "lon_deg": 8.0, "height_m": 400.0}    # the Earth effects need one
+    reference = _scene(everything, _imu_with(base), origin=origin)
     ref_key, ref_source = scene_key(reference, True, False), generate_source(reference, True, False)
     assert all_params(), "the effects declare parameters"
     for effect, param in all_params():
-        changed = _scene(everything, _imu_with({**base, param: _sample_value(param, 11.0)}))   # x11 crosses a decade (the flicker band)
+        # x11 crosses a decade (the flicker band)
+        changed = _scene(everything, _imu_with({**base, param: _sample_value(param, 11.0)}), origin=origin)
         assert scene_key(changed, True, False) != ref_key, param.path
         assert generate_source(changed, True, False) != ref_source, f"{effect.name}: {param.path}"
 
