@@ -172,6 +172,7 @@ class EffectPlan:
         self.streams: list[tuple[int, str]] = []          # (imu, name)
         self.counters: list[tuple[int, int, str]] = []    # (state slot, imu, label)
         self.constants: dict[str, tuple[float, ...]] = {}  # module-level arrays (numba freezes them)
+        self.axes_turns: dict[int, list[tuple[list[str], tuple]]] = {}  # imu -> [(lines, quaternion)], body stage
         navigation = [e for e in self.active if e.stage == Stage.NAVIGATION]
         self.clock = self._emit([e for e in navigation if e.sample_clock], None, None)
         self.navigation = self._emit([e for e in navigation if not e.sample_clock], None, None)
@@ -210,6 +211,9 @@ class EffectPlan:
     def add_constant(self, name: str, values) -> str:
         self.constants[name] = tuple(float(v) for v in values)
         return name
+
+    def add_axes_turn(self, m: int, lines: list[str], quaternion: tuple) -> None:
+        self.axes_turns.setdefault(m, []).append((lines, quaternion))
 
     def add_counter(self, var: str, m: int, label: str) -> str:
         self.counters.append((len(self.slots), m, label))
@@ -273,12 +277,16 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
         frames.append(fill(IMU_FRAME_TEMPLATE, **frame_slots, increment=[]).splitlines())
         quat = []
         if attitude:
+            q = "qbw, qbx, qby, qbz"
+            for lines, turn in plan.axes_turns.get(m, []):   # the IMU's axes turned in the body stage
+                quat += lines + [f"qw, qx, qy, qz = quat_multiply_scalar({q}, {', '.join(turn)})"]
+                q = "qw, qx, qy, qz"
             M = mounting_rotation(EmitContext(plan, EFFECTS["mounting"], scene, imu, m))
             if M is not None:
                 from imu_emulator.rotations import matrix_to_quat
-                quat = ["qw, qx, qy, qz = quat_multiply_scalar(qbw, qbx, qby, qbz, "
-                        + ", ".join(repr(float(v)) for v in matrix_to_quat(M)) + ")"]
-            else:
+                quat += [f"qw, qx, qy, qz = quat_multiply_scalar({q}, "
+                         + ", ".join(repr(float(v)) for v in matrix_to_quat(M)) + ")"]
+            elif not quat:
                 quat = ["qw, qx, qy, qz = qbw, qbx, qby, qbz"]
             quat += [f"out_quat[{m}, j, {i}] = q{c}" for i, c in enumerate("wxyz")]
         bias_truth = []

@@ -597,6 +597,10 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
         imus.append(_imu(table, f"imu[{i}]", effects, {imu.name for imu in imus}, warnings))
         if imus[-1].time_offset_s:
             _check_time_resolution(t0 + imus[-1].time_offset_s, duration, rate, f"imu[{i}].time_offset_s")
+    from imu_emulator.effects import EFFECTS
+    for i, imu in enumerate(imus):   # effects' warnings that need the sample rate (vibration above Nyquist)
+        warnings += [line for effect in EFFECTS.values() if effect.name in effects and effect.warn is not None
+                     for line in effect.warn(imu.values, f"imu[{i}]", rate)]
 
     streams = raw.get("stream", [])
     if isinstance(streams, Mapping):

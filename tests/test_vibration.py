@@ -106,13 +106,11 @@ def random_vibration():
                  rate_hz=RATE, duration_s=SECONDS, seed=7)
 
 
-def test_random_vibration_psd_level_by_welch_within_chi_square_interval(random_vibration):
-    out = run(random_vibration)
-    level = PSD_G2HZ * G0 ** 2
-    freqs, pxx = signal.welch(out.accel[0, :, 0], fs=RATE, window="hann", nperseg=NPERSEG, noverlap=0,
-                              detrend="constant")
+def assert_flat_psd(x, level):
+    """x's Welch PSD is `level` across [F_LO, F_HI] (chi-square intervals) and nothing outside."""
+    freqs, pxx = signal.welch(x, fs=RATE, window="hann", nperseg=NPERSEG, noverlap=0, detrend="constant")
     inside = (freqs > F_LO + 10) & (freqs < F_HI - 10)     # away from the band edges' window leakage
-    segments = int(SECONDS * RATE) // NPERSEG
+    segments = x.size // NPERSEG
     # For a Gaussian process each bin is level * chi2(2K) / 2K over K non-overlapping segments. A sum of
     # sinusoids with random phases has no such spread from the lines' powers (they are exact), but the cross
     # terms of lines within one window bandwidth average out over the segments only where their beat is not near
@@ -130,6 +128,11 @@ def test_random_vibration_psd_level_by_welch_within_chi_square_interval(random_v
         assert lo * level < part.mean() < hi * level, part.mean() / level
     # outside the band: nothing but the edges' leakage (far below the level)
     assert np.all(pxx[(freqs > F_HI + 20) | ((freqs < F_LO - 20) & (freqs > 0))] < 1e-3 * level)
+
+
+def test_random_vibration_psd_level_by_welch_within_chi_square_interval(random_vibration):
+    out = run(random_vibration)
+    assert_flat_psd(out.accel[0, :, 0], PSD_G2HZ * G0 ** 2)
     # the y and z axes carry no vibration (weight 0): z is gravity exactly
     np.testing.assert_array_equal(out.accel[0, :, 1], 0.0)
     np.testing.assert_allclose(out.accel[0, :, 2], G0, rtol=1e-15)
@@ -180,3 +183,130 @@ def test_increments_integrate_a_sine_vibration():
     expected = a0 * (np.cos(w * (t - T) + p) - np.cos(w * t + p)) / w
     np.testing.assert_allclose(out.dvel[0][:, 0], expected, rtol=0, atol=1e-12 * a0 * T)
     assert np.abs(out.dvel[0][:, 1:]).max() < 1e-15 and np.abs(out.dtheta[0]).max() < 1e-15
+
+
+# --- angular random vibration, the attitude output, lines above Nyquist ---------------------------------------
+
+DEG_PSD = 0.5     # (deg/s)^2/Hz
+
+
+def test_angular_random_vibration_gyro_psd_by_welch_within_chi_square_interval():
+    # Angular PSD on x only, body at rest: the relative rate about x is the gyro's x reading exactly (b = c = 0 in
+    # the module's relative-rate formula), so its Welch PSD is the table's level converted to (rad/s)^2/Hz; y and
+    # z read zero. Same chi-square intervals as the linear PSD (assert_flat_psd).
+    out = run(scene({"angular_psd": [[f"{F_LO} Hz", f"{DEG_PSD} (deg/s)^2/Hz"], [f"{F_HI} Hz", f"{DEG_PSD} deg^2/s^2/Hz"]],
+                     "psd_lines": 1000, "angular_psd_axes": [1.0, 0.0, 0.0]},
+                    rate_hz=RATE, duration_s=SECONDS, seed=3))
+    assert_flat_psd(out.gyro[0, :, 0], DEG_PSD * math.radians(1) ** 2)
+    np.testing.assert_array_equal(out.gyro[0, :, 1:], 0.0)
+
+
+def _fit_line(t, x, w):
+    """Least squares x = p sin(w t) + q cos(w t): the amplitude and phase of a line A sin(w t + phi)."""
+    basis = np.stack([np.sin(w * t), np.cos(w * t)], axis=1)
+    (p, q), *_ = np.linalg.lstsq(basis, x, rcond=None)
+    return math.hypot(p, q), math.atan2(q, p)
+
+
+def test_angular_psd_single_line_turns_gravity_and_the_attitude_closed_form():
+    # One line (psd_lines = 1) of a flat angular PSD S on x: at the band's geometric centre f0 = sqrt(f1 f2) with
+    # amplitude A = sqrt(2 S (f2 - f1)) (the whole band's power in one line) and a phase phi drawn from the seed.
+    # The phase is the one unknown: fitted from the gyro, whose amplitude must then be A. Body at rest (ENU, level):
+    # angle a = -A / w cos(w t + phi), gravity seen through the turned axes f = Rx(a)^T (0, 0, g) =
+    # (0, g sin a, g cos a), the attitude quaternion the exact rotation by a about x: (cos a/2, sin a/2, 0, 0).
+    f1, f2, level = 20.0, 80.0, math.radians(2.0) ** 2
+    out = run(scene({"angular_psd": [[f1, level], [f2, level]], "psd_lines": 1, "angular_psd_axes": [1, 0, 0]},
+                    duration_s=0.5, attitude={"roll": "0", "pitch": "0", "yaw": "0"}, seed=5), attitude=True)
+    t, w, amp = out.t_s, 2 * np.pi * math.sqrt(f1 * f2), math.sqrt(2 * level * (f2 - f1))
+    fitted, phi = _fit_line(t, out.gyro[0, :, 0], w)
+    assert abs(fitted - amp) < 1e-12 * amp
+    np.testing.assert_allclose(out.gyro[0, :, 0], amp * np.sin(w * t + phi), rtol=0, atol=1e-12 * amp)
+    a = -amp / w * np.cos(w * t + phi)
+    np.testing.assert_allclose(out.accel[0], np.stack([0 * t, G0 * np.sin(a), G0 * np.cos(a)], axis=1),
+                               rtol=0, atol=1e-12 * G0)
+    np.testing.assert_allclose(out.quat[0], np.stack([np.cos(a / 2), np.sin(a / 2), 0 * t, 0 * t], axis=1),
+                               rtol=0, atol=1e-14)
+
+
+def test_angular_psd_line_is_an_angular_sine_line():
+    # A one-line angular PSD and the angular sine at the same frequency, amplitude and phase are the same motion:
+    # identical outputs and attitude (coning included: a second, sinusoidal axis turns with them).
+    f1, f2, level = 20.0, 80.0, 1e-3
+    base = {"roll": "0.2*sin(t)", "pitch": "0.1", "yaw": "0.3*t"}
+    psd = run(scene({"angular_psd": [[f1, level], [f2, level]], "psd_lines": 1, "angular_psd_axes": [0, 0, 1],
+                     "sines": [{"axis": "x", "kind": "angular", "amplitude": 0.05, "frequency": 33.0}]},
+                    attitude=base, seed=9), attitude=True)
+    w, amp = 2 * np.pi * math.sqrt(f1 * f2), math.sqrt(2 * level * (f2 - f1))
+    # the line's phase is drawn from (seed, IMU, axis) alone: fit it where the gyro's z is that line only
+    alone = run(scene({"angular_psd": [[f1, level], [f2, level]], "psd_lines": 1, "angular_psd_axes": [0, 0, 1]},
+                      seed=9))
+    _, phi = _fit_line(alone.t_s, alone.gyro[0, :, 2], w)
+    sines = run(scene({"sines": [{"axis": "x", "kind": "angular", "amplitude": 0.05, "frequency": 33.0},
+                                 {"axis": "z", "kind": "angular", "amplitude": amp, "frequency": math.sqrt(f1 * f2),
+                                  "phase": phi}]},
+                      attitude=base), attitude=True)
+    # the fitted phase is exact to ~1e-13 rad, not to the bit: compare to 1e-9
+    np.testing.assert_allclose(psd.gyro, sines.gyro, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(psd.accel, sines.accel, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(psd.quat, sines.quat, rtol=0, atol=1e-9)
+
+
+def test_attitude_is_body_then_vibration_then_mounting_against_scipy():
+    # Angular lines on all three axes, a turning body and a mounting rotation: the IMU's attitude is
+    # R_b Rx(a) Ry(b) Rz(c) M, composed here by scipy's Rotation (independent of the kernel's quaternion code):
+    # R_b = Rz(yaw) Ry(pitch) Rx(roll) is intrinsic "ZYX", R_v intrinsic "XYZ", M (z-y-x) intrinsic "ZYX".
+    from scipy.spatial.transform import Rotation
+    lines = [("x", 0.3, 9.0, 0.2), ("y", 0.2, 4.0, 1.0), ("z", 0.25, 13.0, -0.5)]
+    out = run(scene({"sines": [{"axis": a, "kind": "angular", "amplitude": amp, "frequency": f, "phase": ph}
+                               for a, amp, f, ph in lines]},
+                    effects=("gravity", "vibration", "mounting"), rate_hz=200,
+                    attitude={"roll": "0.3*sin(0.5*t)", "pitch": "0.1*t", "yaw": "0.4*t"},
+                    mounting_rpy_deg=[5.0, -10.0, 30.0]), attitude=True)
+    t = out.t_s
+    angles = np.stack([-amp / (2 * np.pi * f) * np.cos(2 * np.pi * f * t + ph) for _, amp, f, ph in lines], axis=1)
+    body = Rotation.from_euler("ZYX", np.stack([0.4 * t, 0.1 * t, 0.3 * np.sin(0.5 * t)], axis=1))
+    expected = body * Rotation.from_euler("XYZ", angles) * Rotation.from_euler("ZYX", [30.0, -10.0, 5.0],
+                                                                                 degrees=True)
+    got = Rotation.from_quat(out.quat[0][:, [1, 2, 3, 0]])       # scipy is scalar-last
+    assert np.max((got.inv() * expected).magnitude()) < 1e-12
+    # and without angular lines the attitude is the body's with mounting, as before
+    plain = run(scene({"sines": [{"axis": "x", "amplitude": "1 g", "frequency": 9.0}]},
+                      effects=("gravity", "vibration", "mounting"), rate_hz=200,
+                      attitude={"roll": "0.3*sin(0.5*t)", "pitch": "0.1*t", "yaw": "0.4*t"},
+                      mounting_rpy_deg=[5.0, -10.0, 30.0]), attitude=True)
+    mounted = body * Rotation.from_euler("ZYX", [30.0, -10.0, 5.0], degrees=True)
+    assert np.max((Rotation.from_quat(plain.quat[0][:, [1, 2, 3, 0]]).inv() * mounted).magnitude()) < 1e-12
+
+
+def test_lines_above_nyquist_warn_once_each_and_alias():
+    # rate 1000 Hz: a 700 Hz line aliases to |700 - 1000| = 300 Hz; its samples are sin(2 pi 700 k / 1000) =
+    # -sin(2 pi 300 k / 1000) exactly (what a part without an anti-alias filter reads). A 400 Hz line: no warning.
+    s = scene({"sines": [{"axis": "x", "amplitude": 1.0, "frequency": "700 Hz"},
+                         {"axis": "y", "amplitude": 1.0, "frequency": "400 Hz"}]}, effects=("vibration",))
+    assert s.warnings == ("imu[0].vibration.sines[0]: 700 Hz (x, linear) is above the Nyquist rate 500 Hz of "
+                          "rate_hz = 1000: it aliases to 300 Hz (no anti-alias filter is simulated)",)
+    out = run(s)
+    k = np.arange(out.t_s.size)
+    np.testing.assert_allclose(out.accel[0, :, 0], -np.sin(2 * np.pi * 300 * k / 1000), rtol=0, atol=1e-11)
+    # a PSD band reaching past Nyquist: one warning naming the table, how many of its lines and their band. The
+    # lines sit at the log-cells' centres 20 * 100^((i + 1/2) / 64) Hz, i < 64.
+    centres = 20.0 * 100.0 ** ((np.arange(64) + 0.5) / 64)
+    above = centres[centres > 500.0]
+    s = scene({"angular_psd": [["20 Hz", "1e-4 (deg/s)^2/Hz"], ["2 kHz", "1e-4 (deg/s)^2/Hz"]], "psd_lines": 64,
+               "angular_psd_axes": [0, 1, 0]})
+    assert s.warnings == (f"imu[0].vibration.angular_psd: {above.size} of 64 lines above the Nyquist rate 500 Hz of "
+                          f"rate_hz = 1000 ({above[0]:.4g} to {above[-1]:.4g} Hz): they alias into 0 to 500 Hz "
+                          "(no anti-alias filter is simulated)",)
+    # a table with every weight 0 realizes no line: no warning
+    assert scene({"psd": [["20 Hz", 0.1], ["2 kHz", 0.1]], "psd_axes": 0.0}).warnings == ()
+
+
+def test_check_command_prints_the_nyquist_warning(tmp_path, capsys):
+    from imu_emulator.cli import main
+    path = tmp_path / "shaker.toml"
+    path.write_text('[scene]\nrate_hz = 200\nduration_s = 1\n[trajectory]\nx = "0"\ny = "0"\nz = "0"\n'
+                    '[[imu]]\nname = "a"\n[imu.vibration]\nsines = [{axis = "z", amplitude = "1 g", '
+                    'frequency = "150 Hz"}]\n[effects]\nvibration = true\n')
+    main(["check", str(path)])
+    assert ("imu[0].vibration.sines[0]: 150 Hz (z, linear) is above the Nyquist rate 100 Hz of rate_hz = 200: "
+            "it aliases to 50 Hz") in capsys.readouterr().out

@@ -91,6 +91,9 @@ class Effect:
     #: checks that need several parameters (validate(values, where) raises SceneError naming the key); run by
     #: scene validation for each IMU when the effect is on
     validate: Callable[[dict, str], None] | None = field(default=None, repr=False)
+    #: warnings that need the sample rate (warn(values, where, rate_hz) -> lines); run by scene validation for
+    #: each IMU when the effect is on
+    warn: Callable[[dict, str, float], list[str]] | None = field(default=None, repr=False)
 
 
 def triad_params(key: str, gyro_unit: str, accel_unit: str, description: str, shape: str = "vector3",
@@ -165,6 +168,12 @@ class EmitContext:
         var = self.var("count_" + "".join(c if c.isalnum() else "_" for c in label))
         self.plan.add_counter(var, self.m, f"{self.effect.name}.{label}")
         return var
+
+    def turn_axes(self, lines: list[str], quaternion: tuple[str, str, str, str]) -> None:
+        """This IMU's axes are turned against the body's by the unit quaternion (w, x, y, z variables) that
+        `lines` compute from this effect's body-stage variables: the attitude output composes it (body, then
+        this, then mounting). The lines run only where the attitude is output."""
+        self.plan.add_axes_turn(self.m, lines, quaternion)
 
     def add_bias(self, triad: str, axis: int, expr: str) -> list[str]:
         """Add a bias term to an output (and to the realized bias that --truth reports)."""

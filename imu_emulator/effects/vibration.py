@@ -6,8 +6,8 @@ Angular vibration turns the IMU's axes against the body's by R_v = Rx(a) Ry(b) R
 about body x, y, z), so the sensor sees R_v^T f, and R_v^T w plus the relative rate
 a' (cos c cos b, -sin c cos b, sin b) + b' (sin c, cos c, 0) + c' (0, 0, 1). Because it is motion, coning
 (angular lines on two axes out of phase) and sculling (angular with linear) appear in the outputs as they
-would on a shaker. The attitude output stays the body's (with mounting): the vibration's small rotation is
-not in it.
+would on a shaker. The attitude output (the IMU's quaternion) is the body's, turned by R_v, then by the mounting:
+the IMU's axes really turn. (--truth roll, pitch, yaw stay the body's, like its position at the reference point.)
 
 - `sines`: lines {axis, amplitude, frequency, phase}; the amplitude is what the sensor on that axis sees:
   linear (an acceleration, "2 g") gives d'' = A sin(2 pi f t + phase), angular (a rate, "3 deg/s") gives the
@@ -18,8 +18,15 @@ not in it.
   first and last breakpoint cut into cells of equal log width, one line at each cell's geometric centre f_i
   with amplitude sqrt(2 S(f_i) df_i) (its power S(f_i) df_i) and a phase drawn uniformly from the seed (per IMU
   and axis, at the run's start). A continuous motion with exact derivatives whose PSD, averaged over a cell,
-  is the table's; the frequencies are incommensurate, so it does not repeat. Lines above the Nyquist rate
-  alias as they would in a part without an anti-alias filter.
+  is the table's; the frequencies are incommensurate, so it does not repeat.
+- `angular_psd`: random angular vibration, an angular rate PSD table ((rad/s)^2/Hz, "(deg/s)^2/Hz"), realized
+  the same way (weights angular_psd_axes, phases of their own) as lines of the relative rate: each is an
+  angular sine line, so it turns the axes exactly as those do.
+
+Lines above the Nyquist rate (rate_hz / 2) alias, as they do in a MEMS part whose anti-alias filter does not
+reach them (a gyro's drive resonance, a shaker's harmonics): the simulation samples the continuous motion and
+adds no filter, which would be a property of the part (its bandwidth), not of the vibration. Scene validation
+warns once per such sine (with the frequency it aliases to) and once per PSD table with lines above Nyquist.
 """
 import math
 
@@ -56,15 +63,13 @@ def _uniform(draw, axis: str, i: int) -> float:
 
 def emit(ctx) -> list[str]:
     sines = ctx.value("imu.vibration.sines")
-    table = ctx.value("imu.vibration.psd")
-    weights = ctx.value("imu.vibration.psd_axes")
     n = int(ctx.value("imu.vibration.psd_lines"))
     # per axis: linear acceleration, velocity, displacement; angular rate and angle (body axes)
     acc, vel, disp = ([ctx.var(f"{q}{a}") for a in AXES] for q in ("acc", "vel", "disp"))
     rate, angle = ([ctx.var(f"{q}{a}") for a in AXES] for q in ("rate", "angle"))
-    linear = sorted({axis for axis, kind, *_ in sines if kind == 0}
-                    | ({i for i in range(3) if weights[i] > 0} if table else set()))
-    angular = sorted({axis for axis, kind, *_ in sines if kind == 1})
+    psd = {kind: _psd_axes(ctx, key) for kind, key in ((0, "psd"), (1, "angular_psd"))}
+    linear = sorted({axis for axis, kind, *_ in sines if kind == 0} | set(psd[0]))
+    angular = sorted({axis for axis, kind, *_ in sines if kind == 1} | set(psd[1]))
     if not linear and not angular:
         return []
     lines = [f"{v} = 0.0" for i in linear for v in (acc[i], vel[i], disp[i])]
@@ -78,22 +83,20 @@ def emit(ctx) -> list[str]:
                       f"{disp[axis]} -= {amplitude / w ** 2!r} * {sn}"]
         else:           # rate = A sin, angle = -A/w cos
             lines += [f"{rate[axis]} += {amplitude!r} * {sn}", f"{angle[axis]} -= {amplitude / w!r} * {cs}"]
-    if table:
-        i = ctx.var("i")
-        for axis in range(3):
-            if not weights[axis] > 0:
-                continue
-            found = psd_lines(table, n, weights[axis])
+    i = ctx.var("i")
+    for kind, per_axis in psd.items():
+        # the same lines as the sines above, in a loop over the constants of each axis
+        targets = ((acc, "+"), (vel, "-"), (disp, "-")) if kind == 0 else ((rate, "+"), (angle, "-"))
+        for axis, found in per_axis.items():
             a = AXES[axis]
-            f = ctx.constant(f"F{a}", [fi for fi, _ in found])
-            amp = ctx.constant(f"A{a}", [ai for _, ai in found])
-            amp_w = ctx.constant(f"AW{a}", [ai / (2.0 * math.pi * fi) for fi, ai in found])
-            amp_w2 = ctx.constant(f"AWW{a}", [ai / (2.0 * math.pi * fi) ** 2 for fi, ai in found])
-            base = ctx.state_block("phase", [lambda draw, a=a, k=k: _uniform(draw, a, k) for k in range(n)])
+            f = ctx.constant(f"F{kind}{a}", [fi for fi, _ in found])
+            base = ctx.state_block(STATES[kind], [lambda draw, a=a, k=k: _uniform(draw, a, k) for k in range(n)])
             lines += [f"for {i} in range({n}):",
-                      f"    {sn}, {cs} = sincos_cycles({f}[{i}] * t + state[{base} + {i}])",
-                      f"    {acc[axis]} += {amp}[{i}] * {sn}", f"    {vel[axis]} -= {amp_w}[{i}] * {cs}",
-                      f"    {disp[axis]} -= {amp_w2}[{i}] * {sn}"]
+                      f"    {sn}, {cs} = sincos_cycles({f}[{i}] * t + state[{base} + {i}])"]
+            for order, (target, sign) in enumerate(targets):
+                # integral number `order` of A sin: A / w^order times sin, -cos, -sin
+                amp = ctx.constant(f"A{kind}{order}{a}", [ai / (2.0 * math.pi * fi) ** order for fi, ai in found])
+                lines.append(f"    {target[axis]} {sign}= {amp}[{i}] * {sn if order % 2 == 0 else cs}")
     if linear:
         d = [disp[i] if i in linear else "0.0" for i in range(3)]
         v = [vel[i] if i in linear else "0.0" for i in range(3)]
@@ -109,7 +112,37 @@ def emit(ctx) -> list[str]:
                          f"{ctx.var('u' + b)})")
     if angular:
         lines += _rotate(ctx, angular, rate, angle)
+        ctx.turn_axes(*_quaternion(ctx, angular, angle))
     return lines
+
+
+STATES = {0: "phase", 1: "angular_phase"}
+
+
+def _psd_axes(ctx, key: str) -> dict[int, list[tuple[float, float]]]:
+    """{axis: its lines} of the PSD table `key` ("psd" or "angular_psd"), for the axes of nonzero weight."""
+    table = ctx.value(f"imu.vibration.{key}")
+    weights = ctx.value(f"imu.vibration.{key}_axes")
+    n = int(ctx.value("imu.vibration.psd_lines"))
+    if not table:
+        return {}
+    return {axis: psd_lines(table, n, weights[axis]) for axis in range(3) if weights[axis] > 0}
+
+
+def _quaternion(ctx, angular, angle) -> tuple[list[str], tuple[str, str, str, str]]:
+    """The unit quaternion of R_v = Rx(a) Ry(b) Rz(c): q_x(a) q_y(b) q_z(c), each q_i(t) = (cos t/2, sin t/2 e_i)
+    (Hamilton products compose as the matrices do). -> (source lines, its four variables)."""
+    q = [ctx.var(f"q{c}") for c in "wxyz"]
+    h = {i: (ctx.var(f"hc{AXES[i]}"), ctx.var(f"hs{AXES[i]}")) for i in angular}
+    lines = [f"{h[i][0]}, {h[i][1]} = math.cos(0.5 * {angle[i]}), math.sin(0.5 * {angle[i]})" for i in angular]
+
+    def unit(i):
+        return [h[i][0]] + [h[i][1] if j == i else "0.0" for j in range(3)]
+    first, *rest = angular
+    lines.append(f"{', '.join(q)} = {', '.join(unit(first))}")
+    for i in rest:
+        lines.append(f"{', '.join(q)} = quat_multiply_scalar({', '.join(q)}, {', '.join(unit(i))})")
+    return lines, tuple(q)
 
 
 def _rotate(ctx, angular, rate, angle) -> list[str]:
@@ -139,14 +172,43 @@ def validate(values: dict, where: str) -> None:
     n = values["imu.vibration.psd_lines"]
     if not (n == int(n) and 1 <= n <= MAX_LINES):
         raise SceneError(f"{where}.vibration.psd_lines: expected a whole number from 1 to {MAX_LINES}, got {n!r}")
-    if any(w < 0 for w in values["imu.vibration.psd_axes"]):
-        raise SceneError(f"{where}.vibration.psd_axes: weights are >= 0, got {values['imu.vibration.psd_axes']!r}")
+    for key in ("psd_axes", "angular_psd_axes"):
+        if any(w < 0 for w in values[f"imu.vibration.{key}"]):
+            raise SceneError(f"{where}.vibration.{key}: weights are >= 0, got {values[f'imu.vibration.{key}']!r}")
+
+
+def alias_hz(f: float, rate_hz: float) -> float:
+    """The frequency a line at f shows in samples taken at rate_hz (folded into [0, rate_hz / 2])."""
+    return abs(f - rate_hz * round(f / rate_hz))
+
+
+def warn(values: dict, where: str, rate_hz: float) -> list[str]:
+    """One line per sinusoid and per PSD table with lines above the Nyquist rate: they alias (module doc)."""
+    nyquist = rate_hz / 2.0
+    out = []
+    for k, (axis, kind, _, f, _) in enumerate(values["imu.vibration.sines"]):
+        if f > nyquist:
+            out.append(f"{where}.vibration.sines[{k}]: {f:g} Hz ({AXES[axis]}, {('linear', 'angular')[kind]}) is "
+                       f"above the Nyquist rate {nyquist:g} Hz of rate_hz = {rate_hz:g}: it aliases to "
+                       f"{alias_hz(f, rate_hz):g} Hz (no anti-alias filter is simulated)")
+    n = int(values["imu.vibration.psd_lines"])
+    for key in ("psd", "angular_psd"):
+        table = values[f"imu.vibration.{key}"]
+        if not table or not any(w > 0 for w in values[f"imu.vibration.{key}_axes"]):
+            continue
+        above = [f for f, _ in psd_lines(table, n) if f > nyquist]
+        if above:
+            out.append(f"{where}.vibration.{key}: {len(above)} of {n} lines above the Nyquist rate {nyquist:g} Hz "
+                       f"of rate_hz = {rate_hz:g} ({above[0]:.4g} to {above[-1]:.4g} Hz): they alias into 0 to "
+                       f"{nyquist:g} Hz (no anti-alias filter is simulated)")
+    return out
 
 
 EFFECT = Effect(
     name="vibration",
-    description="vibration as motion of the IMU: sinusoidal lines (linear or angular) and a random PSD",
-    stage=Stage.BODY, order=50, emit=emit, validate=validate, random=True, state=("phase",), drawn_once=True,
+    description="vibration as motion of the IMU: sinusoidal lines (linear or angular) and random PSDs",
+    stage=Stage.BODY, order=50, emit=emit, validate=validate, warn=warn, random=True,
+    state=("phase", "angular_phase"), drawn_once=True,
     params=(Param("sines", "imu.vibration", "m/s^2|rad/s", "sinusoidal lines: [{axis, amplitude, frequency, "
                   "phase}], amplitude as the sensor sees it (acceleration, or kind = \"angular\": rate)",
                   shape="sines", default=(), datasheet="`[{axis = \"x\", amplitude = \"2 g\", frequency = "
@@ -155,5 +217,10 @@ EFFECT = Effect(
                   "breakpoints [frequency, level], log-log", shape="psd", default=(),
                   datasheet="`[[\"20 Hz\", \"0.01 g^2/Hz\"], [\"2000 Hz\", \"0.01 g^2/Hz\"]]`"),
             Param("psd_axes", "imu.vibration", "1", "PSD weight per body axis (0: none)", default=1.0),
-            Param("psd_lines", "imu.vibration", "1", "sinusoids per axis realizing the PSD", shape="scalar",
+            Param("angular_psd", "imu.vibration", "rad^2/s^2/Hz", "random angular vibration: one-sided angular "
+                  "rate PSD breakpoints [frequency, level], log-log", shape="psd", default=(),
+                  datasheet="`[[\"10 Hz\", \"1e-4 (deg/s)^2/Hz\"], [\"500 Hz\", \"1e-4 (deg/s)^2/Hz\"]]`"),
+            Param("angular_psd_axes", "imu.vibration", "1", "angular PSD weight per body axis (0: none)",
+                  default=1.0),
+            Param("psd_lines", "imu.vibration", "1", "sinusoids per axis realizing each PSD", shape="scalar",
                   default=256.0, example=64.0)))
