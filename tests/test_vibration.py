@@ -310,3 +310,18 @@ def test_check_command_prints_the_nyquist_warning(tmp_path, capsys):
     main(["check", str(path)])
     assert ("imu[0].vibration.sines[0]: 150 Hz (z, linear) is above the Nyquist rate 100 Hz of rate_hz = 200: "
             "it aliases to 50 Hz") in capsys.readouterr().out
+
+
+def test_increments_integrate_an_angular_random_vibration_line():
+    # A one-line angular PSD on y, body at rest: the rotation is about one fixed axis, so dtheta_y over (t-T, t] is
+    # the angle's change a(t) - a(t-T), a = -A / w cos(w t + phi) (phi fitted from the gyro, as above); the
+    # quadrature reruns the line at every node (its phase is drawn once per run).
+    f1, f2, level = 30.0, 120.0, math.radians(1.0) ** 2
+    s = scene({"angular_psd": [[f1, level], [f2, level]], "psd_lines": 1, "angular_psd_axes": [0, 1, 0]},
+              effects=("vibration",), seed=4)
+    out = Simulation(s, attitude=False, increments=8).run()
+    t, w, T, amp = out.t_s, 2 * np.pi * math.sqrt(f1 * f2), 1.0 / 1000, math.sqrt(2 * level * (f2 - f1))
+    _, phi = _fit_line(t, out.gyro[0, :, 1], w)
+    expected = -amp / w * (np.cos(w * t + phi) - np.cos(w * (t - T) + phi))
+    np.testing.assert_allclose(out.dtheta[0][:, 1], expected, rtol=0, atol=1e-11 * amp * T)
+    assert np.abs(out.dtheta[0][:, [0, 2]]).max() < 1e-15 and np.abs(out.dvel[0]).max() < 1e-15

@@ -1,7 +1,8 @@
 """Cost of each sensor-error effect alone and of the full error model, on the circle scene at 1 kHz with a
-lever arm, and the cost of one counter-based normal.
+lever arm, and the cost of one counter-based normal; with --vibration, the vibration variants only (sines,
+linear PSD, angular PSD, angular PSD with the attitude output) against the kinematics alone.
 
-    .venv/bin/python tools/bench_effects.py [--rounds 7] [--seconds 60]
+    .venv/bin/python tools/bench_effects.py [--rounds 7] [--seconds 60] [--vibration]
 
 Variants are interleaved (A, B, C, A, B, C, ...) and timed in thread CPU time (time.thread_time_ns) beside
 wall time, because the machine is shared: compare the ratios, not one run's absolute figures. Prints figures;
@@ -38,6 +39,7 @@ SINES = {"sines": [{"axis": "x", "amplitude": "0.5 g", "frequency": "120 Hz"},
                    {"axis": "z", "amplitude": "0.3 g", "frequency": "47 Hz", "phase": "30 deg"},
                    {"axis": "y", "amplitude": "2 deg/s", "frequency": "90 Hz"}]}
 PSD = {"psd": [["20 Hz", "0.001 g^2/Hz"], ["80 Hz", "0.01 g^2/Hz"], ["450 Hz", "0.01 g^2/Hz"]]}
+ANGULAR_PSD = {"angular_psd": [["20 Hz", "1e-3 (deg/s)^2/Hz"], ["450 Hz", "1e-3 (deg/s)^2/Hz"]]}
 DETERMINISTIC = ["scale_factor", "misalignment", "g_sensitivity", "nonlinearity", "temperature", "range", "resolution"]
 #: the issue's full error model: noise + bias instability + random walk + scale/misalignment + range + resolution
 FULL = ["noise", "bias_instability", "random_walk", "scale_factor", "misalignment", "range", "resolution"]
@@ -120,7 +122,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--seconds", type=float, default=60.0, help="scene length per timed run (1 kHz)")
+    parser.add_argument("--vibration", action="store_true", help="only the vibration variants")
     args = parser.parse_args()
+    if args.vibration:
+        return bench_vibration(args)
 
     variants = [("kinematics only (gravity + lever arm)", []), ("+ noise", ["noise"]),
                 ("+ bias_instability", ["bias_instability"]), ("+ random_walk", ["random_walk"]),
@@ -140,6 +145,28 @@ def main() -> None:
            "effect cost")
     nc = normal_cost(args.rounds)
     print(f"one counter-based normal (normals() loop, thread CPU): min {min(nc):.2f} median {np.median(nc):.2f} ns")
+
+
+def bench_vibration(args) -> None:
+    """The vibration variants alone: the cost per sample of its sines, linear PSD and angular PSD (3 axes x 256
+    lines each), and of the attitude output turned by the angular vibration."""
+    variants = [("kinematics only (gravity + lever arm)", None, False),
+                ("kinematics, attitude output", None, True),
+                ("+ vibration, 3 sines (2 linear, 1 angular)", SINES, False),
+                ("+ vibration, linear PSD 3 x 256 lines", PSD, False),
+                ("+ vibration, angular PSD 3 x 256 lines", ANGULAR_PSD, False),
+                ("+ vibration, angular PSD, attitude output", ANGULAR_PSD, True)]
+    sims = []
+    for label, vib, attitude in variants:
+        scene = circle(["vibration"] if vib else [], args.seconds, vib)
+        sim = Simulation(scene, attitude=attitude)
+        sims.append((label, sim, sim.block(0, BLOCK), scene.n_samples))
+    cpu, wall = interleave(sims, args.rounds)
+    report(sims, cpu, wall, f"vibration on the circle scene, 1 kHz, lever arm, {args.seconds:g} s per run, "
+           f"{args.rounds} interleaved rounds (ns/sample; thread CPU min / median / max, wall median; Msamples/s "
+           "from the CPU median)", "vs kinematics")
+    line = (np.median(cpu[sims[4][0]]) - np.median(cpu[sims[0][0]])) / (3 * 256)
+    print(f"angular PSD per line and sample (thread CPU median): {line:.2f} ns")
 
 
 if __name__ == "__main__":
