@@ -230,9 +230,16 @@ class EffectPlan:
         """Every state slot's value at the run's start (random draws keyed on the seed, never on the block)."""
         from imu_emulator.counter_rng import normals, stream_key
 
+        drawn: dict = {}   # the flicker sums' starts redraw their poles' values: each draw costs a hash and a call
+
+        def draw(m, stream, counter):
+            if (m, stream) not in drawn or counter >= len(drawn[m, stream]):
+                key = np.uint64(stream_key(seed, m, f"init.{stream}"))
+                drawn[m, stream] = normals(key, 0, max(2, counter + 1))   # slots draw counters 0 and 1
+            return float(drawn[m, stream][counter])
+
         def draw_for(m):
-            return lambda stream, counter: float(normals(np.uint64(stream_key(seed, m, f"init.{stream}")),
-                                                         counter, 1)[0])
+            return lambda stream, counter: draw(m, stream, counter)
         return np.array([initial(draw_for(m)) for _, m, initial in self.slots] or [0.0])
 
 
