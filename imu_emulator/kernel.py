@@ -300,7 +300,8 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
         increment = []
         if increments:
             from imu_emulator import increments as inc
-            increment = inc.imu_lines(m, sensor, [var for var, owner, _ in plan.slots if owner == m and var is not None])
+            increment = inc.imu_lines(m, sensor, [f"state[{i}]" if var is None else var   # slots read in place too
+                                                  for i, (var, owner, _) in enumerate(plan.slots) if owner == m])
         per_imu += fill(PER_IMU_TEMPLATE, **frame_slots, increment=increment, sensor=sensor,
                         output=stages["output"], quat=quat, bias_truth=bias_truth).splitlines()
 
