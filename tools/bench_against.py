@@ -45,11 +45,13 @@ def worker(tree: str, seconds: float) -> None:
         scene = circle(effects, seconds)
         sim = Simulation(scene, attitude=False)
         sims[label] = (sim, sim.block(0, BLOCK), scene.n_samples)
+    after = dict.fromkeys(sims, BLOCK)   # the run sample each simulation's state is at (the warm-up block's end)
     print("ready", flush=True)
     for line in sys.stdin:
         label, mode = line.strip().rsplit(" ", 1)
         sim, out, n = sims[label]
-        start = 0 if mode == "restart" else sim._next
+        start = 0 if mode == "restart" else after[label]
+        after[label] = start + n
         cpu0, wall0 = time.thread_time_ns(), time.perf_counter_ns()
         for k0 in range(0, n, BLOCK):
             size = min(BLOCK, n - k0)
