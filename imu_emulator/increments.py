@@ -131,7 +131,7 @@ def imu_lines(m: int, sensor: list[str], state_vars: list[str]) -> list[str]:
     lines = [f"# -- IMU {m}: increments over (t_k-1, t_k], then the sensor stage on their mean"]
     lines += [f"{v} *= inc_T" for v in th + dv]
     if sensor:
-        saved = [v for v in state_vars if any(re.search(rf"\b{v}\b", line) for line in sensor)]
+        saved = [v for v in state_vars if any(re.search(rf"(?<!\w){re.escape(v)}(?![\w\[])", line) for line in sensor)]
         lines += [f"inc_s{i} = {v}" for i, v in enumerate(saved)]
         lines += ["inc_iT = 1.0 / inc_T"]
         lines += [f"o{a} = {v} * inc_iT" for a, v in zip("xyz", dv)]

@@ -234,9 +234,16 @@ class EffectPlan:
         """Every state slot's value at the run's start (random draws keyed on the seed, never on the block)."""
         from imu_emulator.counter_rng import normals, stream_key
 
+        drawn: dict = {}   # the flicker sums' starts redraw their poles' values: each draw costs a hash and a call
+
+        def draw(m, stream, counter):
+            if (m, stream) not in drawn or counter >= len(drawn[m, stream]):
+                key = np.uint64(stream_key(seed, m, f"init.{stream}"))
+                drawn[m, stream] = normals(key, 0, max(2, counter + 1))   # slots draw counters 0 and 1
+            return float(drawn[m, stream][counter])
+
         def draw_for(m):
-            return lambda stream, counter: float(normals(np.uint64(stream_key(seed, m, f"init.{stream}")),
-                                                         counter, 1)[0])
+            return lambda stream, counter: draw(m, stream, counter)
         return np.array([initial(draw_for(m)) for _, m, initial in self.slots] or [0.0])
 
 
@@ -302,7 +309,8 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
         increment = []
         if increments:
             from imu_emulator import increments as inc
-            increment = inc.imu_lines(m, sensor, [var for var, owner, _ in plan.slots if owner == m and var is not None])
+            increment = inc.imu_lines(m, sensor, [f"state[{i}]" if var is None else var   # slots read in place too
+                                                  for i, (var, owner, _) in enumerate(plan.slots) if owner == m])
         per_imu += fill(PER_IMU_TEMPLATE, **frame_slots, increment=increment, sensor=sensor,
                         output=stages["output"], quat=quat, bias_truth=bias_truth).splitlines()
 

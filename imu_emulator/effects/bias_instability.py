@@ -17,11 +17,13 @@ from imu_emulator.errors import SceneError
 SIGMA_PER_B = 0.856
 #: a plain Gauss-Markov process steps at least STEPS_PER_TAU times per tau (its per-knot statistics are
 #: exact, the straight lines between knots its only approximation); a pole of the flicker sum at least
-#: FLICKER_STEPS_PER_TAU times: only the sum's Allan curve is promised, and interpolating a pole over tau / 20
-#: changes it by far less than its confidence intervals at tau >= 0.1 s (tests/test_allan.py; the per-pole
-#: variance dips by (1 - exp(-1/20)) / 2 = 2.4 % midway between knots, 0.4 % of a six-pole sum)
+#: FLICKER_STEPS_PER_TAU times: only the sum's Allan curve is promised, and interpolating a pole over tau / 10
+#: changes it by far less than its confidence intervals at tau >= 0.1 s (tests/test_allan.py, the 2 h tests and
+#: tests/test_presets.py pass at 10 as at 20; the per-pole variance dips by (1 - exp(-1/10)) / 2 = 4.8 % midway
+#: between knots, 0.8 % of a six-pole sum). 10 rather than 20 halves the knot work: -5 ns/sample of the full
+#: model (tools/bench_bias_instability.py --steps 20,10)
 STEPS_PER_TAU = 100
-FLICKER_STEPS_PER_TAU = 20
+FLICKER_STEPS_PER_TAU = 10
 
 
 def poles(tau_min: float, tau_max: float) -> list[float]:
@@ -102,25 +104,32 @@ def emit(ctx) -> list[str]:
         def at_next_knot(xa, xb, m_p):
             return xb if m_p == m else xa + (xb - xa) * (m / m_p)
 
+        # the slow processes' own knot values live in the state array, read and written in place by the knot
+        # code only: as locals they were some 60 values carried around the sample loop, which the register
+        # allocator spilled and reloaded every sample (about 5 ns/sample of the full model). Their initial
+        # draws are the state block's streams ("gm.<name>"), so the sums sa, sb start from the same values.
         def start(draw, slow=slow):
-            return sum(sigma * draw(name, 0) for name, sigma, *_ in slow)
+            return sum(sigma * draw(f"gm.{name}", 0) for name, sigma, *_ in slow)
 
         def start_next(draw, slow=slow):
-            return sum(at_next_knot(sigma * draw(name, 0), a * sigma * draw(name, 0) + q * draw(name, 1), m_p)
+            return sum(at_next_knot(sigma * draw(f"gm.{name}", 0),
+                                    a * sigma * draw(f"gm.{name}", 0) + q * draw(f"gm.{name}", 1), m_p)
                        for name, sigma, m_p, a, q in slow)
         label = f"{triad}.{AXES[axis]}"
         sa = ctx.state(f"gm[{label}.sa]", start)
         sb = ctx.state(f"gm[{label}.sb]", start_next)
         shift.append(f"{sa} = {sb}")
         for name, sigma, m_p, a, q in slow:
-            xb = ctx.state(f"gm[{name}.b]", lambda draw, name=name, sigma=sigma, a=a, q=q:
-                           a * sigma * draw(name, 0) + q * draw(name, 1))
+            initials = [lambda draw, name=name, sigma=sigma, a=a, q=q: a * sigma * draw(name, 0) + q * draw(name, 1)]
+            if m_p != m:
+                initials.append(lambda draw, name=name, sigma=sigma: sigma * draw(name, 0))
+            base = ctx.state_block("gm", initials)
+            xb, xa = f"state[{base}]", f"state[{base + 1}]"
             step = f"{xb} = {a!r} * {xb} + {q!r} * {ctx.normal(name, f'(s // {m_p} + 1)')}"
             if m_p == m:
                 advance.setdefault(m_p, []).append(step)
                 nexts.append(xb)
                 continue
-            xa = ctx.state(f"gm[{name}.a]", lambda draw, name=name, sigma=sigma: sigma * draw(name, 0))
             advance.setdefault(m_p, []).extend([f"{xa} = {xb}", step])
             nexts.append(f"({xa} + ({xb} - {xa}) * {ctx.var(f'w{m_p}')})")
         sums.append(f"{sb} = {' + '.join(nexts)}")
