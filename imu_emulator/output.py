@@ -107,7 +107,7 @@ def open_writer(path: str | Path, imu_names, truth: bool, bias_truth: bool = Fal
     if Path(path).suffix.lower() == ".parquet":
         from imu_emulator.output_parquet import ParquetWriter
         return ParquetWriter(check_path(path), imu_names, truth, bias_truth=bias_truth, temperature=temperature,
-                             increments=increments, metadata=metadata)
+                             increments=increments, metadata=metadata, conventions=conventions)
     if Path(path).suffix.lower() == ".mcap":
         if increments:
             raise ImuEmulatorError(f"{path}: --increments: a ROS 2 bag's sensor_msgs/Imu has no field for "
