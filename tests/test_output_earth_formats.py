@@ -136,3 +136,71 @@ def test_parquet_equals_npz_column_by_column_in_an_earth_scene(run):
     assert np.array_equal(t_ns[:, 1] - t_ns[:, 0], np.full(len(t_ns), offsets_ns[1] - offsets_ns[0]))
     from imu_emulator.output_parquet import read_metadata
     assert any("f = a - g" in line for line in read_metadata(run[".parquet"])["conventions"])
+
+
+def test_ros2_bag_carries_the_earth_truth(run):
+    """/truth/navsatfix and /truth/odometry_ecef, decoded by rosbags, against the NPZ of the same run and pymap3d:
+    the fix is the NPZ's geodetic truth, pymap3d puts it at the odometry's ECEF position; the odometry's
+    orientation is body FRD -> ECEF (pymap3d's NED axes times the NPZ's attitude w.r.t. local NED), its twist the
+    ECEF velocity in body axes and a body rate that turns its own orientations (checked by differencing them)."""
+    pymap3d = pytest.importorskip("pymap3d")
+    from scipy.spatial.transform import Rotation
+    from test_output_mcap import read_bag
+    topics = read_bag(run[".mcap"])
+    assert {"/truth/navsatfix", "/truth/odometry_ecef", "/truth/odometry"} <= set(topics)
+    with np.load(run[".npz"]) as npz:
+        geodetic, r_ecef, v_ecef = npz["geodetic"], npz["position_ecef"], npz["velocity_ecef"]
+        euler_ned, t = npz["euler_ned"], npz["t"]
+    fixes = [m for _, m in topics["/truth/navsatfix"]]
+    llh = np.array([[f.latitude, f.longitude, f.altitude] for f in fixes])
+    assert _same_bits(llh, geodetic)
+    assert {(f.status.status, f.position_covariance_type, f.header.frame_id) for f in fixes} == {(0, 3, "earth")}
+    odom = [m for _, m in topics["/truth/odometry_ecef"]]
+    assert {(d.header.frame_id, d.child_frame_id) for d in odom} == {("earth", "base_link_frd")}
+    pos = np.array([[d.pose.pose.position.x, d.pose.pose.position.y, d.pose.pose.position.z] for d in odom])
+    assert _same_bits(pos, r_ecef)
+    np.testing.assert_allclose(pos, np.array(pymap3d.geodetic2ecef(*llh.T)).T, rtol=0, atol=1e-6)
+    q = np.array([[d.pose.pose.orientation.x, d.pose.pose.orientation.y, d.pose.pose.orientation.z,
+                   d.pose.pose.orientation.w] for d in odom])
+    c_be = Rotation.from_quat(q)                                      # scipy: scalar last
+    # C_n^e from pymap3d: row i holds the NED components of ECEF axis i
+    c_ne = np.array([np.column_stack(pymap3d.ecef2nedv(*np.eye(3), la, lo)) for la, lo, _ in llh])
+    c_bn = Rotation.from_euler("ZYX", euler_ned[:, ::-1]).as_matrix()
+    np.testing.assert_allclose(c_be.as_matrix(), c_ne @ c_bn, rtol=0, atol=1e-12)
+    v_b = np.array([[d.twist.twist.linear.x, d.twist.twist.linear.y, d.twist.twist.linear.z] for d in odom])
+    np.testing.assert_allclose(c_be.apply(v_b), v_ecef, rtol=0, atol=1e-9)
+    _twist_moves_the_pose(odom, t)
+
+
+def _twist_moves_the_pose(odom, t):
+    """The twist of successive odometry messages carries the pose from one to the next: the rotation between
+    orientations over dt is the mean body rate, the ECEF step the mean ECEF velocity, each to O(dt^2) of the
+    derivatives' changes: with the scenes' rates (< 0.4 rad/s, changing by < 0.1 rad/s^2), accelerations
+    (< 10 m/s^2, jerk < 1 m/s^3) and dt = 0.02 s that is < 1e-5 rad/s and < 1e-3 m/s."""
+    from scipy.spatial.transform import Rotation
+    c_be = Rotation.from_quat([[d.pose.pose.orientation.x, d.pose.pose.orientation.y, d.pose.pose.orientation.z,
+                                d.pose.pose.orientation.w] for d in odom])
+    w = np.array([[d.twist.twist.angular.x, d.twist.twist.angular.y, d.twist.twist.angular.z] for d in odom])
+    turned = (c_be[:-1].inv() * c_be[1:]).as_rotvec() / np.diff(t)[:, None]
+    np.testing.assert_allclose(turned, (w[:-1] + w[1:]) / 2, rtol=0, atol=1e-5)
+    pos = np.array([[d.pose.pose.position.x, d.pose.pose.position.y, d.pose.pose.position.z] for d in odom])
+    v_e = c_be.apply([[d.twist.twist.linear.x, d.twist.twist.linear.y, d.twist.twist.linear.z] for d in odom])
+    np.testing.assert_allclose(np.diff(pos, axis=0) / np.diff(t)[:, None], (v_e[:-1] + v_e[1:]) / 2,
+                               rtol=0, atol=1e-3)
+
+
+@pytest.mark.parametrize("frame, trajectory", [
+    ("ENU", 'x = "30*t + sin(t)"\ny = "3*t**2"\nz = "5*t"'),     # a forward-left-up body
+    ("ECI", 'x = "7e6*cos(1e-3*t)"\ny = "7e6*sin(1e-3*t)"\nz = "1e3*t"'),   # 7 km/s: a transport rate of 1e-3 rad/s
+])
+def test_odometry_ecef_twist_in_other_frames(tmp_path, monkeypatch, frame, trajectory):
+    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
+    from test_output_mcap import read_bag
+    scene = tmp_path / "s.toml"
+    scene.write_text(f'[scene]\nrate_hz = 50\nduration_s = 1.0\nframe = "{frame}"\ngravity_model = "wgs84"\n'
+                     'origin = { lat_deg = -30.0, lon_deg = 170.0, height_m = 10.0 }\n'
+                     f'[trajectory]\n{trajectory}\n[attitude]\nroll = "0.1*sin(t)"\npitch = "0.05"\n'
+                     'yaw = "0.3*t"\n[[imu]]\nname = "a"\n[effects]\ngravity = true\nearth_rate = true\ncoriolis = true\n')
+    assert main(["generate", str(scene), "-o", str(tmp_path / "o.mcap"), "--quiet", "--truth"]) == 0
+    odom = [m for _, m in read_bag(tmp_path / "o.mcap")["/truth/odometry_ecef"]]
+    _twist_moves_the_pose(odom, np.arange(50) / 50.0)
