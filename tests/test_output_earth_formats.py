@@ -204,3 +204,26 @@ def test_odometry_ecef_twist_in_other_frames(tmp_path, monkeypatch, frame, traje
     assert main(["generate", str(scene), "-o", str(tmp_path / "o.mcap"), "--quiet", "--truth"]) == 0
     odom = [m for _, m in read_bag(tmp_path / "o.mcap")["/truth/odometry_ecef"]]
     _twist_moves_the_pose(odom, np.arange(50) / 50.0)
+
+
+def test_run_size_matches_the_files_written(run):
+    """run_size.output_bytes with --truth and --increments (MCAP: --truth) against the files of the Earth run:
+    NPZ to within 1 % (its arrays exactly, plus per-array headers); CSV within CSV_ESTIMATE_MARGIN of the
+    estimate and under the bound; Parquet and MCAP under their uncompressed bounds (Parquet: plus 25 % for the
+    dictionary pages a short file keeps beside its values)."""
+    import os
+
+    from imu_emulator.run_size import CSV_ESTIMATE_MARGIN, csv_bytes, output_bytes
+    from imu_emulator.scene import load_scene
+    scene = load_scene(run["scene"])
+    size = {suffix: os.path.getsize(run[suffix]) for suffix in (".npz", ".csv", ".parquet", ".mcap")}
+    assert abs(size[".npz"] / output_bytes(scene, "NPZ", True, True) - 1) < 0.01
+    # the CSV's '#' convention lines are not rows
+    rows = size[".csv"] - sum(len(line) + 1 for line in run[".csv"].read_text().splitlines()[:7])
+    assert abs(rows / output_bytes(scene, "CSV", True, True) - 1) < CSV_ESTIMATE_MARGIN
+    assert size[".csv"] <= csv_bytes(scene, True, True)
+    assert size[".parquet"] <= 1.25 * output_bytes(scene, "Parquet", True, True)
+    assert size[".mcap"] <= output_bytes(scene, "MCAP", True)
+    # and each group of columns counts: without truth and increments every estimate is smaller
+    for fmt in ("NPZ", "CSV", "Parquet", "MCAP"):
+        assert output_bytes(scene, fmt, False, False) < output_bytes(scene, fmt, True, fmt != "MCAP")
