@@ -227,3 +227,19 @@ def test_run_size_matches_the_files_written(run):
     # and each group of columns counts: without truth and increments every estimate is smaller
     for fmt in ("NPZ", "CSV", "Parquet", "MCAP"):
         assert output_bytes(scene, fmt, False, False) < output_bytes(scene, fmt, True, fmt != "MCAP")
+
+
+def test_a_batch_writes_the_earth_truth_too(run, tmp_path, monkeypatch):
+    """batch's Parquet files carry the same Earth truth columns (the truth does not depend on the seed)."""
+    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
+    import pyarrow.parquet as pq
+
+    from imu_emulator import batch
+    from imu_emulator.earth_truth import COLUMNS
+    result = batch.run(str(run["scene"]), 1, 3, tmp_path / "mc", truth=True)
+    assert result.ok, result.failures
+    table = pq.read_table(batch.run_file(tmp_path / "mc", 0))
+    with np.load(run[".npz"]) as npz:
+        want = _npz_columns(npz)
+    for name in (name for names in COLUMNS.values() for name in names):
+        assert _same_bits(table.column(name).to_numpy(), want[name]), name
