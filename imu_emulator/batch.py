@@ -122,8 +122,11 @@ def _write(task: Task, path: Path, identity: dict) -> float | None:
     load_s = None
     if not loaded_before:
         load_s = KERNEL_LOADS[key] = time.perf_counter() - start
+    from imu_emulator import earth_truth
+    conventions = earth_truth.conventions(scene) if task.truth and earth_truth.on(scene) else None   # Earth columns
     with open_writer(path, scene.imu_names, task.truth, bias_truth=sim.bias_truth,
-                     temperature=sim.temperature, metadata=run_metadata(scene, batch={**identity, "truth": task.truth})) as writer:
+                     temperature=sim.temperature, metadata=run_metadata(scene, batch={**identity, "truth": task.truth}),
+                     conventions=conventions) as writer:
         for k0 in range(0, sim.n_samples, task.block):
             writer.write(sim.block(k0, min(task.block, sim.n_samples - k0)))
     return load_s

@@ -45,20 +45,22 @@ class Writer(FinishOnExit):
         self.temperature = temperature
         self.blocks: list[SampleBlock] = []
         self.csv = self.path.suffix.lower() == ".csv"
-        self._out = AtomicOutput(self.path, "w" if self.csv else "wb")
+        self._out = AtomicOutput(self.path, "wb")
         if self.csv:
-            self._out.write("".join(f"# {line}\n" for line in self.conventions))
-            self._out.write(",".join(CSV_COLUMNS + (INCREMENT_COLUMNS if increments else ())
-                                     + (("temp_c",) if temperature else ()) + (TRUTH_COLUMNS if truth else ())
-                                     + (BIAS_COLUMNS if self.bias_truth else ()) + _earth_columns(self.conventions))
-                            + "\n")
+            from imu_emulator.csv_text import RowWriter
+            self._rows = RowWriter(self.imu_names)
+            self._out.write("".join(f"# {line}\n" for line in self.conventions).encode())
+            self._out.write((",".join(CSV_COLUMNS + (INCREMENT_COLUMNS if increments else ())
+                                      + (("temp_c",) if temperature else ()) + (TRUTH_COLUMNS if truth else ())
+                                      + (BIAS_COLUMNS if self.bias_truth else ()) + _earth_columns(self.conventions))
+                             + "\n").encode())
 
     def write(self, block: SampleBlock) -> None:
         if not self.csv:
             self.blocks.append(block)
             return
-        self._out.write(csv_rows(block, self.imu_names, self.truth, self.bias_truth, self.temperature,
-                                 self.increments, earth=bool(self.conventions)))
+        self._out.write(_csv_text(self._rows, block, self.imu_names, self.truth, self.bias_truth, self.temperature,
+                                  self.increments, bool(self.conventions)))
 
     def close(self) -> None:
         """Finish the file and put it at its path."""
@@ -97,21 +99,23 @@ class Writer(FinishOnExit):
 
 def open_writer(path: str | Path, imu_names, truth: bool, bias_truth: bool = False, temperature: bool = False,
                 increments: bool = False, metadata: dict | None = None, conventions: list[str] | None = None,
-                covariances: dict | None = None):
+                covariances: dict | None = None, frame: str | None = None):
     """The writer for the output file's suffix: .mcap is a ROS 2 bag (imu_emulator.output_mcap; it carries no
     temperature, and no increments: sensor_msgs/Imu has no field for them; it takes the noise covariances per
-    IMU, effects.noise.variances); .parquet is a table with `metadata` (scene hash, seed, versions) in its
+    IMU, effects.noise.variances; with `conventions` and the scene's `frame` it adds the Earth truth); .parquet
+    is a table with `metadata` (scene hash, seed, versions) in its
     footer (imu_emulator.output_parquet)."""
     if Path(path).suffix.lower() == ".parquet":
         from imu_emulator.output_parquet import ParquetWriter
         return ParquetWriter(check_path(path), imu_names, truth, bias_truth=bias_truth, temperature=temperature,
-                             increments=increments, metadata=metadata)
+                             increments=increments, metadata=metadata, conventions=conventions)
     if Path(path).suffix.lower() == ".mcap":
         if increments:
             raise ImuEmulatorError(f"{path}: --increments: a ROS 2 bag's sensor_msgs/Imu has no field for "
                                    "integrated outputs; write .csv or .npz")
         from imu_emulator.output_mcap import McapWriter
-        return McapWriter(check_path(path), imu_names, truth, covariances)
+        return McapWriter(check_path(path), imu_names, truth, covariances,
+                          earth_frame=frame if conventions else None)
     return Writer(path, imu_names, truth, bias_truth=bias_truth, temperature=temperature, increments=increments,
                   conventions=conventions)
 
@@ -127,15 +131,58 @@ def csv_rows(block: SampleBlock, imu_names, truth: bool, bias_truth: bool = Fals
              temperature: bool = False, increments: bool = False, earth: bool = False) -> str:
     """The CSV rows of one block (no header): one row per IMU per sample, sample k of every IMU before sample k+1.
 
-    Numbers are the shortest text that reads back as the same double (pyarrow's CSV writer, double-conversion's
-    shortest mode): exact like %.17g, shorter, and about 20x faster than formatting in numpy.
+    Numbers are the shortest text that reads back as the same double, like Python's repr (imu_emulator.csv_text;
+    a block holding a NaN or infinity goes through pyarrow's CSV writer, which writes them as nan and inf).
     """
+    from imu_emulator.csv_text import RowWriter
+    return bytes(_csv_text(RowWriter(imu_names), block, imu_names, truth, bias_truth, temperature, increments,
+                           earth)).decode()
+
+
+def _csv_text(row_writer, block: SampleBlock, imu_names, *options) -> bytes | memoryview:
+    text = row_writer.rows(csv_segments(block, len(imu_names), *options), len(block))
+    return _pyarrow_csv_rows(block, imu_names, *options).encode() if text is None else text
+
+
+def csv_segments(block: SampleBlock, n_imu: int, truth: bool, bias_truth: bool = False, temperature: bool = False,
+                 increments: bool = False, earth: bool = False) -> list[tuple[bool, np.ndarray]]:
+    """The numeric columns of a CSV row in order, as groups (per_imu, matrix) for csv_text.rows: a per-IMU
+    matrix has a row per IMU per sample (IMU fastest), the others (time without offsets, truth) a row per sample."""
+    def interleaved(*per_imu):      # (n_imu, n, k) arrays -> (n * n_imu, sum k), IMU index fastest
+        joined = np.concatenate(per_imu, axis=2)
+        return joined.transpose(1, 0, 2).reshape(len(block) * n_imu, -1)
+
+    groups = [(True, block.imu_t_s().T.reshape(-1, 1)) if block.time_offset_s is not None
+              else (False, block.t_s[:, None])]
+    numeric = [block.accel, block.gyro] + ([block.dtheta, block.dvel] if increments else [])
+    if temperature:
+        numeric.append(block.temperature_c[:, :, None])
+    groups.append((True, interleaved(*numeric)))
+    if truth:
+        groups.append((False, np.hstack([block.truth[key] for key in ("position", "velocity", "euler",
+                                                                       "omega_body")])))
+    if bias_truth:
+        groups.append((True, interleaved(block.truth["accel_bias"], block.truth["gyro_bias"])))
+    if earth:
+        from imu_emulator.earth_truth import KEYS
+        shared = np.hstack([block.truth[key] for key in KEYS])
+        if groups[-1][0]:
+            groups.append((False, shared))
+        else:                   # right after the truth columns: one group
+            groups[-1] = (False, np.hstack([groups[-1][1], shared]))
+    return groups
+
+
+def _pyarrow_csv_rows(block: SampleBlock, imu_names, truth: bool, bias_truth: bool = False,
+                      temperature: bool = False, increments: bool = False, earth: bool = False) -> str:
+    """csv_rows through pyarrow's CSV writer (double-conversion's shortest mode), which has a text for NaN and
+    infinities; about 180 ns a number."""
     import pyarrow as pa
     import pyarrow.csv as pa_csv
 
     columns = block_columns(block, imu_names, truth, bias_truth, temperature, increments, earth=earth)
     # pyarrow's "needed" quotes every string; plain names go unquoted, as they always did.
-    plain = not any(ch in name for name in imu_names for ch in '"\r\n')
+    plain = not any(ch in name for name in imu_names for ch in '"\r\n,')
     sink = pa.BufferOutputStream()
     pa_csv.write_csv(pa.table(columns), sink, write_options=pa_csv.WriteOptions(
         include_header=False, quoting_style="none" if plain else "needed"))

@@ -7,6 +7,13 @@ without a ROS installation; block by block, so memory does not grow with the run
 Covariances: given per IMU (gyro and accelerometer variance per axis, (rad/s)^2 and (m/s^2)^2) when a sensor
 noise model supplies them (the noise effect's per-sample variance, effects.noise.variances), on the diagonal; otherwise all zeros, which sensor_msgs/Imu defines as "covariance
 unknown" (-1 in element 0 would instead say "this field carries no data", and consumers would drop it).
+Earth truth (a scene on the Earth, --truth): `/truth/navsatfix`, a `sensor_msgs/msg/NavSatFix` per sample (WGS-84
+latitude and longitude in degrees, altitude = ellipsoidal height in m; status STATUS_FIX, covariance type
+COVARIANCE_TYPE_KNOWN with zeros: the truth has no error), and `/truth/odometry_ecef`, a `nav_msgs/msg/Odometry`
+with frame_id "earth" (REP 105's name for ECEF) and child "base_link_frd": ECEF position, the attitude of the
+forward-right-down body w.r.t. ECEF, and as twist (in the body, as nav_msgs asks) the Earth-referenced
+velocity and the body's rate w.r.t. the Earth, omega_eb.
+
 Orientation: the sensor frame's attitude (the emulator's truth, sensor -> navigation) when the simulation
 provides it, else orientation_covariance[0] = -1 ("no orientation estimate"), as the message asks.
 """
@@ -52,6 +59,13 @@ ODOMETRY_DEFINITION = _definition(
     "MSG: geometry_msgs/Twist\ngeometry_msgs/Vector3 linear\ngeometry_msgs/Vector3 angular\n", _MSG_VEC)
 
 
+NAVSATFIX_DEFINITION = _definition(
+    "std_msgs/Header header\nsensor_msgs/NavSatStatus status\nfloat64 latitude\nfloat64 longitude\n"
+    "float64 altitude\nfloat64[9] position_covariance\nuint8 position_covariance_type\n",
+    _MSG_HEADER, _MSG_TIME, "MSG: sensor_msgs/NavSatStatus\nint8 status\nuint16 service\n")
+_COVARIANCE_TYPE_KNOWN = 3
+
+
 def _stamps(ns) -> list[dict]:
     return [{"sec": int(t // 1_000_000_000), "nanosec": int(t % 1_000_000_000)} for t in ns]
 
@@ -65,7 +79,10 @@ def ros_name(name: str) -> str:
 class McapWriter(FinishOnExit):
     """Like output.Writer, the bag appears at its path only once it is complete."""
 
-    def __init__(self, path: str | Path, imu_names, truth: bool, covariances: dict | None = None):
+    def __init__(self, path: str | Path, imu_names, truth: bool, covariances: dict | None = None,
+                 earth_frame: str | None = None):
+        """earth_frame: the scene's frame when the truth carries the Earth keys (imu_emulator.earth_truth);
+        ENU's bodies are forward-left-up."""
         try:
             from mcap_ros2.writer import Writer
         except ImportError:
@@ -83,6 +100,9 @@ class McapWriter(FinishOnExit):
         self._writer = Writer(self._file)
         self._imu_schema = self._writer.register_msgdef("sensor_msgs/msg/Imu", IMU_DEFINITION)
         self._odom_schema = self._writer.register_msgdef("nav_msgs/msg/Odometry", ODOMETRY_DEFINITION) if truth else None
+        self.earth_frame = earth_frame if truth else None
+        self._fix_schema = (self._writer.register_msgdef("sensor_msgs/msg/NavSatFix", NAVSATFIX_DEFINITION)
+                            if self.earth_frame else None)
 
     def _covariance(self, name: str, which: int) -> list[float]:
         variance = self.covariances.get(name)
@@ -114,6 +134,8 @@ class McapWriter(FinishOnExit):
                     "linear_acceleration_covariance": acc_cov}, log_time=int(ns[j]), publish_time=int(ns[j]))
         if self.truth:
             self._write_truth(block, scene_ns, _stamps(scene_ns))
+        if self.earth_frame:
+            self._write_earth_truth(block, scene_ns, _stamps(scene_ns))
 
     def _write_truth(self, block: SampleBlock, ns, stamps) -> None:
         from imu_emulator.rotations import euler_to_matrix, matrix_to_quat
@@ -132,6 +154,36 @@ class McapWriter(FinishOnExit):
                          "covariance": zeros36},
                 "twist": {"twist": {"linear": dict(zip("xyz", map(float, v_body[j]))),
                                     "angular": dict(zip("xyz", map(float, w)))},
+                          "covariance": zeros36}}, log_time=int(ns[j]), publish_time=int(ns[j]))
+
+    def _write_earth_truth(self, block: SampleBlock, ns, stamps) -> None:
+        from imu_emulator import frames
+        from imu_emulator.rotations import matrix_to_quat
+        tr = block.truth
+        llh, r_e, v_e = tr["geodetic"], tr["position_ecef"], tr["velocity_ecef"]
+        c_eb = np.einsum("nji,njk->nik", frames.ned_from_ecef_matrix(llh[:, 0], llh[:, 1]),
+                         frames.dcm_from_euler_zyx(tr["euler_ned"]))          # C_b^e = C_n^e C_b^n
+        q = matrix_to_quat(np.ascontiguousarray(c_eb))
+        v_b = np.einsum("nji,nj->ni", c_eb, v_e)
+        # the kernel's body rate is w.r.t. the local level frame (the attitude's reference), which turns at
+        # the transport rate over the Earth: omega_eb = omega_nb + C_n^b omega_en
+        w_nb = tr["omega_body"] @ (frames.FRD_FROM_FLU if self.earth_frame == "ENU" else np.eye(3)).T  # FLU
+        w_eb = w_nb + np.einsum("nji,nj->ni", frames.dcm_from_euler_zyx(tr["euler_ned"]), tr["transport_rate_ned"])
+        zeros9, zeros36 = [0.0] * 9, [0.0] * 36
+        for j, stamp in enumerate(stamps):
+            self._writer.write_message("/truth/navsatfix", self._fix_schema, {
+                "header": {"stamp": stamp, "frame_id": "earth"}, "status": {"status": 0, "service": 0},
+                "latitude": float(llh[j, 0]), "longitude": float(llh[j, 1]), "altitude": float(llh[j, 2]),
+                "position_covariance": zeros9, "position_covariance_type": _COVARIANCE_TYPE_KNOWN},
+                log_time=int(ns[j]), publish_time=int(ns[j]))
+            self._writer.write_message("/truth/odometry_ecef", self._odom_schema, {
+                "header": {"stamp": stamp, "frame_id": "earth"}, "child_frame_id": "base_link_frd",
+                "pose": {"pose": {"position": dict(zip("xyz", map(float, r_e[j]))),
+                                  "orientation": {"x": float(q[j, 1]), "y": float(q[j, 2]), "z": float(q[j, 3]),
+                                                  "w": float(q[j, 0])}},
+                         "covariance": zeros36},
+                "twist": {"twist": {"linear": dict(zip("xyz", map(float, v_b[j]))),
+                                    "angular": dict(zip("xyz", map(float, w_eb[j])))},
                           "covariance": zeros36}}, log_time=int(ns[j]), publish_time=int(ns[j]))
 
     def close(self) -> None:

@@ -1,7 +1,9 @@
 """Samples as Parquet (`-o run.parquet`), block by block: each block is one row group, so memory does not grow
 with the run. Columns: t_ns (int64, ns on the scene's time base), imu (dictionary-encoded name), ax ay az (m/s^2),
-gx gy gz (rad/s), then as in CSV the increments (--increments), temp_c, truth and realized-bias columns. The footer's key "imu_emulator" holds
-JSON: the scene's hash and seed, the versions that wrote it, and whatever the caller adds (a batch's draws).
+gx gy gz (rad/s), then as in CSV the increments (--increments), temp_c, truth, realized-bias and (a scene on the
+Earth, with --truth) Earth truth columns. The footer's key "imu_emulator" holds JSON: the scene's hash and seed,
+the versions that wrote it, whatever the caller adds (a batch's draws) and, with Earth truth, "conventions" (the
+lines a CSV starts with).
 """
 from __future__ import annotations
 
@@ -49,12 +51,14 @@ class ParquetWriter(FinishOnExit):
     """Receives blocks in order and writes each as a row group; the file appears at its path on close()."""
 
     def __init__(self, path: Path, imu_names, truth: bool, bias_truth: bool = False, temperature: bool = False,
-                 increments: bool = False, metadata: dict | None = None):
+                 increments: bool = False, metadata: dict | None = None, conventions: list[str] | None = None):
         self.path = Path(path)
         self.imu_names = list(imu_names)
+        earth = bool(truth and conventions)
         self.options = dict(truth=truth, bias_truth=truth and bias_truth, temperature=temperature,
-                            increments=increments)
-        self.metadata = {METADATA_KEY: json.dumps(metadata or {}, sort_keys=True).encode()}
+                            increments=increments, earth=earth)
+        metadata = dict(metadata or {}, **({"conventions": list(conventions)} if earth else {}))
+        self.metadata = {METADATA_KEY: json.dumps(metadata, sort_keys=True).encode()}
         self._out = AtomicOutput(self.path, "wb")
         self._writer = None     # opened on the first block, when the schema is known
 

@@ -69,3 +69,48 @@ def test_names_with_quotes_are_quoted():
     block = _block(3, 1, np.random.default_rng(1))
     rows = list(csv.reader(io.StringIO(csv_rows(block, ['my "imu"'], truth=False))))
     assert [r[1] for r in rows] == ['my "imu"'] * 3
+
+
+def test_every_column_group_and_clock_offsets_read_back_exactly():
+    """Per-IMU groups (increments, temperature, realized biases), shared ones (truth, Earth truth) and per-IMU
+    time stamps ([[imu]] time_offset_s) land in the right row and column, each number Python's float() of it."""
+    from imu_emulator.earth_truth import KEYS
+    from imu_emulator.output import BIAS_COLUMNS, INCREMENT_COLUMNS, csv_segments
+    rng = np.random.default_rng(5)
+    n, n_imu = 300, 3
+    block = _block(n, n_imu, rng)
+    values = np.concatenate([AWKWARD, rng.standard_normal(50)])
+    for key in ("dtheta", "dvel"):
+        setattr(block, key, rng.choice(values, (n_imu, n, 3)))
+    block.temperature_c = rng.choice(values, (n_imu, n))
+    block.truth.update({key: rng.choice(values, (n, 3)) for key in KEYS})
+    block.truth.update(accel_bias=rng.choice(values, (n_imu, n, 3)), gyro_bias=rng.choice(values, (n_imu, n, 3)))
+    block.time_offset_s = np.array([0.0, 1e-3, -2.5e-3])
+    names = ["a", "b,c", 'd"e']
+    text = csv_rows(block, names, truth=True, bias_truth=True, temperature=True, increments=True, earth=True)
+    rows = list(csv.reader(io.StringIO(text)))
+    assert [r[1] for r in rows] == names * n
+    back = np.array([[float(x) for i, x in enumerate(r) if i != 1] for r in rows])
+    stamps = block.imu_t_s()
+    want = []
+    for k in range(n):
+        shared_truth = [block.truth[key][k] for key in ("position", "velocity", "euler", "omega_body")]
+        for m in range(n_imu):
+            want.append(np.concatenate([[stamps[m, k]], block.accel[m, k], block.gyro[m, k], block.dtheta[m, k],
+                                        block.dvel[m, k], [block.temperature_c[m, k]], *shared_truth,
+                                        block.truth["accel_bias"][m, k], block.truth["gyro_bias"][m, k],
+                                        *[block.truth[key][k] for key in KEYS]]))
+    assert back.shape[1] == 1 + 6 + len(INCREMENT_COLUMNS) + 1 + 12 + len(BIAS_COLUMNS) + 3 * len(KEYS)
+    assert np.array_equal(back.view(np.int64), np.array(want).view(np.int64))
+    # the groups: a per-IMU time column, the shared truth columns once per sample
+    assert [per_imu for per_imu, _ in csv_segments(block, n_imu, True, True, True, True, True)] == [
+        True, True, False, True, False]
+
+
+def test_a_block_with_nan_or_infinity_is_still_written():
+    block = _block(20, 2, np.random.default_rng(3))
+    block.accel[1, 4] = [np.nan, np.inf, -np.inf]
+    rows = list(csv.reader(io.StringIO(csv_rows(block, ["imu0", "imu1"], truth=False))))
+    assert rows[9][2:5] == ["nan", "inf", "-inf"]
+    back = np.array([[float(x) for i, x in enumerate(r) if i != 1] for r in rows])
+    assert np.array_equal(back[::2, 1:4], block.accel[0]) and np.array_equal(back[8, 0], block.t_s[4])

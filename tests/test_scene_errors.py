@@ -325,8 +325,8 @@ HUGE = GOOD.replace("rate_hz = 100", "rate_hz = 1e7").replace("duration_s = 1.0"
 def test_csv_beyond_the_free_disk_is_refused_with_the_figure(tmp_path):
     result = _cli("generate", str(_write(tmp_path, HUGE)), "-o", str(tmp_path / "out.csv"))
     assert result.returncode == 2 and result.stderr.count("\n") == 1, result.stderr
-    # 1e12 samples x (7 values x 25 B + "imu0" + 2) = 181e12 B
-    assert "1000000000000 samples x 1 IMU(s)" in result.stderr and f"{181e12 / 2 ** 30:.3g} GiB" in result.stderr
+    # 1e12 samples x (7 values x 25 B, each with its comma or the newline, + "imu0" and its comma) = 180e12 B
+    assert "1000000000000 samples x 1 IMU(s)" in result.stderr and f"{180e12 / 2 ** 30:.3g} GiB" in result.stderr
     assert "--allow-large" in result.stderr and not (tmp_path / "out.csv").exists()
 
 

@@ -4,10 +4,6 @@ from __future__ import annotations
 import numpy as np
 import sys
 
-# The longest shortest-round-trip repr of a double, e.g. "-1.2345678901234567e-300".
-_MAX_NUMBER_CHARS = 24
-
-
 def register(subparsers) -> None:
     p = subparsers.add_parser("check", help="validate a scene and describe it without running it",
                               description="Validate a scene file; print its frame and conventions, IMUs and effects, "
@@ -21,16 +17,13 @@ def _megabytes(n_bytes: float) -> str:
     return f"{n_bytes / 1e6:,.1f} MB"
 
 
-def output_sizes(scene, truth: bool) -> dict[str, int]:
-    """Bytes of `generate`'s output: NPZ's arrays exactly (the file adds small headers), CSV an upper bound."""
-    from imu_emulator.output import CSV_COLUMNS, TRUTH_COLUMNS
-    from imu_emulator.simulation import TRUTH_KEYS
-    n, n_imu = scene.n_samples, len(scene.imus)
-    npz = 8 * n * (1 + 6 * n_imu + (3 * len(TRUTH_KEYS) if truth else 0))
-    numbers = len(CSV_COLUMNS) - 1 + (len(TRUTH_COLUMNS) if truth else 0)
-    longest_name = max(len(name) for name in scene.imu_names)
-    csv = n * n_imu * (numbers * (_MAX_NUMBER_CHARS + 1) + longest_name + 1)
-    return {"NPZ": npz, "CSV": csv}
+def output_sizes(scene, truth: bool, increments: bool = False) -> dict[str, int]:
+    """Bytes of `generate`'s output per format (imu_emulator.run_size.output_bytes: NPZ within its headers, CSV
+    an estimate, Parquet and MCAP uncompressed bounds), and "CSV bound", the CSV at its longest."""
+    from imu_emulator.run_size import csv_bytes, output_bytes
+    sizes = {fmt: output_bytes(scene, fmt, truth, increments and fmt != "MCAP")
+             for fmt in ("NPZ", "CSV", "Parquet", "MCAP")}
+    return {**sizes, "CSV bound": csv_bytes(scene, truth, increments)}
 
 
 def _describe_part(part) -> str:
@@ -80,8 +73,13 @@ def cmd_check(args) -> int:
         print(f"  warning: {warning}")
     sizes = output_sizes(scene, truth=False)
     sizes_truth = output_sizes(scene, truth=True)
-    print(f"  generate   NPZ {_megabytes(sizes['NPZ'])} ({_megabytes(sizes_truth['NPZ'])} with --truth); "
-          f"CSV at most {_megabytes(sizes['CSV'])} ({_megabytes(sizes_truth['CSV'])} with --truth)")
+    sizes_all = output_sizes(scene, truth=True, increments=True)
+    print(f"  generate   NPZ {_megabytes(sizes['NPZ'])} ({_megabytes(sizes_truth['NPZ'])} with --truth, "
+          f"{_megabytes(sizes_all['NPZ'])} with --truth --increments); CSV about {_megabytes(sizes['CSV'])} "
+          f"({_megabytes(sizes_truth['CSV'])}, {_megabytes(sizes_all['CSV'])}; at most "
+          f"{_megabytes(sizes_all['CSV bound'])}); Parquet at most {_megabytes(sizes['Parquet'])} "
+          f"({_megabytes(sizes_truth['Parquet'])}, {_megabytes(sizes_all['Parquet'])}), MCAP at most "
+          f"{_megabytes(sizes['MCAP'])} ({_megabytes(sizes_truth['MCAP'])} with --truth), before compression")
 
     problems = []
     for stream in streams:

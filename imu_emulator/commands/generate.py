@@ -54,8 +54,8 @@ def _generate(args, scene, stopped) -> int:
     with open_writer(args.output, scene.imu_names, args.truth, bias_truth=bias_truth,
                      temperature="temperature" in scene.effects, increments=bool(args.increments),
                      metadata=run_metadata(scene), conventions=conventions,
-                     covariances=variances(scene)) as writer:
-        check_output(scene, args.output, args.truth, args.allow_large)
+                     covariances=variances(scene), frame=scene.frame) as writer:
+        check_output(scene, args.output, args.truth, args.allow_large, increments=bool(args.increments))
         # a ROS Imu message has an orientation field: fill it from the sensor frame's attitude
         attitude = args.output.lower().endswith(".mcap")
         with CompileStatus(scene, attitude=attitude, truth=args.truth, quiet=args.quiet, increments=args.increments):
