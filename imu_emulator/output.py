@@ -99,10 +99,12 @@ class Writer(FinishOnExit):
 
 def open_writer(path: str | Path, imu_names, truth: bool, bias_truth: bool = False, temperature: bool = False,
                 increments: bool = False, metadata: dict | None = None, conventions: list[str] | None = None,
-                covariances: dict | None = None, frame: str | None = None):
+                covariances: dict | None = None, frame: str | None = None, attitude_reference: str = "local_level",
+                effects=()):
     """The writer for the output file's suffix: .mcap is a ROS 2 bag (imu_emulator.output_mcap; it carries no
     temperature, and no increments: sensor_msgs/Imu has no field for them; it takes the noise covariances per
-    IMU, effects.noise.variances; with `conventions` and the scene's `frame` it adds the Earth truth); .parquet
+    IMU, effects.noise.variances; with `conventions` and the scene's `frame` it adds the Earth truth, whose body
+    rate needs the scene's `attitude_reference` and `effects`); .parquet
     is a table with `metadata` (scene hash, seed, versions) in its
     footer (imu_emulator.output_parquet)."""
     if Path(path).suffix.lower() == ".parquet":
@@ -115,7 +117,8 @@ def open_writer(path: str | Path, imu_names, truth: bool, bias_truth: bool = Fal
                                    "integrated outputs; write .csv or .npz")
         from imu_emulator.output_mcap import McapWriter
         return McapWriter(check_path(path), imu_names, truth, covariances,
-                          earth_frame=frame if conventions else None)
+                          earth_frame=frame if conventions else None, attitude_reference=attitude_reference,
+                          effects=effects)
     return Writer(path, imu_names, truth, bias_truth=bias_truth, temperature=temperature, increments=increments,
                   conventions=conventions)
 

@@ -80,9 +80,10 @@ class McapWriter(FinishOnExit):
     """Like output.Writer, the bag appears at its path only once it is complete."""
 
     def __init__(self, path: str | Path, imu_names, truth: bool, covariances: dict | None = None,
-                 earth_frame: str | None = None):
+                 earth_frame: str | None = None, attitude_reference: str = "local_level", effects=()):
         """earth_frame: the scene's frame when the truth carries the Earth keys (imu_emulator.earth_truth);
-        ENU's bodies are forward-left-up."""
+        ENU's bodies are forward-left-up. attitude_reference and effects: the scene's, which say what the
+        truth's body rate is relative to (_to_earth_rate)."""
         try:
             from mcap_ros2.writer import Writer
         except ImportError:
@@ -101,6 +102,7 @@ class McapWriter(FinishOnExit):
         self._imu_schema = self._writer.register_msgdef("sensor_msgs/msg/Imu", IMU_DEFINITION)
         self._odom_schema = self._writer.register_msgdef("nav_msgs/msg/Odometry", ODOMETRY_DEFINITION) if truth else None
         self.earth_frame = earth_frame if truth else None
+        self.attitude_reference, self.effects = attitude_reference, frozenset(effects)
         self._fix_schema = (self._writer.register_msgdef("sensor_msgs/msg/NavSatFix", NAVSATFIX_DEFINITION)
                             if self.earth_frame else None)
 
@@ -165,10 +167,8 @@ class McapWriter(FinishOnExit):
                          frames.dcm_from_euler_zyx(tr["euler_ned"]))          # C_b^e = C_n^e C_b^n
         q = matrix_to_quat(np.ascontiguousarray(c_eb))
         v_b = np.einsum("nji,nj->ni", c_eb, v_e)
-        # the kernel's body rate is w.r.t. the local level frame (the attitude's reference), which turns at
-        # the transport rate over the Earth: omega_eb = omega_nb + C_n^b omega_en
-        w_nb = tr["omega_body"] @ (frames.FRD_FROM_FLU if self.earth_frame == "ENU" else np.eye(3)).T  # FLU
-        w_eb = w_nb + np.einsum("nji,nj->ni", frames.dcm_from_euler_zyx(tr["euler_ned"]), tr["transport_rate_ned"])
+        w = tr["omega_body"] @ (frames.FRD_FROM_FLU if self.earth_frame == "ENU" else np.eye(3)).T   # to FRD
+        w_eb = w + np.einsum("nji,nj->ni", frames.dcm_from_euler_zyx(tr["euler_ned"]), self._to_earth_rate(tr))
         zeros9, zeros36 = [0.0] * 9, [0.0] * 36
         for j, stamp in enumerate(stamps):
             self._writer.write_message("/truth/navsatfix", self._fix_schema, {
@@ -185,6 +185,19 @@ class McapWriter(FinishOnExit):
                 "twist": {"twist": {"linear": dict(zip("xyz", map(float, v_b[j]))),
                                     "angular": dict(zip("xyz", map(float, w_eb[j])))},
                           "covariance": zeros36}}, log_time=int(ns[j]), publish_time=int(ns[j]))
+
+    def _to_earth_rate(self, tr) -> np.ndarray:
+        """What to add (in local NED) to the kernel's body rate w to get omega_eb. w is the rate w.r.t. the
+        attitude's reference X less u, the part of X's rate that the named Earth effects add back
+        (earth_motion.reference_lines): X = local level turns at rho = omega_en over the Earth, ECEF not at
+        all, ECI at -omega_ie; u holds rho with coriolis and, for ECI, omega_ie with earth_rate."""
+        rho, w_ie = tr["transport_rate_ned"], tr["earth_rate_ned"]
+        if self.attitude_reference == "local_level":
+            return rho
+        added = rho if "coriolis" in self.effects else np.zeros_like(rho)
+        if self.attitude_reference == "ECI":
+            added = added + (w_ie if "earth_rate" in self.effects else 0.0) - w_ie
+        return added
 
     def close(self) -> None:
         try:

@@ -189,18 +189,28 @@ def _twist_moves_the_pose(odom, t):
                                rtol=0, atol=1e-3)
 
 
-@pytest.mark.parametrize("frame, trajectory", [
-    ("ENU", 'x = "30*t + sin(t)"\ny = "3*t**2"\nz = "5*t"'),     # a forward-left-up body
-    ("ECI", 'x = "7e6*cos(1e-3*t)"\ny = "7e6*sin(1e-3*t)"\nz = "1e3*t"'),   # 7 km/s: a transport rate of 1e-3 rad/s
+ECI_ORBIT = 'x = "7e6*cos(1e-3*t)"\ny = "7e6*sin(1e-3*t)"\nz = "1e3*t"'   # 7 km/s: a transport rate of 1e-3 rad/s
+BOTH = "earth_rate = true\ncoriolis = true\n"
+
+
+@pytest.mark.parametrize("frame, trajectory, reference, effects", [
+    ("ENU", 'x = "30*t + sin(t)"\ny = "3*t**2"\nz = "5*t"', "local_level", BOTH),     # a forward-left-up body
+    ("ECI", ECI_ORBIT, "local_level", BOTH),
+    # an attitude given w.r.t. ECEF or ECI: the kernel's body rate leaves out only what the named effects add
+    ("ECEF", ECI_ORBIT, "ECEF", ""),
+    ("ECEF", ECI_ORBIT, "ECEF", "earth_rate = true\n"),
+    ("ECEF", ECI_ORBIT, "ECI", "earth_rate = true\n"),
+    ("ECEF", ECI_ORBIT, "ECI", "coriolis = true\n"),
+    ("ECEF", ECI_ORBIT, "ECI", BOTH),
 ])
-def test_odometry_ecef_twist_in_other_frames(tmp_path, monkeypatch, frame, trajectory):
+def test_odometry_ecef_twist_in_other_frames(tmp_path, monkeypatch, frame, trajectory, reference, effects):
     monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
     from test_output_mcap import read_bag
     scene = tmp_path / "s.toml"
     scene.write_text(f'[scene]\nrate_hz = 50\nduration_s = 1.0\nframe = "{frame}"\ngravity_model = "wgs84"\n'
                      'origin = { lat_deg = -30.0, lon_deg = 170.0, height_m = 10.0 }\n'
-                     f'[trajectory]\n{trajectory}\n[attitude]\nroll = "0.1*sin(t)"\npitch = "0.05"\n'
-                     'yaw = "0.3*t"\n[[imu]]\nname = "a"\n[effects]\ngravity = true\nearth_rate = true\ncoriolis = true\n')
+                     f'[trajectory]\n{trajectory}\n[attitude]\nreference = "{reference}"\nroll = "0.1*sin(t)"\n'
+                     f'pitch = "0.05"\nyaw = "0.3*t"\n[[imu]]\nname = "a"\n[effects]\ngravity = true\n{effects}')
     assert main(["generate", str(scene), "-o", str(tmp_path / "o.mcap"), "--quiet", "--truth"]) == 0
     odom = [m for _, m in read_bag(tmp_path / "o.mcap")["/truth/odometry_ecef"]]
     _twist_moves_the_pose(odom, np.arange(50) / 50.0)

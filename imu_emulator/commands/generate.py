@@ -54,7 +54,8 @@ def _generate(args, scene, stopped) -> int:
     with open_writer(args.output, scene.imu_names, args.truth, bias_truth=bias_truth,
                      temperature="temperature" in scene.effects, increments=bool(args.increments),
                      metadata=run_metadata(scene), conventions=conventions,
-                     covariances=variances(scene), frame=scene.frame) as writer:
+                     covariances=variances(scene), frame=scene.frame,
+                     attitude_reference=scene.attitude_reference, effects=scene.effects) as writer:
         check_output(scene, args.output, args.truth, args.allow_large, increments=bool(args.increments))
         # a ROS Imu message has an orientation field: fill it from the sensor frame's attitude
         attitude = args.output.lower().endswith(".mcap")
