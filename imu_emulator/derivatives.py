@@ -50,7 +50,9 @@ Choices worth knowing:
   assumes nothing about the motion at the ends; "natural" conditions would force zero high derivatives
   (zero jerk for spline5) at both ends and cost accuracy there.
 - Large coordinates (ECEF, ~6.4e6 m): the first sample is subtracted before fitting or differencing and
-  added back to the values only, so derivatives are as accurate as for the same track near the origin.
+  added back to the values only, so no precision is lost here. The input values themselves carry the
+  rounding of their magnitude (2.7e-10 m at 6.4e6 m), which interpolation amplifies; spline5c (the default)
+  and smooth without stated noise therefore apply the rounding rule (imu_emulator/rounding_smoothing.py).
   Likewise time is measured from the first time stamp.
 - Output times may lie up to 1e-6 of a mean step outside the input span (t0 + k*dt rounding); further out
   is a DataError -- there is no extrapolation.
@@ -76,7 +78,8 @@ METHODS: dict[str, str] = {
     "spline5": "quintic interpolating spline (not-a-knot): smooth jerk, error O(h^(6-d)) for derivative d",
     "spline3": "cubic interpolating spline (not-a-knot), as most simulators: jerk piecewise constant",
     "spline5c": "quintic interpolating spline clamped at the ends: first and second derivatives there from a "
-                "degree-9 least-squares polynomial through the 14 end samples; ends about as accurate as inside",
+                "degree-9 least-squares polynomial through the 14 end samples; ends about as accurate as inside; "
+                "where the rounding of large coordinates dominates, a least-squares spline (rounding rule)",
     "smooth": "quintic smoothing spline for noisy data (logs): residual sum of squares = n * sigma^2 of the stated "
               "noise (position_noise_m, attitude_noise_rad), plus the float rounding of the data's magnitude",
 }

@@ -21,13 +21,9 @@ from scipy.interpolate import BSpline
 from scipy.sparse.linalg import spsolve
 
 from imu_emulator.errors import DataError
+from imu_emulator.rounding_smoothing import uniform_knots
 
 DEGREE = 5          # quintic, as `smooth`: jerk stays continuous for tangent attitude
-
-
-def _knots(t0: float, t1: float, spacing: float, degree: int) -> np.ndarray:
-    m = max(1, int(round((t1 - t0) / spacing)))
-    return np.r_[[t0] * (degree + 1), np.linspace(t0, t1, m + 1)[1:-1], [t1] * (degree + 1)]
 
 
 def _design(x: np.ndarray, knots: np.ndarray, degree: int, order: int) -> sp.csr_matrix:
@@ -56,7 +52,7 @@ class JointFit:
         if sigma_pos <= 0 or (vel is not None and (sigma_vel is None or sigma_vel <= 0)):
             raise DataError("joint position/velocity fit: the noise levels must be > 0")
         self.degree = degree
-        self.knots = _knots(float(t_pos[0]), float(t_pos[-1]), spacing, degree)
+        self.knots = uniform_knots(float(t_pos[-1] - t_pos[0]), degree, spacing) + t_pos[0]
         rows, weights, data = [_design(t_pos, self.knots, degree, 0)], [np.full(t_pos.size, sigma_pos ** -2)], [pos]
         if vel is not None:
             t_vel = np.asarray(t_vel, dtype=float)
