@@ -50,7 +50,9 @@ Choices worth knowing:
   assumes nothing about the motion at the ends; "natural" conditions would force zero high derivatives
   (zero jerk for spline5) at both ends and cost accuracy there.
 - Large coordinates (ECEF, ~6.4e6 m): the first sample is subtracted before fitting or differencing and
-  added back to the values only, so derivatives are as accurate as for the same track near the origin.
+  added back to the values only, so no precision is lost here. The input values themselves carry the
+  rounding of their magnitude (2.7e-10 m at 6.4e6 m), which interpolation amplifies; spline5c (the default)
+  and smooth without stated noise therefore apply the rounding rule (imu_emulator/rounding_smoothing.py).
   Likewise time is measured from the first time stamp.
 - Output times may lie up to 1e-6 of a mean step outside the input span (t0 + k*dt rounding); further out
   is a DataError -- there is no extrapolation.
@@ -76,7 +78,8 @@ METHODS: dict[str, str] = {
     "spline5": "quintic interpolating spline (not-a-knot): smooth jerk, error O(h^(6-d)) for derivative d",
     "spline3": "cubic interpolating spline (not-a-knot), as most simulators: jerk piecewise constant",
     "spline5c": "quintic interpolating spline clamped at the ends: first and second derivatives there from a "
-                "degree-9 least-squares polynomial through the 14 end samples; ends about as accurate as inside",
+                "degree-9 least-squares polynomial through the 14 end samples; ends about as accurate as inside; "
+                "where the rounding of large coordinates dominates, a least-squares spline (rounding rule)",
     "smooth": "quintic smoothing spline for noisy data (logs): residual sum of squares = n * sigma^2 of the stated "
               "noise (position_noise_m, attitude_noise_rad), plus the float rounding of the data's magnitude",
 }
@@ -279,36 +282,62 @@ def smoothing_condition(n: int, sigma: float) -> float:
 class _SmoothFit:
     """A quintic smoothing spline per column (FITPACK's curfit through scipy's UnivariateSpline: knots
     placed where the residuals need them, smoothing condition sum of squared residuals <= s). Quintic, so
-    that jerk, which tangent attitude needs, is smooth. The noise is the stated one combined with the
-    rounding of the original values, so that coordinates of ECEF size (6.4e6 m: 2.7e-10 m of rounding) are
-    smoothed even when the user states none. A column whose noise is below 1e-12 of its own variation has
-    nothing to smooth and is interpolated (FITPACK would add knots up to one per sample, slowly, to get there)."""
+    that jerk, which tangent attitude needs, is smooth. A column whose stated noise is not above the rounding
+    of its own magnitude (none stated; coordinates of ECEF size) is left to the rounding rule
+    (`_rounding_fits`): FITPACK stops at 2.9e-5 m/s^2 on a 1 kHz ECEF-sized circle, the rule reaches 1.7e-7."""
 
     def __init__(self, tau: np.ndarray, y: np.ndarray, noise: float, magnitude: np.ndarray):
         from scipy.interpolate import UnivariateSpline
         self.splines = []
         for j in range(y.shape[1]):
-            sigma = float(np.hypot(noise, rounding_noise(magnitude[j])))
-            variation = float(np.ptp(y[:, j]))
-            if sigma <= 1e-12 * variation:
+            rounding = rounding_noise(magnitude[j])
+            if noise <= rounding:
+                interpolant = make_interp_spline(tau, y[:, j], k=5, check_finite=False)
+                self.splines.append(_rounding_fits(tau, y[:, [j]], magnitude[[j]], interpolant).get(0, interpolant))
+                continue
+            sigma = float(np.hypot(noise, rounding))
+            if sigma <= 1e-12 * float(np.ptp(y[:, j])):
+                # nothing to smooth; FITPACK would add knots up to one per sample, slowly, to get there
                 self.splines.append(make_interp_spline(tau, y[:, j], k=5, check_finite=False))
                 continue
             with warnings.catch_warnings():
                 # "s too small" and friends: FITPACK then returns its best approximation, which we keep
                 warnings.simplefilter("ignore", UserWarning)
-                self.splines.append(UnivariateSpline(tau, y[:, j], k=5, s=smoothing_condition(tau.size, sigma)))
+                self.splines.append(UnivariateSpline(tau, y[:, j], k=5,
+                                                     s=smoothing_condition(tau.size, sigma)))
 
     def evaluate(self, tau_out: np.ndarray, order: int) -> np.ndarray:
         return np.stack([np.column_stack([s(tau_out, nu=d) for s in self.splines]) for d in range(order + 1)])
 
 
+def _rounding_fits(tau: np.ndarray, y: np.ndarray, magnitude: np.ndarray, interpolant) -> dict:
+    """{column: least-squares spline} for the columns where the float rounding of the data's magnitude (ECEF
+    coordinates) is what the interpolant's derivatives show; the knot spacing is chosen by Lepski's rule from
+    that rounding and the sample rate (imu_emulator.rounding_smoothing). Other columns keep the interpolant."""
+    from imu_emulator.rounding_smoothing import choose_lsq_fit
+    fits = {}
+    for j in range(y.shape[1]):
+        acc = (lambda t, j=j: interpolant(t, 2)[:, j]) if interpolant.c.ndim > 1 else (lambda t: interpolant(t, 2))
+        fit, _ = choose_lsq_fit(tau, y[:, j], rounding_noise(magnitude[j]), acc)
+        if fit is not None:
+            fits[j] = fit
+    return fits
+
+
 class _SplineFit:
-    def __init__(self, tau: np.ndarray, y: np.ndarray, spec: _MethodSpec):
+    """An interpolating spline over all columns; for spline5c (the default) columns whose rounding dominates are
+    replaced by the rounding rule's least-squares spline (`_rounding_fits`)."""
+
+    def __init__(self, tau: np.ndarray, y: np.ndarray, spec: _MethodSpec, magnitude: np.ndarray):
         bc = "not-a-knot" if spec.end_fit is None else _clamped_ends(tau, y, *spec.end_fit)
         self.spline = make_interp_spline(tau, y, k=spec.order, bc_type=bc, check_finite=False)
+        self.rounding = _rounding_fits(tau, y, magnitude, self.spline) if spec.end_fit is not None else {}
 
     def evaluate(self, tau_out: np.ndarray, order: int) -> np.ndarray:
-        return np.stack([self.spline(tau_out, nu=d) for d in range(order + 1)])
+        out = np.stack([self.spline(tau_out, nu=d) for d in range(order + 1)])
+        for j, fit in self.rounding.items():
+            out[:, :, j] = np.stack([fit(tau_out, nu=d) for d in range(order + 1)])
+        return out
 
 
 def _default_row_label(i: int) -> str:
@@ -385,7 +414,7 @@ class SampledSeries:
         if spec.kind == "smooth":
             self._fit = _SmoothFit(tau, local, noise, np.abs(y).max(axis=0))
         elif spec.kind == "spline":
-            self._fit = _SplineFit(tau, local, spec)
+            self._fit = _SplineFit(tau, local, spec, np.abs(y).max(axis=0))
         else:
             self._fit = _GridFit(tau, local, spec, max_order, h)
 

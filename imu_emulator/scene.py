@@ -263,7 +263,7 @@ def _noise(table: Mapping, key: str, where: str, derivative: str, warnings: list
     return noise
 
 
-LOG_KEYS = {"position_source", "attitude_source", "max_gap_s"}
+LOG_KEYS = {"position_source", "attitude_source", "max_gap_s", "velocity_noise_mps"}
 
 
 def _noise_from_velocity(log, derivative: str, warnings: list[str]) -> float:
@@ -282,6 +282,26 @@ def _noise_from_velocity(log, derivative: str, warnings: list[str]) -> float:
         raise SceneError(str(exc)) from None
     warnings.append(f"{where}: {sigma:g} m, chosen from the logged velocity {log.velocity.name}")
     return sigma
+
+
+def _joint_with_velocity(table: Mapping, log, derivative: str, noise: float, warnings: list[str]) -> np.ndarray:
+    """velocity_noise_mps: the logged velocity as data in the position fit (logs/joint_fit.py); the fitted
+    positions at the log's stamps replace the logged ones, which are then smooth (noise 0 from here on)."""
+    from imu_emulator.logs.joint_fit import choose_joint_fit
+    where = "trajectory.velocity_noise_mps"
+    sigma_v = _number(table, "velocity_noise_mps", "trajectory", positive=True)
+    if derivative != "smooth" or noise <= 0:
+        raise SceneError(f"{where}: needs derivative 'smooth' with position_noise_m > 0 (the fit weighs the two "
+                         "noises)")
+    if log.velocity is None:
+        raise SceneError(f"{where}: {log.source.name} logs no velocity beside {log.position.name}")
+    try:
+        fit, spacing = choose_joint_fit(log.position, log.velocity, noise, sigma_v, f"{where}: {log.source.name}")
+    except DataError as exc:
+        raise SceneError(str(exc)) from None
+    warnings.append(f"trajectory: positions fitted jointly with the logged velocity {log.velocity.name} "
+                    f"(knot spacing {spacing:.3g} s, position noise {noise:g} m, velocity noise {sigma_v:g} m/s)")
+    return fit.evaluate(log.position.t, 0)[0]
 
 
 def _is_log(table: Mapping) -> bool:
@@ -317,7 +337,8 @@ def _log_window(motion, trajectory: SampledData, attitude: SampledData | None, t
             parts.append(None)
             continue
         try:
-            cropped = logs.window(s, t0, t_hi, motion.source.name, max_gap)
+            # the part's own values: the positions may come from the joint fit with the velocity
+            cropped = logs.window(replace(s, t=part.t, values=part.values), t0, t_hi, motion.source.name, max_gap)
         except DataError as exc:
             raise SceneError(f"trajectory.file: {exc}") from None
         parts.append(replace(part, t=cropped.t, values=cropped.values))
@@ -494,7 +515,10 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
             noise = _noise_from_velocity(log, derivative, warnings)
         else:
             noise = _noise(traj_table, "position_noise_m", "trajectory", derivative, warnings)
-        trajectory = SampledData(t=log.position.t, values=log.position.values, derivative=derivative,
+        values = log.position.values
+        if "velocity_noise_mps" in traj_table:
+            values, noise = _joint_with_velocity(traj_table, log, derivative, noise, warnings), 0.0
+        trajectory = SampledData(t=log.position.t, values=values, derivative=derivative,
                                  source=f"{log.source}:{log.position.name}", noise=noise)
         warnings.extend(log.notes)
     elif "file" in traj_table or "t" in traj_table:

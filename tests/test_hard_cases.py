@@ -252,7 +252,9 @@ def _circle_track(offset):
     return t, np.column_stack([5 * np.cos(w * t), 5 * np.sin(w * t), np.zeros_like(t)]) + offset
 
 
-@pytest.mark.parametrize("method", ["spline5c", "spline5", "central6", "spline3"])
+# not spline5c: the default takes values of 6.4e6 m as rounded to their ulp and smooths them, which the same
+# values shifted to the origin do not need (the rounding rule; tests/test_smoothing.py checks it against the origin)
+@pytest.mark.parametrize("method", ["spline5", "central6", "spline3"])
 def test_large_coordinates_differentiate_relative_to_a_local_origin(method):
     # ECEF-sized positions at 1 kHz. The SAME rounded data shifted to the origin (exact: Sterbenz) must give
     # the same samples bit for bit: nothing beyond the data's own rounding is lost to the big numbers.

@@ -13,6 +13,7 @@ import pytest
 from imu_emulator import scene_from_dict
 from imu_emulator.derivatives import SampledSeries
 from imu_emulator.errors import SceneError
+from imu_emulator.scene import DEFAULT_DERIVATIVE
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
 from smoothing_scan import ecef_case, noisy_case  # noqa: E402
@@ -26,11 +27,41 @@ def test_noise_derived_smoothing_beats_interpolation_and_nears_the_best_scan(rat
     assert smooth <= 2 * min(scan.values()), (smooth, scan)
 
 
-def test_rounding_of_ecef_coordinates_is_smoothed_without_stated_noise():
-    # 1 kHz circle at 6.4e6 m: spline5c amplifies the 2.7e-10 m rounding to 3.4e-3 m/s^2; smooth takes the
-    # rounding as the noise and measures 3.3e-5 (the origin's 6e-8 is NOT reached: see the README)
-    res = ecef_case(6.4e6)
-    assert res["smooth"] * 50 < res["spline5c"]
+def test_ecef_sized_track_by_default_is_within_10x_of_the_same_track_at_the_origin():
+    # issue 14's goal: the default derivative method on a 1 kHz, 5 m / 1 Hz circle at 6.4e6 m against the analytic
+    # acceleration (-5 w^2 cos wt, ...), compared with the same circle at the origin. The interpolating spline
+    # alone turns the 2.7e-10 m rounding of the input into 3.4e-3 m/s^2 (56 000x the origin's 6.05e-8), so this
+    # fails without the rounding rule (imu_emulator.rounding_smoothing)
+    at_origin, at_ecef = ecef_case(0.0, DEFAULT_DERIVATIVE), ecef_case(6.4e6, DEFAULT_DERIVATIVE)
+    assert at_ecef <= 10 * at_origin, (at_ecef, at_origin)
+
+
+def test_the_rounding_rule_leaves_the_origin_interpolated():
+    # near the origin the rounding (2.5e-16 m at 5 m) cannot explain the next candidate's difference, so the
+    # default stays the interpolating spline: it passes through every sample (a least-squares fit would not)
+    t = np.arange(5001) * 1e-3
+    pos = np.column_stack([5 * np.cos(2 * np.pi * t), 5 * np.sin(2 * np.pi * t), 0 * t])
+    values = SampledSeries(t, pos, DEFAULT_DERIVATIVE, 2).evaluate(t, 0)[0]
+    np.testing.assert_allclose(values, pos, rtol=0, atol=1e-14)
+    shifted = SampledSeries(t, pos + 6.4e6, DEFAULT_DERIVATIVE, 2).evaluate(t, 0)[0]
+    assert np.abs(shifted - (pos + 6.4e6)).max() > 0           # at ECEF size the rule smooths
+
+
+def test_rounding_rule_noise_gain_matches_a_monte_carlo():
+    # acceleration_noise is the estimator's exact standard deviation (largest over a knot interval); a Monte Carlo
+    # of 400 fits to unit white noise (fixed seed) gives the standard deviation at each point within its own 95 %
+    # confidence interval: the sample std of 400 Gaussian values has relative standard error 1/sqrt(2*399)=3.5 %,
+    # so the largest over the points must lie within 4 standard errors (14 %) below or at the formula's value
+    from scipy.interpolate import make_lsq_spline
+    from imu_emulator.rounding_smoothing import DEGREE, acceleration_noise, uniform_knots
+    rate, spacing, span = 100.0, 0.2, 6.0
+    t = np.arange(int(span * rate) + 1) / rate
+    knots = uniform_knots(span, DEGREE, spacing)
+    at = np.linspace(2.8, 3.0, 21)          # one knot interval in the middle
+    noise = np.random.default_rng(5).normal(0, 1, (400, t.size))
+    acc = np.array([make_lsq_spline(t, y, knots, k=DEGREE)(at, 2) for y in noise])
+    expected = acceleration_noise(1.0, spacing, rate)
+    assert 0.86 * expected <= acc.std(axis=0, ddof=1).max() <= 1.14 * expected
 
 
 def test_noise_free_columns_are_interpolated():

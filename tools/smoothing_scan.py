@@ -12,7 +12,8 @@ With --ecef-floor, where the ECEF floor comes from (issue 14): the same 1 kHz ci
 rounding of its input values (2.7e-10 m RMS, a uniform error over one ulp), which no subtraction of a reference
 point afterwards can remove (SampledSeries already fits relative to the first sample); what is left is how well
 a smoother separates 2.7e-10 m of white noise from a 5 m, 1 Hz circle. Printed: FITPACK with s = c n sigma^2
-over c, and least-squares splines of degree 5 and 7 on fixed uniform knots over their spacing.
+over c, least-squares splines of degree 5 to 11 on fixed uniform knots over their spacing, and what the rule
+of imu_emulator/rounding_smoothing.py (used by spline5c and smooth) chooses.
 With --timing, the cost of fitting `smooth`: one column of 15 k, 60 k and 240 k samples (100 Hz, 1 cm noise),
 wall time and the CPU time of the fitting thread (FITPACK is single-threaded; on a shared machine the wall time
 is mostly waiting).
@@ -68,29 +69,29 @@ def noisy_case(rate, sigma, seconds, seed=0):
     return out, scan
 
 
-def ecef_case(offset):
+def ecef_case(offset, method):
+    """Max interior |acceleration error| (m/s^2) of `method` on a noise-free 1 kHz circle (5 m, 1 Hz) at offset."""
     t = np.arange(5001) * 1e-3
     w = 2 * np.pi
     pos = np.column_stack([offset + 5 * np.cos(w * t), offset + 5 * np.sin(w * t), np.full_like(t, offset)])
     truth = np.column_stack([-5 * w * w * np.cos(w * t), -5 * w * w * np.sin(w * t), 0 * t])
     inner = (t > 0.25) & (t < 4.75)
-    res = {}
-    for method in ("spline5c", "smooth"):
-        got = SampledSeries(t, pos, method, 2).evaluate(t, 2)[2]
-        res[method] = float(np.abs(got - truth)[inner].max())
-    return res
+    got = SampledSeries(t, pos, method, 2, noise=0.0).evaluate(t, 2)[2]
+    return float(np.abs(got - truth)[inner].max())
 
 
 def ecef_floor_scan():
-    from scipy.interpolate import make_lsq_spline
+    from scipy.interpolate import make_interp_spline, make_lsq_spline
+
+    from imu_emulator.rounding_smoothing import DEGREE, choose_lsq_fit
     t = np.arange(5001) * 1e-3
     w = 2 * np.pi
     truth = -5 * w * w * np.cos(w * t)
     inner = (t > 0.25) & (t < 4.75)
     sigma = float(np.spacing(6.4e6)) / np.sqrt(12.0)
     print("\nECEF floor: 1 kHz circle at 6.4e6 m, max interior |acceleration error| (m/s^2)")
-    print(f"  origin, spline5c / smooth: {ecef_case(0.0)['spline5c']:.3g} / {ecef_case(0.0)['smooth']:.3g}; "
-          f"6.4e6 m: {ecef_case(6.4e6)['spline5c']:.3g} / {ecef_case(6.4e6)['smooth']:.3g}")
+    print(f"  origin, spline5c / smooth: {ecef_case(0.0, 'spline5c'):.3g} / {ecef_case(0.0, 'smooth'):.3g}; "
+          f"6.4e6 m: {ecef_case(6.4e6, 'spline5c'):.3g} / {ecef_case(6.4e6, 'smooth'):.3g} (with the rounding rule)")
     y = 6.4e6 + 5 * np.cos(w * t)
     y = y - y[0]
     line = []
@@ -100,9 +101,14 @@ def ecef_floor_scan():
             fit = UnivariateSpline(t, y, k=5, s=c * t.size * sigma ** 2)
         line.append(f"c={c:g} {np.abs(fit(t, 2) - truth)[inner].max():.2g}")
     print("  FITPACK quintic, s = c n sigma^2: " + ", ".join(line))
-    for k in (5, 7):
+    interpolant = make_interp_spline(t, y, k=5)
+    print(f"  quintic interpolant alone (no rule): {np.abs(interpolant(t, 2) - truth)[inner].max():.2g}")
+    fit, chosen = choose_lsq_fit(t, y, sigma, lambda x: interpolant(x, 2))
+    print(f"  the rule (degree {DEGREE}, Lepski): knot spacing {chosen * 1e3:.3g} ms, "
+          f"{np.abs(fit(t, 2) - truth)[inner].max():.2g}")
+    for k in (5, 7, 9, 11):
         line = []
-        for spacing in (0.01, 0.015, 0.02, 0.03, 0.05):
+        for spacing in (0.01, 0.02, 0.03, 0.045, 0.064, 0.09, 0.128):
             m = int(round(t[-1] / spacing))
             knots = np.r_[[0.0] * (k + 1), np.linspace(0, t[-1], m + 1)[1:-1], [t[-1]] * (k + 1)]
             fit = make_lsq_spline(t, y, knots, k=k)
@@ -119,6 +125,17 @@ def timing(sizes=(15_000, 60_000, 240_000)):
         series = SampledSeries(t, y, "smooth", 2, noise=0.01)
         wall, cpu = time.perf_counter() - wall, time.thread_time() - cpu
         print(f"  {n} samples: {wall:.2f} / {cpu:.2f} s, {len(series._fit.splines[0].get_knots())} knots")
+    print("spline5c with the rounding rule, 1 kHz circle at 6.4e6 m, three columns: wall / thread CPU (s); "
+          "the same at the origin (the rule's check only)")
+    for n in (60_000, 600_000):
+        t = np.arange(n) * 1e-3
+        line = []
+        for offset in (6.4e6, 0.0):
+            pos = offset + 5 * np.column_stack([np.cos(2 * np.pi * t), np.sin(2 * np.pi * t), np.cos(np.pi * t)])
+            wall, cpu = time.perf_counter(), time.thread_time()
+            SampledSeries(t, pos, "spline5c", 3)
+            line.append(f"{time.perf_counter() - wall:.2f} / {time.thread_time() - cpu:.2f}")
+        print(f"  {n} samples: {line[0]} s; at the origin {line[1]} s")
 
 
 def main(argv=None):
@@ -152,8 +169,8 @@ def main(argv=None):
         print(f"| {rate} Hz | {sigma * 1e3:g} mm | " + " | ".join(f"{scan[c]:.2g}" for c in SCAN) + " |")
     print("\nrounding floor, 1 kHz circle, max interior |acceleration error| (m/s^2)")
     for offset in (0.0, 6.4e6):
-        res = ecef_case(offset)
-        print(f"  offset {offset:g} m: spline5c {res['spline5c']:.3g}, smooth {res['smooth']:.3g}")
+        print(f"  offset {offset:g} m: spline5c {ecef_case(offset, 'spline5c'):.3g}, "
+              f"smooth {ecef_case(offset, 'smooth'):.3g}")
 
 
 if __name__ == "__main__":
