@@ -41,22 +41,26 @@ class Deferred:
         self.options = options
         self.dispatcher = None
         self._native: dict[str, object] = {}      # argument kinds -> loaded machine code (or None: use numba)
-        self._last = None                         # (argument count, scalars getter, their types, function, refusal)
+        self._last = None                         # the machine code called last
+        self._numba_only = False
         _pending.append(self)
 
     def __call__(self, *args):
-        if NATIVE:
-            # the last machine code called, again if the scalars' types are the same (its entry checks the arrays
-            # itself): a call from Python costs about what numba's dispatcher costs (tools/bench_encode.py)
+        if NATIVE and not self._numba_only:
+            # the last machine code called, again: its entry checks every argument's type itself (refusing others),
+            # so a call from Python costs less than numba's dispatcher (tools/bench_encode.py)
             last = self._last
-            if last is not None and len(args) == last[0] and (last[1] is None or tuple(map(type, last[1](args))) == last[2]):
-                result = last[3].call_checked(args)
-                if result is not last[4]:
+            if last is not None:
+                result = last.call_checked(args)
+                if result is not _refused():
                     return result
             function = self._machine_code(args)
             if function is not None:
-                self._last = _last_call(function, args)
+                self._last = function
                 return function(*args)
+            # arguments machine code cannot take (structured arrays, objects): numba's dispatcher from now on,
+            # without looking at the arguments twice per call
+            self._numba_only = True
         realize()
         return _NUMBA_CALL[type(self.dispatcher)](self.dispatcher, *args)
 
@@ -98,19 +102,14 @@ class Deferred:
         return f"<deferred numba function {self.py_func.__module__}.{self.py_func.__qualname__}>"
 
 
+_REFUSED = []
+
+
 def _refused():
-    from machine_code.objects import REFUSED
-    return REFUSED
-
-
-def _last_call(function, args) -> tuple:
-    """What __call__ checks before calling `function` again without looking it up: the count of arguments and the
-    types of the scalars (np.ndarray arguments are checked by the machine code's entry)."""
-    import operator
-    scalars = [i for i, a in enumerate(args) if type(a) is not np.ndarray]
-    getter = (None if not scalars else operator.itemgetter(*scalars) if len(scalars) > 1
-              else (lambda values, i=scalars[0]: (values[i],)))
-    return len(args), getter, tuple(type(args[i]) for i in scalars), function, _refused()
+    if not _REFUSED:
+        from machine_code.objects import REFUSED
+        _REFUSED.append(REFUSED)
+    return _REFUSED[0]
 
 
 def jit(py_func=None, **options):

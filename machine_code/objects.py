@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-_MAGIC = b"IMUK3"     # 3: arrays passed as PyObject* (the entry reads numpy's array struct)
+_MAGIC = b"IMUK4"     # 4: the argument tuple passed as PyObject* (the entry reads it in place)
 _ENTRY = "entry_c"
 _DTYPES = ("float64", "float32", "int64", "uint64", "int32", "uint32", "int16", "uint16", "int8", "uint8")
 _symbols_added = False
@@ -51,29 +51,88 @@ def _describe(value) -> list:
     raise TypeError(f"no native passing for {type(value).__name__}")
 
 
+def _expected(kinds: list) -> list[int]:
+    """What the entry compares with, in its order: numpy's ndarray type, then per argument four words: its code
+    (0 array, 1 int64, 2 float64, 3 another scalar), the address of its dtype (arrays) or of its numpy scalar
+    type, that of the Python type numba types the same (int, float; else 0, matching nothing), its rank.
+    Addresses differ per process: the table is built at load and passed at each call."""
+    expect = [id(np.ndarray)]
+    for kind in kinds:
+        dtype = np.dtype(kind[1])
+        if kind[0] == "array":
+            expect += [0, id(dtype), 0, int(kind[2])]
+        else:
+            code = {"int64": 1, "float64": 2}.get(kind[1], 3)
+            expect += [code, id(dtype.type), id({1: int, 2: float}[code]) if code < 3 else 0, 0]
+    return expect
+
+
+def _work_size(kinds: list) -> int:
+    """The entry's per-call words: a pointer per argument, an int per argument, then the arrays' dimensions."""
+    return 2 * len(kinds) + sum(int(k[2]) for k in kinds if k[0] == "array")
+
+
+# The entry's check of every argument, one loop whatever the arguments (typing unrolled per-argument checks cost
+# numba seconds for a kernel's 20 arguments): it fills work with each argument's data pointer (an array's data, a
+# scalar's value: a numpy scalar's or a Python float's at byte 16, a Python int of up to two 30-bit digits read
+# into work) and the arrays' dimensions, or returns 1 if one is not of the type the code was compiled for.
+_CHECK = """
+    x = numba.carray(expect, (N_EXPECT,), np.int64)
+    t = numba.carray(args, (3 + N_ARGS,), np.int64)
+    w = numba.carray(work, (N_WORK,), np.int64)
+    if t[2] != N_ARGS:
+        return 1
+    s = 2 * N_ARGS
+    for j in range(N_ARGS):
+        o = t[3 + j]
+        h = numba.carray(_address(o), (9,), np.int64)
+        code, own, python = x[1 + 4 * j], x[2 + 4 * j], x[3 + 4 * j]
+        if code == 0:
+            nd = x[4 + 4 * j]
+            # PyArrayObject words: 1 type, 2 data, 3 nd (int), 4 dimensions, 7 descr, 8 flags (1: C-contiguous)
+            if h[1] != x[0] or h[7] != own or (h[3] & 0xFFFFFFFF) != nd or (h[8] & 1) == 0:
+                return 1
+            w[j] = h[2]
+            dims = numba.carray(_address(h[4]), (nd,), np.int64)
+            for d in range(nd):
+                w[s + d] = dims[d]
+            s += nd
+        elif h[1] == own or (code == 2 and h[1] == python):
+            w[j] = o + 16
+        elif code == 1 and h[1] == python and -2 <= h[2] <= 2:
+            g = numba.carray(_address(o + 24), (2,), np.uint32)
+            value = np.int64(0)
+            if h[2] != 0:
+                value = np.int64(g[0])
+            if h[2] == 2 or h[2] == -2:
+                value |= np.int64(g[1]) << 30
+            if h[2] < 0:
+                value = -value
+            w[N_ARGS + j] = value
+            w[j] = _integer(work) + 8 * (N_ARGS + j)
+        else:
+            return 1
+"""
+
+
 def _wrapper_source(kinds: list, n_returns: int | None) -> str:
-    """The cfunc taking the function's arguments as C does: an array as its PyObject* (read in place: data pointer,
-    dimensions, type, dtype and flags of numpy's PyArrayObject, so a call marshals nothing in Python), a scalar
-    as its C type; then `expect` (the addresses of numpy's ndarray type and of each array's dtype, which differ
-    per process) and the return pointers. It returns 1 without calling the function when an array is not of the
-    type, rank and C-contiguity the code was compiled for (the caller converts it and calls again), else 0 and
-    stores what the function returns (None: nothing; 0: a number; n: a tuple of n). Only integers reach this
-    source; dtypes are looked up by position in the namespace (D0, D1, ..., R0, R1, ...)."""
-    params, lines, at = [], ["    x = numba.carray(expect, (N_EXPECT,), np.int64)"], 1
+    """The cfunc taking the call's argument tuple as a PyObject* and reading it in place (_CHECK), so that a call
+    marshals nothing in Python; then `expect` (_expected), the return pointers and a per-thread work area. It
+    returns 1 without calling the function when an argument is not of the type (rank, C-contiguity) the code
+    was compiled for (the caller converts it and calls again), else 0, having stored what the function returns
+    (None: nothing; 0: a number; n: a tuple of n). Only integers reach this source; dtypes are looked up by
+    position in the namespace (D0, ..., R0, ...)."""
+    n = len(kinds)
+    lines, at = [], 2 * n
     for i, kind in enumerate(kinds):
-        if kind[0] == "scalar":
-            params.append(f"a{i}")
-            continue
-        params.append(f"o{i}")
-        nd = int(kind[2])
-        # PyArrayObject words: 1 type, 2 data, 3 nd (int), 4 dimensions, 7 descr, 8 flags (int; 1: C-contiguous)
-        lines += [f"    h{i} = numba.carray(o{i}, (9,), np.int64)",
-                  f"    if h{i}[1] != x[0] or h{i}[7] != x[{at}] or (h{i}[3] & 0xFFFFFFFF) != {nd} or (h{i}[8] & 1) == 0:",
-                  "        return 1",
-                  f"    d{i} = numba.carray(_address(h{i}[4]), ({nd},), np.int64)",
-                  f"    a{i} = numba.carray(_address(h{i}[2]), ({''.join(f'd{i}[{d}], ' for d in range(nd))}), D{i})"]
-        at += 1
-    call = f"function({', '.join(f'a{i}' for i in range(len(kinds)))})"
+        if kind[0] == "array":
+            nd = int(kind[2])
+            shape = "".join(f"w[{at + d}], " for d in range(nd))
+            lines.append(f"    a{i} = numba.carray(_address(w[{i}]), ({shape}), D{i})")
+            at += nd
+        else:
+            lines.append(f"    a{i} = numba.carray(_address(w[{i}]), (1,), D{i})[0]")
+    call = f"function({', '.join(f'a{i}' for i in range(n))})"
     if n_returns is None:
         lines.append(f"    {call}")
     elif n_returns == 0:     # a single number
@@ -84,9 +143,8 @@ def _wrapper_source(kinds: list, n_returns: int | None) -> str:
     lines.append("    return 0")
     return "\n".join([
         "@numba.cfunc(SIGNATURE, nogil=True, error_model='numpy')",
-        f"def {_ENTRY}({', '.join(params)}, expect, rets):",
-        *lines,
-    ]) + "\n"
+        f"def {_ENTRY}(args, expect, rets, work):",
+    ]) + _CHECK + "\n".join(lines) + "\n"
 
 
 def _address_intrinsic():
@@ -100,7 +158,13 @@ def _address_intrinsic():
         def codegen(context, builder, signature, args):
             return builder.inttoptr(args[0], cgutils.voidptr_t)
         return types.voidptr(types.int64), codegen
-    return _address
+
+    @intrinsic
+    def _integer(typingctx, pointer):
+        def codegen(context, builder, signature, args):
+            return builder.ptrtoint(args[0], cgutils.intp_t)
+        return types.int64(types.voidptr), codegen
+    return _address, _integer
 
 
 def _returns(function, args) -> tuple[int | None, list[str]]:
@@ -130,10 +194,11 @@ def export(function, args: tuple, path: Path, meta: dict) -> bool:
         n_returns, returns = _returns(function, args)
         if any(name not in _DTYPES for name in returns):
             return False
-        params = [types.voidptr if k[0] == "array" else numba.from_dtype(np.dtype(k[1])) for k in kinds]
-        namespace = {"numba": numba, "np": np, "function": function, "_address": _address_intrinsic(),
-                     "N_EXPECT": 1 + sum(k[0] == "array" for k in kinds),
-                     "SIGNATURE": types.int32(*params, types.voidptr, types.CPointer(types.voidptr))}
+        address, integer = _address_intrinsic()
+        namespace = {"numba": numba, "np": np, "function": function, "_address": address, "_integer": integer,
+                     "N_EXPECT": len(_expected(kinds)), "N_ARGS": len(kinds), "N_WORK": _work_size(kinds),
+                     "SIGNATURE": types.int32(types.voidptr, types.voidptr, types.CPointer(types.voidptr),
+                                              types.voidptr)}
         namespace.update({f"D{i}": np.dtype(k[1]).type for i, k in enumerate(kinds)})
         namespace.update({f"R{j}": np.dtype(name).type for j, name in enumerate(returns)})
         exec(compile(_wrapper_source(kinds, n_returns), f"<native wrapper {path.name}>", "exec"), namespace)
@@ -173,29 +238,38 @@ def _array_struct_as_expected() -> bool:
     probe = np.zeros((4, 3))[1:3]
     words = (ctypes.c_int64 * 9).from_address(id(probe))
     dims = (ctypes.c_int64 * 2).from_address(words[4])
-    return (words[1] == id(np.ndarray) and words[2] == probe.ctypes.data and words[3] & 0xFFFFFFFF == 2
-            and tuple(dims) == (2, 3) and words[7] == id(probe.dtype) and words[8] & 1 == 1)
+    arrays = (words[1] == id(np.ndarray) and words[2] == probe.ctypes.data and words[3] & 0xFFFFFFFF == 2
+              and tuple(dims) == (2, 3) and words[7] == id(probe.dtype) and words[8] & 1 == 1)
+    big, negative, value, real = 2 ** 40 + 3, -5, np.uint64(7), 2.5
+    digits = (ctypes.c_uint32 * 2).from_address(id(big) + 24)
+    held = (big, negative, value, real)
+    items = (ctypes.c_int64 * 7).from_address(id(held))
+    scalars = (items[2] == 4 and items[3] == id(big) and (ctypes.c_int64 * 3).from_address(id(big))[2] == 2
+               and digits[0] | digits[1] << 30 == big and (ctypes.c_int64 * 3).from_address(id(negative))[2] == -1
+               and (ctypes.c_uint64 * 3).from_address(id(value))[2] == 7
+               and (ctypes.c_double * 3).from_address(id(real))[2] == 2.5)
+    return arrays and scalars
 
 
 class NativeFunction:
     """Calls the loaded machine code like the numba dispatcher: f(*args) (then the declared scratch arrays).
 
-    The entry reads arrays in place (numpy's struct) and takes scalars as C values, so a call costs one ctypes
-    call, like numba's dispatcher unboxing in C. An array of another dtype or not C-contiguous is refused by the
-    entry: it is converted, passed again and written back."""
+    The entry reads the argument tuple in place (numpy's array struct, scalars' values), so a call costs one
+    ctypes call with one object, less than numba's dispatcher typing each argument. An argument of another type
+    (an array of another dtype or not C-contiguous, a large Python int) is refused by the entry: it is
+    converted, passed again and (arrays) written back."""
 
     def __init__(self, address: int, kinds: list, returns: list, scratch: list):
         import ctypes
         import threading
-        types = [ctypes.py_object if k[0] == "array" else getattr(ctypes, _CTYPES[k[1]]) for k in kinds]
-        self._call = ctypes.CFUNCTYPE(ctypes.c_int32, *types, ctypes.c_void_p, ctypes.c_void_p)(address)
+        self._call = ctypes.CFUNCTYPE(ctypes.c_int32, ctypes.py_object, ctypes.c_void_p, ctypes.c_void_p,
+                                      ctypes.c_void_p)(address)
         self.kinds = kinds
         self.n_returns, self.returns = returns
         self.scratch = [tuple(int(x) for x in shape) for shape in scratch]
         self._dtypes = [np.dtype(k[1]) for k in kinds]
         # the dtype objects numpy uses for new arrays of these types (singletons): their addresses for the entry
-        self._expect = np.array([id(np.ndarray)] + [id(np.dtype(k[1])) for k in kinds if k[0] == "array"],
-                                dtype=np.int64)
+        self._expect = np.array(_expected(kinds), dtype=np.int64)
         self._expect_address = self._expect.ctypes.data
         self._local = threading.local()
 
@@ -207,6 +281,8 @@ class NativeFunction:
             local.results = [getattr(ctypes, _CTYPES[name])() for name in self.returns]
             local.rets = (ctypes.c_void_p * max(len(self.returns), 1))(*[ctypes.addressof(r) for r in local.results])
             local.address = ctypes.addressof(local.rets)
+            local.work = np.zeros(max(_work_size(self.kinds), 1), dtype=np.int64)
+            local.work_address = local.work.ctypes.data
         return local
 
     def _returned(self, local):
@@ -219,7 +295,7 @@ class NativeFunction:
     def call_checked(self, args):
         """f(*args) for a function without scratch, or REFUSED when an array is not of the compiled type."""
         local = self._rets()
-        if self._call(*args, self._expect_address, local.address):
+        if self._call(args, self._expect_address, local.address, local.work_address):
             return REFUSED
         return self._returned(local)
 
@@ -229,16 +305,17 @@ class NativeFunction:
         if self.scratch:
             args = args + tuple(np.empty(shape) for shape in self.scratch)
         local = self._rets()
-        if self._call(*args, self._expect_address, local.address):
-            self._convert_and_call(args, local.address)
+        if self._call(args, self._expect_address, local.address, local.work_address):
+            self._convert_and_call(args, local)
         return self._returned(local)
 
-    def _convert_and_call(self, args, rets_address) -> None:
+    def _convert_and_call(self, args, local) -> None:
         """The machine code indexes C-contiguous arrays of its dtypes: work on copies, written back after."""
         converted, copies = list(args), []
         for i, value in enumerate(args):
             kind = self.kinds[i]
             if kind[0] != "array":
+                converted[i] = self._dtypes[i].type(value)
                 continue
             if not isinstance(value, np.ndarray) or value.ndim != kind[2]:
                 raise TypeError(f"argument {i}: expected an array of {kind[2]} dimensions")
@@ -246,7 +323,7 @@ class NativeFunction:
                 contiguous = np.array(value, dtype=self._dtypes[i], order="C", subok=False)
                 converted[i] = contiguous
                 copies.append((value, contiguous))
-        if self._call(*converted, self._expect_address, rets_address):
+        if self._call(tuple(converted), self._expect_address, local.address, local.work_address):
             raise TypeError("arguments not of the types the machine code was compiled for")
         for original, contiguous in copies:
             if original.flags.writeable:

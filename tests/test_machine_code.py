@@ -92,3 +92,35 @@ def test_warm_stream_imports_no_numba_and_sends_the_same_bytes(tmp_path):
     assert _run(stream_to("numba.bin"), tmp_path / "cache", native=False) is True
     warm = (tmp_path / "warm.bin").read_bytes()
     assert len(warm) > 0 and warm == (tmp_path / "numba.bin").read_bytes() == (tmp_path / "cold.bin").read_bytes()
+
+
+@numba.njit(cache=False)
+def _scaled_sum(values, k, x):
+    """Writes its array in place and returns what it read: a tuple of an int64 and a float64."""
+    values[0] += k * x
+    return k, values.sum()
+
+
+@pytest.mark.parametrize("case", ["plain", "numpy_scalars", "negative_two_digit_int", "int_beyond_two_digits",
+                                  "int_for_float", "not_contiguous", "other_dtype"])
+def test_entry_reads_arguments_in_place_or_converts_them(tmp_path, case):
+    """The entry reads the argument tuple in place (numpy's array struct, scalars' values) and refuses what it was
+    not compiled for, which the caller converts: either way the numbers are numba's dispatcher's (the oracle, run
+    on a copy of the same arguments)."""
+    compiled_for = (np.zeros((2, 3)), 5, 2.0)
+    path = tmp_path / "f.o"
+    assert objects.export(_scaled_sum, compiled_for, path, {})
+    function = objects.load(path)[0]
+    base = np.arange(12.0).reshape(4, 3)
+    args = {"plain": (base[:2].copy(), 7, 0.5), "numpy_scalars": (base[:2].copy(), np.int64(-3), np.float64(1.25)),
+            "negative_two_digit_int": (base[:2].copy(), -(2**40 + 9), 1.0),
+            "int_beyond_two_digits": (base[:2].copy(), 2**62 + 1, 1.0),
+            "int_for_float": (base[:2].copy(), 2, 3),
+            "not_contiguous": (base[::2], 3, 1.5), "other_dtype": (base[:2].astype(np.float32), 4, 0.25)}[case]
+    oracle_args = (np.array(args[0], dtype=np.float64), np.int64(args[1]), float(args[2]))
+    expected = _scaled_sum(*oracle_args)
+    got = function(*args)
+    assert got == expected and type(got[0]) is int and type(got[1]) is float
+    assert np.array_equal(args[0], oracle_args[0].astype(args[0].dtype))      # written back in place
+    if case == "not_contiguous":
+        assert np.array_equal(base[1], [3.0, 4.0, 5.0])                       # rows between untouched
