@@ -2,11 +2,13 @@
 
 Loading a function from numba's own cache costs about a second of CPU before the first call: importing numba and
 initializing its CPU target (typing and lowering registries), all for a function compiled long ago. Here the
-function is compiled once behind a C-ABI wrapper (a `numba.cfunc` taking its integers, floats, array pointers and
-shapes as four C arrays, and two more for what it returns); the object code of that wrapper, which contains
-everything it calls (numba links the libraries of the callees into it), is written to a file, and later runs
-load it with llvmlite's JIT linker alone. The few C helpers numba's code may call on error paths (numba._helperlib, the NRT) are loaded
-as plain extension modules, without importing the numba package.
+function is compiled once behind a C-ABI wrapper (a `numba.cfunc` taking the call's argument tuple as a PyObject*,
+a table of expected types, return pointers and a work area); the object code of that wrapper, which contains
+everything it calls (numba links the libraries of the callees into it), is written to a file, and later runs load
+it with llvmlite's JIT linker alone. The few C helpers numba's code may call on error paths (numba._helperlib, the
+NRT) are loaded as plain extension modules, without importing the numba package. The wrapper reads the tuple in
+place (numpy's array struct, scalar objects' values), so a call from Python costs one ctypes call, about what
+numba's dispatcher costs; the struct layout is checked once per process (_array_struct_as_expected).
 
 The wrapper is built from the argument values of a trial call, not from a hand-kept list: whatever arguments a
 function grows, an integer/float scalar or an array of a plain dtype and any rank is passed through, and it may

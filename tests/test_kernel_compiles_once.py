@@ -35,7 +35,8 @@ def _cache_log(cache: Path, native: bool) -> tuple[str, bool]:
 def test_a_cold_cache_compiles_the_kernel_once_and_a_warm_one_never(tmp_path, native):
     cold, _ = _cache_log(tmp_path, native)
     # each function saved once: kernel_body (exported as machine code), and on numba's path its wrapper kernel
-    saved = [line.rsplit("/", 1)[-1].split(".py")[0].rsplit("-", 1)[0] for line in cold.splitlines() if "data saved to" in line]
+    saved = [line.rsplit("/", 1)[-1].split(".py")[0].rsplit("-", 1)[0]
+             for line in cold.splitlines() if "data saved to" in line]
     assert sorted(saved) == (["kernel.kernel_body"] if native else ["kernel.kernel", "kernel.kernel_body"]), cold
     published = [p for p in (tmp_path / "kernels").iterdir() if not p.name.startswith(".")]
     assert len(published) == 1, published

@@ -1,4 +1,4 @@
-"""With more than INLINE_IMUS IMUs each IMU's stages are a function of their own (compile time linear in the IMU count): every
+"""With more than INLINE_IMUS IMUs, each IMU's stages are a function (compile time linear in the IMU count): every
 IMU of a many-IMU scene gives exactly what the same IMU gives alone, where its lines sit in the kernel's loop
 (the single-IMU form is the oracle for the per-IMU functions: independent code paths of the generator)."""
 from __future__ import annotations

@@ -64,7 +64,8 @@ def per_sample(names: list[str], rounds: int = 7, per_round: int = 1000) -> None
         for native in (True, False):
             cpu = [c for c, _ in times[native]]
             wall = [w for _, w in times[native]]
-            print(f"{name:24s} {'machine code' if native else 'numba':13s} {min(cpu):9.1f}/{statistics.median(cpu):<9.1f}"
+            path = "machine code" if native else "numba"
+            print(f"{name:24s} {path:13s} {min(cpu):9.1f}/{statistics.median(cpu):<9.1f}"
                   f" {min(wall):9.1f}/{statistics.median(wall):<9.1f}")
     lazy.NATIVE = True
 
