@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-_MAGIC = b"IMUK4"     # 4: the argument tuple passed as PyObject* (the entry reads it in place)
+_MAGIC = b"IMUK5"     # 5: the argument tuple passed as PyObject* (the entry reads it in place)
 _ENTRY = "entry_c"
 _DTYPES = ("float64", "float32", "int64", "uint64", "int32", "uint32", "int16", "uint16", "int8", "uint8")
 _symbols_added = False
@@ -56,13 +56,14 @@ def _describe(value) -> list:
 def _expected(kinds: list) -> list[int]:
     """What the entry compares with, in its order: numpy's ndarray type, then per argument four words: its code
     (0 array, 1 int64, 2 float64, 3 another scalar), the address of its dtype (arrays) or of its numpy scalar
-    type, that of the Python type numba types the same (int, float; else 0, matching nothing), its rank.
+    type, that of the Python type numba types the same (int, float; else 0, matching nothing) or for an array its
+    dtype's scalar type (an equal dtype that is another object), its rank.
     Addresses differ per process: the table is built at load and passed at each call."""
     expect = [id(np.ndarray)]
     for kind in kinds:
         dtype = np.dtype(kind[1])
         if kind[0] == "array":
-            expect += [0, id(dtype), 0, int(kind[2])]
+            expect += [0, id(dtype), id(dtype.type), int(kind[2])]
         else:
             code = {"int64": 1, "float64": 2}.get(kind[1], 3)
             expect += [code, id(dtype.type), id({1: int, 2: float}[code]) if code < 3 else 0, 0]
@@ -92,8 +93,15 @@ _CHECK = """
         if code == 0:
             nd = x[4 + 4 * j]
             # PyArrayObject words: 1 type, 2 data, 3 nd (int), 4 dimensions, 7 descr, 8 flags (1: C-contiguous)
-            if h[1] != x[0] or h[7] != own or (h[3] & 0xFFFFFFFF) != nd or (h[8] & 1) == 0:
+            if h[1] != x[0] or (h[3] & 0xFFFFFFFF) != nd or (h[8] & 1) == 0:
                 return 1
+            if h[7] != own:
+                # another dtype object: the same if its scalar type is (PyArray_Descr word 2) in native order
+                # (byte 26: '>' is the only foreign order on a little-endian machine)
+                descr = numba.carray(_address(h[7]), (4,), np.int64)
+                order = numba.carray(_address(h[7] + 24), (4,), np.uint8)
+                if descr[2] != python or order[2] == 62:
+                    return 1
             w[j] = h[2]
             dims = numba.carray(_address(h[4]), (nd,), np.int64)
             for d in range(nd):
@@ -250,7 +258,11 @@ def _array_struct_as_expected() -> bool:
                and digits[0] | digits[1] << 30 == big and (ctypes.c_int64 * 3).from_address(id(negative))[2] == -1
                and (ctypes.c_uint64 * 3).from_address(id(value))[2] == 7
                and (ctypes.c_double * 3).from_address(id(real))[2] == 2.5)
-    return arrays and scalars
+    native_, swapped = np.dtype("=f8"), np.dtype(">f8")
+    dtypes = ((ctypes.c_int64 * 3).from_address(id(native_))[2] == id(np.float64)
+              and (ctypes.c_uint8 * 32).from_address(id(native_))[26] in (ord("="), ord("<"))
+              and (ctypes.c_uint8 * 32).from_address(id(swapped))[26] == ord(">"))
+    return arrays and scalars and dtypes
 
 
 class NativeFunction:
@@ -322,7 +334,8 @@ class NativeFunction:
             if not isinstance(value, np.ndarray) or value.ndim != kind[2]:
                 raise TypeError(f"argument {i}: expected an array of {kind[2]} dimensions")
             if type(value) is not np.ndarray or value.dtype is not self._dtypes[i] or not value.flags.c_contiguous:
-                contiguous = np.array(value, dtype=self._dtypes[i], order="C", subok=False)
+                contiguous = np.empty(value.shape, dtype=self._dtypes[i])     # numpy's own dtype object
+                contiguous[...] = value
                 converted[i] = contiguous
                 copies.append((value, contiguous))
         if self._call(tuple(converted), self._expect_address, local.address, local.work_address):

@@ -102,7 +102,8 @@ def _scaled_sum(values, k, x):
 
 
 @pytest.mark.parametrize("case", ["plain", "numpy_scalars", "negative_two_digit_int", "int_beyond_two_digits",
-                                  "int_for_float", "not_contiguous", "other_dtype"])
+                                  "int_for_float", "not_contiguous", "other_dtype",
+                                  "equal_dtype_another_object", "byte_swapped"])
 def test_entry_reads_arguments_in_place_or_converts_them(tmp_path, case):
     """The entry reads the argument tuple in place (numpy's array struct, scalars' values) and refuses what it was
     not compiled for, which the caller converts: either way the numbers are numba's dispatcher's (the oracle, run
@@ -116,7 +117,10 @@ def test_entry_reads_arguments_in_place_or_converts_them(tmp_path, case):
             "negative_two_digit_int": (base[:2].copy(), -(2**40 + 9), 1.0),
             "int_beyond_two_digits": (base[:2].copy(), 2**62 + 1, 1.0),
             "int_for_float": (base[:2].copy(), 2, 3),
-            "not_contiguous": (base[::2], 3, 1.5), "other_dtype": (base[:2].astype(np.float32), 4, 0.25)}[case]
+            "not_contiguous": (base[::2], 3, 1.5), "other_dtype": (base[:2].astype(np.float32), 4, 0.25),
+            # a dtype equal to float64 but another object (as arrays from other libraries carry)
+            "equal_dtype_another_object": (base[:2].copy().view(np.dtype("=f8", metadata={"unit": "m"})), 2, 0.5),
+            "byte_swapped": (base[:2].astype(">f8"), 2, 0.5)}[case]
     oracle_args = (np.array(args[0], dtype=np.float64), np.int64(args[1]), float(args[2]))
     expected = _scaled_sum(*oracle_args)
     got = function(*args)
