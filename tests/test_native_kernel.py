@@ -36,7 +36,8 @@ def _every_effect_scene():
     imu_a, imu_b = _imu_with(base), _imu_with({p: base[p] if p.key.startswith("clock") else _sample_value(p, 2.0)
                                                for p in base})
     imu_b["name"] = "b"
-    return scene_from_dict({"scene": {"rate_hz": 200, "duration_s": 3.0, "seed": 11},
+    return scene_from_dict({"scene": {"rate_hz": 200, "duration_s": 3.0, "seed": 11,     # Earth effects: an origin
+                                      "origin": {"lat_deg": 45.0, "lon_deg": 10.0, "height_m": 0.0}},
                             "trajectory": {"x": "0.5*t*t", "y": "sin(t)", "z": "0"},
                             "attitude": {"roll": "0.1*t", "pitch": "0", "yaw": "0.2*t"},
                             "imu": [imu_a, imu_b], "effects": {name: True for name in EFFECTS}})
