@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba
+from machine_code.lazy import jit
 import numpy as np
 
 from firmware_protocols.base import SaturationStats, empty_frames
@@ -112,7 +112,7 @@ class SignalLayout:
         return frames
 
 
-@numba.njit(cache=True, nogil=True)
+@jit(cache=True, nogil=True)
 def _pack(sources, spec, values, template, can_ids, extended, counter, counter_byte, crc8, crc_table,
           frames, counts):
     f_sample = frames.sample

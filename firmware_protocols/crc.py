@@ -5,7 +5,7 @@ them per packet without leaving machine code.
   init 0xFFFF is CRC-16/CCITT-FALSE (DroneCAN transfer CRC). One function serves both.
 - crc16_mcrf4xx: poly 0x1021 reflected (0x8408), init 0xFFFF, no final xor (MAVLink's X.25 variant).
 """
-import numba
+from machine_code.lazy import jit
 import numpy as np
 
 
@@ -33,7 +33,7 @@ CCITT_TABLE = _table_ccitt().astype(np.int64)  # int64: numba mixes uint16 with 
 REFLECTED_TABLE = _table_reflected().astype(np.int64)
 
 
-@numba.njit(cache=True, nogil=True)
+@jit(cache=True, nogil=True)
 def crc16_ccitt(data, start, stop, crc):
     """CRC over data[start:stop] (uint8 array), continuing from `crc` (an int)."""
     table = CCITT_TABLE
@@ -43,7 +43,7 @@ def crc16_ccitt(data, start, stop, crc):
     return crc
 
 
-@numba.njit(cache=True, nogil=True)
+@jit(cache=True, nogil=True)
 def crc16_mcrf4xx(data, start, stop, crc):
     """MAVLink's CRC over data[start:stop] (uint8 array), continuing from `crc` (0xFFFF to start)."""
     table = REFLECTED_TABLE

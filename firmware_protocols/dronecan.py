@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import math
 
-import numba
+from machine_code.lazy import jit
 import numpy as np
 
 from firmware_protocols.base import (CLASSIC_FRAME_DTYPE, FD_FRAME_DTYPE, FD_LENGTH_TABLE, CanStreamDecoder,
@@ -69,7 +69,7 @@ _OP_WIDTH = {OP_TIMESTAMP: 7, OP_F16: 2, OP_F32: 4, OP_U8: 1, OP_F32_TIMES_INTER
 
 # --- numba kernels -----------------------------------------------------------------------------
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@jit(cache=True, nogil=True, inline="always")
 def _f16_from_f32_bits(u):
     """libuavcan's float -> half (pydronecan f16_from_f32) on float32 bits: ties away from zero.
 
@@ -96,7 +96,7 @@ def _f16_from_f32_bits(u):
     return sign | ((q + 0x1000) >> 13)
 
 
-@numba.njit(cache=True, nogil=True)
+@jit(cache=True, nogil=True)
 def _encode_transfers(time_ns, sources, ops, params, counts, frames):
     """Serialise every sample per the op program and cut it into DroneCAN frames, written straight into
     the frame columns.

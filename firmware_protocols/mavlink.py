@@ -56,7 +56,7 @@ import struct
 import time
 from dataclasses import dataclass
 
-import numba
+from machine_code.lazy import jit
 import numpy as np
 
 from firmware_protocols.base import DecoderStats, EncodeError, Packet, SaturationStats, Samples, SerialBatch
@@ -195,13 +195,13 @@ _BY_MSGID = {spec.msgid: spec for spec in MESSAGES.values()}
 
 # --- the packing kernel -------------------------------------------------------------------------
 
-@numba.njit(cache=True, nogil=True)
+@jit(cache=True, nogil=True)
 def _put_le(out, pos, value, nbytes):
     for k in range(nbytes):
         out[pos + k] = (value >> (8 * k)) & 0xFF
 
 
-@numba.njit(cache=True, nogil=True)
+@jit(cache=True, nogil=True)
 def _first_nonfinite_row(values, n, lo, hi):
     """First row in [lo, hi) holding a non-finite value, or hi (an empty array means "absent")."""
     if values.shape[0] != n:
@@ -214,7 +214,7 @@ def _first_nonfinite_row(values, n, lo, hi):
     return hi
 
 
-@numba.njit(cache=True, nogil=True)
+@jit(cache=True, nogil=True)
 def _encode_block(time_ns, accel, gyro, mag, pressure, temperature, layout, lsb, consts, params,
                   link_state, lo, hi, base, sat, out, offsets):
     """Pack samples [lo, hi) into `out` from its start; offsets[lo..hi] get `base` + position in out.

@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
-import numba
+from machine_code.lazy import jit
 import numpy as np
 
 from firmware_protocols.base import DecoderStats, EncodeError, SaturationStats, Samples, SerialBatch
@@ -43,14 +43,14 @@ _SLOTS = 16
 _EMPTY_SOURCE = np.zeros((1, 1), dtype=np.float64)
 
 
-@numba.njit(cache=True, nogil=True)
+@jit(cache=True, nogil=True)
 def _put_be(out, p, value, nbytes):
     for k in range(nbytes - 1, -1, -1):
         out[p + k] = value & 0xFF
         value >>= 8
 
 
-@numba.njit(cache=True, nogil=True)
+@jit(cache=True, nogil=True)
 def pack_fixed_packets(sources, time_ns, counter0, ilayout, flayout, template, checksum_kind, out, sat_counts):
     """Write len(time_ns) packets of len(template) bytes into out.
 

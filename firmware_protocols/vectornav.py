@@ -55,7 +55,7 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 
-import numba
+from machine_code.lazy import jit
 import numpy as np
 
 from firmware_protocols.base import (_FIELD_WIDTHS, DecoderStats, EncodeError, Packet, SaturationStats, Samples,
@@ -328,7 +328,7 @@ def parse_fields(fields) -> Layout:
 
 # --- binary encoder --------------------------------------------------------------------------
 
-@numba.njit(cache=True, nogil=True)
+@jit(cache=True, nogil=True)
 def _pack(out, size, header, items, scales, time_ns, accel, gyro, mag, quat, euler, temp, pres, extra, steps, sat,
           gps_offset_ns):
     """Write len(time_ns) packets of `size` bytes into `out`. items[j] = (source id, column, wire type

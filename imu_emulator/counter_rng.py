@@ -17,7 +17,7 @@ from __future__ import annotations
 import hashlib
 import math
 
-import numba
+from machine_code.lazy import jit
 import numpy as np
 
 _GAMMA = np.uint64(0x9E3779B97F4A7C15)
@@ -62,20 +62,20 @@ KI, WI, FI, _X = _tables()
 _INV_R = 1.0 / _R
 
 
-@numba.njit
+@jit
 def mix64(z):
     z = (z ^ (z >> _S30)) * _M1
     z = (z ^ (z >> _S27)) * _M2
     return z ^ (z >> _S31)
 
 
-@numba.njit
+@jit
 def _unit(z, i):
     """A double in [0, 1) from the i-th extra draw of state z."""
     return float(mix64(z + np.uint64(i) * _EXTRA) >> _S11) * (1.0 / 9007199254740992.0)
 
 
-@numba.njit
+@jit
 def _slow_path(z, idx, rabs, x):
     """The 1 % of draws outside a layer's safe rectangle: wedge test, tail, or a fresh draw."""
     i = 1
@@ -102,7 +102,7 @@ def _slow_path(z, idx, rabs, x):
             return x
 
 
-@numba.njit
+@jit
 def normal(key, counter):
     """The standard normal number `counter` of stream `key` (both uint64-compatible integers)."""
     z = key + (np.uint64(counter) + _ONE) * _GAMMA
@@ -119,12 +119,17 @@ def normal(key, counter):
     return _slow_path(z, idx, rabs, x)
 
 
-@numba.njit(cache=True)   # every new process draws initial states: compiling it cost each batch worker seconds
+@jit(cache=True)   # every new process draws initial states: compiling it cost each batch worker seconds
+def _normals_into(key, first, out):
+    for i in range(out.shape[0]):
+        out[i] = normal(key, first + i)
+
+
 def normals(key, first, n):
-    """n consecutive normals of one stream (tests, initial state draws)."""
-    out = np.empty(n)
-    for i in range(n):
-        out[i] = normal(np.uint64(key), first + i)
+    """n consecutive normals of one stream (tests, initial state draws). Allocated here, filled by machine code
+    that returns nothing (machine_code.lazy passes no arrays back)."""
+    out = np.empty(int(n))
+    _normals_into(np.uint64(key), np.int64(first), out)
     return out
 
 

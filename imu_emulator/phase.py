@@ -8,7 +8,7 @@ calls, one shared reduction for both values, error within about one unit in the 
 """
 import math
 
-import numba
+from machine_code.lazy import jit
 
 TWO_PI = 2.0 * math.pi
 S1 = -1.66666666666666324348e-01
@@ -25,7 +25,7 @@ C5 = 2.08757232129817482790e-09
 C6 = -1.13596475577881948265e-11
 
 
-@numba.njit(cache=True, inline="always")
+@jit(cache=True, inline="always")
 def sincos_cycles(c):
     """(sin(2 pi c), cos(2 pi c)) for any finite c."""
     q = math.floor(4.0 * c + 0.5)

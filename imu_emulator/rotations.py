@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import math
 
-import numba
+from machine_code.lazy import jit
 import numpy as np
 
 
-@numba.njit(cache=True, inline="always")
+@jit(cache=True, inline="always")
 def matrix_to_quat_scalar(r00, r01, r02, r10, r11, r12, r20, r21, r22):
     trace = r00 + r11 + r22
     # 4*q_i^2 for each component; the largest is computed from its diagonal, the rest from off-diagonals.
@@ -35,7 +35,7 @@ def matrix_to_quat_scalar(r00, r01, r02, r10, r11, r12, r20, r21, r22):
     return w, x, y, z
 
 
-@numba.njit(cache=True, inline="always")
+@jit(cache=True, inline="always")
 def quat_multiply_scalar(aw, ax, ay, az, bw, bx, by, bz):
     return (aw * bw - ax * bx - ay * by - az * bz,
             aw * bx + ax * bw + ay * bz - az * by,
@@ -84,7 +84,7 @@ def matrix_to_euler(R) -> np.ndarray:
     return np.stack([roll, pitch, yaw], axis=-1)
 
 
-@numba.njit(cache=True)
+@jit(cache=True)
 def _matrices_to_quats(R, out):
     for i in range(R.shape[0]):
         q = matrix_to_quat_scalar(R[i, 0, 0], R[i, 0, 1], R[i, 0, 2], R[i, 1, 0], R[i, 1, 1], R[i, 1, 2],

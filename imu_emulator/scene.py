@@ -39,7 +39,7 @@ MAX_ANGLE_DEG = 1e4            # mounting angles, initial heading
 MAX_TRACK_ANGLE_RAD = 1e9      # track angles may be unwrapped over long runs
 MAX_FREQUENCY_HZ = 1e6         # circle shape
 MAX_TIME_OFFSET_S = 1e6        # [[imu]] time_offset_s: a clock offset, not a second epoch
-MAX_IMUS = 64                  # each IMU adds its lines to the kernel; compile time grows with them
+MAX_IMUS = 256                 # beyond kernel.INLINE_IMUS, an IMU is a kernel function: ~0.3 s CPU compile each
 # Time stamps t0 + k/rate are float64: the spacing of floats at the latest stamp must stay below this
 # fraction of the sample period, or stamps collide (t0_s = 1e16 s: spacing 2 s, every stamp equal).
 TIME_RESOLUTION = 1e-3

@@ -77,17 +77,22 @@ class Simulation:
     def trial(kernel, scene: Scene, attitude: bool, truth: bool, increments: int = 0) -> None:
         """Call a freshly loaded kernel on no sample with the argument types `block` uses (numba compiles on
         the first call; the cache publishes only compiled kernels)."""
+        kernel(*Simulation.trial_args(scene, attitude, truth, increments))
+
+    @staticmethod
+    def trial_args(scene: Scene, attitude: bool, truth: bool, increments: int = 0) -> tuple:
+        """Arguments for no sample, of the types `block` passes (the machine-code export is typed from them)."""
         n_imu = len(scene.imus)
         plan = EffectPlan(scene)
         sampled = isinstance(scene.trajectory, SampledData)
         empty = np.zeros((1, 0, 3))
-        kernel(np.int64(0), np.int64(0), np.int64(0), empty if sampled else _EMPTY3,
-               empty if isinstance(scene.attitude, SampledData) else _EMPTY3, np.zeros(4),
-               plan.keys(0), plan.initial_state(0), np.zeros((n_imu, 0, 3)), np.zeros((n_imu, 0, 3)),
-               np.zeros((n_imu, 0, 4)) if attitude else _EMPTY3,
-               *([np.zeros((0, 3))] * 5 if truth else [_EMPTY2] * 5),
-               *([np.zeros((n_imu, 0, 3))] * 2 if truth and plan.bias_truth else [_EMPTY3] * 2),
-               *([np.zeros((n_imu, 0, 3))] * 2 if increments else []))
+        return (np.int64(0), np.int64(0), np.int64(0), empty if sampled else _EMPTY3,
+                empty if isinstance(scene.attitude, SampledData) else _EMPTY3, np.zeros(4),
+                plan.keys(0), plan.initial_state(0), np.zeros((n_imu, 0, 3)), np.zeros((n_imu, 0, 3)),
+                np.zeros((n_imu, 0, 4)) if attitude else _EMPTY3,
+                *([np.zeros((0, 3))] * 5 if truth else [_EMPTY2] * 5),
+                *([np.zeros((n_imu, 0, 3))] * 2 if truth and plan.bias_truth else [_EMPTY3] * 2),
+                *([np.zeros((n_imu, 0, 3))] * 2 if increments else []))
 
     @staticmethod
     def _series(part, order: int, where: str):

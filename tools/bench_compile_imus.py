@@ -1,8 +1,9 @@
 """Cold compile time of a scene's kernel against its number of IMUs (each with its own lever arm and mounting, so
 every IMU adds code): `generate` with an empty kernel cache, one fresh process per count. Prints wall and CPU
-seconds per count and the ratio to one IMU; asserts nothing. A count that exceeds --timeout is reported as such.
+seconds per count and the ratio to the first count; asserts nothing. A count that exceeds --timeout is reported as
+such. --numba-only adds, interleaved, the same compile without the machine-code export (IMU_EMULATOR_NATIVE=0).
 
-    .venv/bin/python tools/bench_compile_imus.py [--counts 1 2 4 8 16] [--timeout 300]
+    .venv/bin/python tools/bench_compile_imus.py [--counts 1 2 4 8 16] [--timeout 300] [--numba-only]
 """
 from __future__ import annotations
 
@@ -42,13 +43,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--counts", type=int, nargs="*", default=[1, 2, 4, 8, 16])
     parser.add_argument("--timeout", type=float, default=300.0)
+    parser.add_argument("--numba-only", action="store_true",
+                        help="also time each count with IMU_EMULATOR_NATIVE=0 (no machine-code export), interleaved")
     args = parser.parse_args()
-    base = None
-    for n in args.counts:
+    base = {}
+    variants = [("", "1")] + ([(" (numba only)", "0")] if args.numba_only else [])
+    for n, (label, native) in ((n, v) for n in args.counts for v in variants):
         with tempfile.TemporaryDirectory() as tmp:
             scene = Path(tmp) / f"imus{n}.toml"
             scene.write_text(scene_text(n))
-            env = dict(os.environ, IMU_EMULATOR_CACHE=str(Path(tmp) / "cache"))
+            env = dict(os.environ, IMU_EMULATOR_CACHE=str(Path(tmp) / "cache"), IMU_EMULATOR_NATIVE=native)
             started = time.monotonic()
             try:
                 proc = subprocess.Popen([sys.executable, "-m", "imu_emulator", "generate", str(scene), "-o",
@@ -60,12 +64,15 @@ def main() -> None:
                     proc.wait()
             wall = time.monotonic() - started
             if usage is None:
-                print(f"{n:4d} IMUs: more than {args.timeout:.0f} s (stopped)")
+                print(f"{n:4d} IMUs{label}: more than {args.timeout:.0f} s (stopped)")
+                continue
+            if os.waitstatus_to_exitcode(status):
+                print(f"{n:4d} IMUs{label}: failed: {proc.stderr.read().decode().strip()}")
                 continue
             cpu = usage.ru_utime + usage.ru_stime
-            base = base or cpu
-            print(f"{n:4d} IMUs: {wall:7.1f} s wall {cpu:7.1f} s CPU  ({cpu / base:.1f}x one IMU's CPU, "
-                  f"{cpu / n:.2f} s CPU per IMU)", flush=True)
+            base.setdefault(label, cpu)
+            print(f"{n:4d} IMUs{label}: {wall:7.1f} s wall {cpu:7.1f} s CPU  ({cpu / base[label]:.1f}x the first "
+                  f"count's CPU, {cpu / n:.2f} s CPU per IMU)", flush=True)
     print(f"(1-minute load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs)")
 
 

@@ -1,6 +1,11 @@
 """Encoding speed of every registered wire format: batch (packets/s over N samples) and single sample.
 
     .venv/bin/python tools/bench_encode.py [--samples 3600000] [--formats mavlink-highres,dronecan-rawimu]
+    .venv/bin/python tools/bench_encode.py --per-sample [--formats ...]
+
+--per-sample: one sample at a time as devices encode (a view of row i of a block, firmware_protocols.devices.base
+.single), the encoders' functions run as machine code (machine_code.lazy) and through numba's dispatcher,
+interleaved in one process: thread CPU and wall time per sample, min/median of 7 rounds of 1000 samples each.
 
 Prints figures; asserts nothing. Samples are random but in range, with every optional field given.
 """
@@ -36,12 +41,45 @@ def count(result) -> tuple[int, str]:
     return len(result), "frames"
 
 
+def per_sample(names: list[str], rounds: int = 7, per_round: int = 1000) -> None:
+    import statistics
+    from firmware_protocols.devices.base import single
+    from machine_code import lazy
+    block = make_samples(per_round, np.random.default_rng(1))
+    print(f"{'format':24s} {'path':13s} {'CPU µs/sample':>20s} {'wall µs/sample':>20s}   (min/median)")
+    for name in names:
+        encoder = fp.create_encoder(name)
+        times = {True: [], False: []}
+        for native in (True, False):      # compile or load both first
+            lazy.NATIVE = native
+            encoder.encode(single(block, 0))
+        for _ in range(rounds):
+            for native in (True, False):
+                lazy.NATIVE = native
+                cpu, wall = time.thread_time_ns(), time.perf_counter_ns()
+                for i in range(per_round):
+                    encoder.encode(single(block, i))
+                times[native].append(((time.thread_time_ns() - cpu) / per_round / 1e3,
+                                      (time.perf_counter_ns() - wall) / per_round / 1e3))
+        for native in (True, False):
+            cpu = [c for c, _ in times[native]]
+            wall = [w for _, w in times[native]]
+            path = "machine code" if native else "numba"
+            print(f"{name:24s} {path:13s} {min(cpu):9.1f}/{statistics.median(cpu):<9.1f}"
+                  f" {min(wall):9.1f}/{statistics.median(wall):<9.1f}")
+    lazy.NATIVE = True
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--samples", type=int, default=3_600_000)
     parser.add_argument("--formats", default="", help="comma-separated names (default: all)")
     parser.add_argument("--single-repeat", type=int, default=20000)
+    parser.add_argument("--per-sample", action="store_true", help="machine code against numba, one sample at a time")
     args = parser.parse_args()
+    if args.per_sample:
+        per_sample([n for n in args.formats.split(",") if n] or list(fp.formats()))
+        return
 
     rng = np.random.default_rng(1)
     big = make_samples(args.samples, rng)

@@ -1,5 +1,6 @@
 """Start-up cost of the command line, warm cache: `generate examples/circle.toml -o x.npz` (600 s at 1 kHz) end to
-end, and the time from launching `stream` to its first packet on a pty. Each run is a fresh process; the two are
+end (kernel loaded as machine code, and with IMU_EMULATOR_NATIVE=0 from numba's cache), and the time from
+launching `stream` to its first packet on a pty. Each run is a fresh process; the two are
 interleaved; wall time and the child's CPU time (user + sys) are printed as min/median/max. With --importtime,
 also the slowest imports of one `generate` (python -X importtime). Prints figures, asserts nothing.
 
@@ -35,9 +36,13 @@ def run_timed(args, env) -> tuple[float, float]:
     return wall, usage.ru_utime + usage.ru_stime
 
 
-def first_packet(directory: Path) -> float:
-    proc, fd, started = launch(directory, 1000, 1.0, directory / "first.json")
-    return read_until_exit(proc, fd) - started
+def first_packet(directory: Path, native: bool = True) -> float:
+    os.environ["IMU_EMULATOR_NATIVE"] = "1" if native else "0"     # launch() passes our environment on
+    try:
+        proc, fd, started = launch(directory, 1000, 1.0, directory / "first.json")
+        return read_until_exit(proc, fd) - started
+    finally:
+        del os.environ["IMU_EMULATOR_NATIVE"]
 
 
 def summary(values, unit="s") -> str:
@@ -74,18 +79,28 @@ def main() -> None:
             wall, cpu = run_timed([sys.executable, "-m", "imu_emulator", "generate", "examples/helix.toml", "-o",
                                    str(tmp / "h.npz"), "--quiet"], env)
             print(f"cold generate examples/helix.toml (compiles its kernel): {wall:.2f} s wall, {cpu:.2f} s CPU")
+        numba_env = dict(env, IMU_EMULATOR_NATIVE="0")     # kernels and encoders from numba's own cache
         run_timed(generate, env)          # warm the kernel caches
+        run_timed(generate, numba_env)
         first_packet(tmp)
-        gen_wall, gen_cpu, packet = [], [], []
+        first_packet(tmp, native=False)
+        gen_wall, gen_cpu = {"machine code": [], "numba": []}, {"machine code": [], "numba": []}
+        packet = {"machine code": [], "numba": []}
         for _ in range(args.repeats):     # interleaved, the machine is shared
-            wall, cpu = run_timed(generate, env)
-            gen_wall.append(wall)
-            gen_cpu.append(cpu)
-            packet.append(first_packet(tmp))
+            for name, variant_env in (("machine code", env), ("numba", numba_env)):
+                wall, cpu = run_timed(generate, variant_env)
+                gen_wall[name].append(wall)
+                gen_cpu[name].append(cpu)
+                packet[name].append(first_packet(tmp, native=name == "machine code"))
         load = os.getloadavg()[0]
-        print(f"warm generate examples/circle.toml -o x.npz (600 000 samples): wall {summary(gen_wall)}, "
-              f"CPU {summary(gen_cpu)}")
-        print(f"warm stream, launch to first packet on a pty: wall {summary(packet)}")
+        for name in gen_wall:
+            print(f"warm generate examples/circle.toml -o x.npz (600 000 samples), kernel loaded as {name}: "
+                  f"wall {summary(gen_wall[name])}, CPU {summary(gen_cpu[name])}")
+        ratio = statistics.median(gen_cpu["numba"]) / statistics.median(gen_cpu["machine code"])
+        print(f"  CPU median ratio numba / machine code: {ratio:.2f}")
+        for name in packet:
+            print(f"warm stream (mavlink-highres, 1 kHz), launch to first packet on a pty, {name}: "
+                  f"wall {summary(packet[name])}")
         print(f"(min/median/max of {args.repeats}; 1-minute load average {load:.1f} on {os.cpu_count()} CPUs)")
         if args.importtime:
             importtime(env, tmp / "x.npz")

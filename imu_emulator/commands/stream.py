@@ -6,8 +6,6 @@ from dataclasses import replace
 import math
 
 from imu_emulator.commands.shared import load_scene_with_warnings, number
-from imu_emulator.streaming import StreamError
-from imu_emulator.transport import TargetOptions
 
 # Beyond any UART or CAN bus there is, and far from where the numbers stop being exact.
 _MAX_RATE = 100_000_000
@@ -54,6 +52,7 @@ def register(subparsers) -> None:
     p.set_defaults(func=cmd_stream)
 
 def _option_value(key: str, text: str):
+    from imu_emulator.streaming import StreamError    # here: importing streaming costs every command start-up
     lowered = text.lower()
     if lowered in ("true", "false"):
         return lowered == "true"
@@ -71,6 +70,7 @@ def _option_value(key: str, text: str):
 
 
 def _parse_options(pairs) -> dict:
+    from imu_emulator.streaming import StreamError
     options = {}
     for pair in pairs:
         key, sep, value = pair.partition("=")
@@ -97,8 +97,9 @@ def _stream(args, stats) -> None:
     from imu_emulator.progress import CompileStatus
     from imu_emulator.simulation import Simulation
     from imu_emulator.increments import DEFAULT_NODES
-    from imu_emulator.streaming import (RunOptions, StreamConfig, needs_increments, needs_truth, run_streams,
-                                        streams_from_tables)
+    from imu_emulator.streaming import (RunOptions, StreamConfig, StreamError, needs_increments, needs_truth,
+                                        run_streams, streams_from_tables)
+    from imu_emulator.transport import TargetOptions
 
     scene = load_scene_with_warnings(args.scene)
     if args.duration is not None and round(args.duration * scene.rate_hz) < 1:

@@ -1,0 +1,415 @@
+"""numba functions kept as machine code that loads without numba.
+
+Loading a function from numba's own cache costs about a second of CPU before the first call: importing numba and
+initializing its CPU target (typing and lowering registries), all for a function compiled long ago. Here the
+function is compiled once behind a C-ABI wrapper (a `numba.cfunc` taking the call's argument tuple as a PyObject*,
+a table of expected types, return pointers and a work area); the object code of that wrapper, which contains
+everything it calls (numba links the libraries of the callees into it), is written to a file, and later runs load
+it with llvmlite's JIT linker alone. The few C helpers numba's code may call on error paths (numba._helperlib, the
+NRT) are loaded as plain extension modules, without importing the numba package. The wrapper reads the tuple in
+place (numpy's array struct, scalar objects' values), so a call from Python costs one ctypes call, about what
+numba's dispatcher costs; the struct layout is checked once per process (_array_struct_as_expected).
+
+The wrapper is built from the argument values of a trial call, not from a hand-kept list: whatever arguments a
+function grows, an integer/float scalar or an array of a plain dtype and any rank is passed through, and it may
+return nothing, a number or a tuple of numbers. Arrays the function allocates live in numba's runtime (NRT): its
+C helpers and its reference-counting functions are loaded without the numba package. Trailing scratch arguments
+the caller does not pass may be declared (`scratch` shapes): the loader allocates them per call.
+
+If anything fails (another numba's private API, a platform llvmlite cannot link for, a damaged file), `export`
+returns False, `load` returns None and the caller keeps numba's dispatcher.
+"""
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+_MAGIC = b"IMUK5"     # 5: the argument tuple passed as PyObject* (the entry reads it in place)
+_ENTRY = "entry_c"
+_DTYPES = ("float64", "float32", "int64", "uint64", "int32", "uint32", "int16", "uint16", "int8", "uint8")
+_symbols_added = False
+REFUSED = object()      # NativeFunction.call_checked: an array argument not of the type compiled for
+
+
+def _describe(value) -> list:
+    """How one argument is passed: ["scalar", dtype] or ["array", dtype, ndim] (numba's own typing of it)."""
+    if isinstance(value, np.ndarray):
+        if value.dtype.name not in _DTYPES or value.ndim == 0:
+            raise TypeError(f"no native passing for {value.dtype} arrays")
+        return ["array", value.dtype.name, value.ndim]
+    if isinstance(value, (bool, np.bool_)):
+        raise TypeError("no native passing for booleans")
+    if isinstance(value, np.generic) and value.dtype.name in _DTYPES:
+        return ["scalar", value.dtype.name]
+    if isinstance(value, int):
+        return ["scalar", "int64"]
+    if isinstance(value, float):
+        return ["scalar", "float64"]
+    raise TypeError(f"no native passing for {type(value).__name__}")
+
+
+def _expected(kinds: list) -> list[int]:
+    """What the entry compares with, in its order: numpy's ndarray type, then per argument four words: its code
+    (0 array, 1 int64, 2 float64, 3 another scalar), the address of its dtype (arrays) or of its numpy scalar
+    type, that of the Python type numba types the same (int, float; else 0, matching nothing) or for an array its
+    dtype's scalar type (an equal dtype that is another object), its rank.
+    Addresses differ per process: the table is built at load and passed at each call."""
+    expect = [id(np.ndarray)]
+    for kind in kinds:
+        dtype = np.dtype(kind[1])
+        if kind[0] == "array":
+            expect += [0, id(dtype), id(dtype.type), int(kind[2])]
+        else:
+            code = {"int64": 1, "float64": 2}.get(kind[1], 3)
+            expect += [code, id(dtype.type), id({1: int, 2: float}[code]) if code < 3 else 0, 0]
+    return expect
+
+
+def _work_size(kinds: list) -> int:
+    """The entry's per-call words: a pointer per argument, an int per argument, then the arrays' dimensions."""
+    return 2 * len(kinds) + sum(int(k[2]) for k in kinds if k[0] == "array")
+
+
+# The entry's check of every argument, one loop whatever the arguments (typing unrolled per-argument checks cost
+# numba seconds for a kernel's 20 arguments): it fills work with each argument's data pointer (an array's data, a
+# scalar's value: a numpy scalar's or a Python float's at byte 16, a Python int of up to two 30-bit digits read
+# into work) and the arrays' dimensions, or returns 1 if one is not of the type the code was compiled for.
+_CHECK = """
+    x = numba.carray(expect, (N_EXPECT,), np.int64)
+    t = numba.carray(args, (3 + N_ARGS,), np.int64)
+    w = numba.carray(work, (N_WORK,), np.int64)
+    if t[2] != N_ARGS:
+        return 1
+    s = 2 * N_ARGS
+    for j in range(N_ARGS):
+        o = t[3 + j]
+        h = numba.carray(_address(o), (9,), np.int64)
+        code, own, python = x[1 + 4 * j], x[2 + 4 * j], x[3 + 4 * j]
+        if code == 0:
+            nd = x[4 + 4 * j]
+            # PyArrayObject words: 1 type, 2 data, 3 nd (int), 4 dimensions, 7 descr, 8 flags (1: C-contiguous)
+            if h[1] != x[0] or (h[3] & 0xFFFFFFFF) != nd or (h[8] & 1) == 0:
+                return 1
+            if h[7] != own:
+                # another dtype object: the same if its scalar type is (PyArray_Descr word 2) in native order
+                # (byte 26: '>' is the only foreign order on a little-endian machine)
+                descr = numba.carray(_address(h[7]), (4,), np.int64)
+                order = numba.carray(_address(h[7] + 24), (4,), np.uint8)
+                if descr[2] != python or order[2] == 62:
+                    return 1
+            w[j] = h[2]
+            dims = numba.carray(_address(h[4]), (nd,), np.int64)
+            for d in range(nd):
+                w[s + d] = dims[d]
+            s += nd
+        elif h[1] == own or (code == 2 and h[1] == python):
+            w[j] = o + 16
+        elif code == 1 and h[1] == python and -2 <= h[2] <= 2:
+            g = numba.carray(_address(o + 24), (2,), np.uint32)
+            value = np.int64(0)
+            if h[2] != 0:
+                value = np.int64(g[0])
+            if h[2] == 2 or h[2] == -2:
+                value |= np.int64(g[1]) << 30
+            if h[2] < 0:
+                value = -value
+            w[N_ARGS + j] = value
+            w[j] = _integer(work) + 8 * (N_ARGS + j)
+        else:
+            return 1
+"""
+
+
+def _wrapper_source(kinds: list, n_returns: int | None) -> str:
+    """The cfunc taking the call's argument tuple as a PyObject* and reading it in place (_CHECK), so that a call
+    marshals nothing in Python; then `expect` (_expected), the return pointers and a per-thread work area. It
+    returns 1 without calling the function when an argument is not of the type (rank, C-contiguity) the code
+    was compiled for (the caller converts it and calls again), else 0, having stored what the function returns
+    (None: nothing; 0: a number; n: a tuple of n). Only integers reach this source; dtypes are looked up by
+    position in the namespace (D0, ..., R0, ...)."""
+    n = len(kinds)
+    lines, at = [], 2 * n
+    for i, kind in enumerate(kinds):
+        if kind[0] == "array":
+            nd = int(kind[2])
+            shape = "".join(f"w[{at + d}], " for d in range(nd))
+            lines.append(f"    a{i} = numba.carray(_address(w[{i}]), ({shape}), D{i})")
+            at += nd
+        else:
+            lines.append(f"    a{i} = numba.carray(_address(w[{i}]), (1,), D{i})[0]")
+    call = f"function({', '.join(f'a{i}' for i in range(n))})"
+    if n_returns is None:
+        lines.append(f"    {call}")
+    elif n_returns == 0:     # a single number
+        lines += [f"    r = {call}", "    numba.carray(rets[0], (1,), R0)[0] = r"]
+    else:
+        lines.append(f"    r = {call}")
+        lines += [f"    numba.carray(rets[{j}], (1,), R{j})[0] = r[{j}]" for j in range(n_returns)]
+    lines.append("    return 0")
+    return "\n".join([
+        "@numba.cfunc(SIGNATURE, nogil=True, error_model='numpy')",
+        f"def {_ENTRY}(args, expect, rets, work):",
+    ]) + _CHECK + "\n".join(lines) + "\n"
+
+
+def _address_intrinsic():
+    """numba: an int64 address as a void pointer (carray takes pointers only)."""
+    from numba import types
+    from numba.core import cgutils
+    from numba.extending import intrinsic
+
+    @intrinsic
+    def _address(typingctx, value):
+        def codegen(context, builder, signature, args):
+            return builder.inttoptr(args[0], cgutils.voidptr_t)
+        return types.voidptr(types.int64), codegen
+
+    @intrinsic
+    def _integer(typingctx, pointer):
+        def codegen(context, builder, signature, args):
+            return builder.ptrtoint(args[0], cgutils.intp_t)
+        return types.int64(types.voidptr), codegen
+    return _address, _integer
+
+
+def _returns(function, args) -> tuple[int | None, list[str]]:
+    """What `function` compiled for these arguments returns: (None, []) nothing, (0, [dtype]) one number,
+    (n, dtypes) a tuple of n numbers."""
+    import numba
+    from numba import types
+    from numba.np.numpy_support import as_dtype
+    signature = tuple(numba.typeof(a) for a in args)
+    function.compile(signature)
+    result = function.overloads[signature].signature.return_type
+    if result == types.none:
+        return None, []
+    if isinstance(result, types.BaseTuple):
+        return len(result), [as_dtype(t).name for t in result]
+    return 0, [as_dtype(result).name]
+
+
+def export(function, args: tuple, path: Path, meta: dict) -> bool:
+    """Compile `function` (a numba dispatcher) for the types of `args` behind a C entry, and write its object
+    code with `meta` (JSON) to `path` atomically. False if this numba cannot."""
+    try:
+        import numba
+        from numba import types
+        kinds = [_describe(a) for a in args]
+        args = tuple(np.ascontiguousarray(a) if isinstance(a, np.ndarray) else a for a in args)
+        n_returns, returns = _returns(function, args)
+        if any(name not in _DTYPES for name in returns):
+            return False
+        address, integer = _address_intrinsic()
+        namespace = {"numba": numba, "np": np, "function": function, "_address": address, "_integer": integer,
+                     "N_EXPECT": len(_expected(kinds)), "N_ARGS": len(kinds), "N_WORK": _work_size(kinds),
+                     "SIGNATURE": types.int32(types.voidptr, types.voidptr, types.CPointer(types.voidptr),
+                                              types.voidptr)}
+        namespace.update({f"D{i}": np.dtype(k[1]).type for i, k in enumerate(kinds)})
+        namespace.update({f"R{j}": np.dtype(name).type for j, name in enumerate(returns)})
+        exec(compile(_wrapper_source(kinds, n_returns), f"<native wrapper {path.name}>", "exec"), namespace)
+        entry = namespace[_ENTRY]
+        code = bytes(entry._library._get_compiled_object())      # numba's private API: guarded
+        name = entry.native_name
+    except Exception:      # noqa: BLE001 -- any failure means: keep numba's dispatcher
+        return False
+    header = json.dumps({"entry": name, "kinds": kinds, "returns": [n_returns, returns], "meta": meta}).encode()
+    body = len(header).to_bytes(4, "little") + header + code
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}-{os.urandom(4).hex()}")
+    tmp.write_bytes(_MAGIC + hashlib.sha256(body).digest() + body)
+    os.replace(tmp, path)     # a concurrent reader sees the whole file or none
+    return True
+
+
+def kinds_of(args) -> list | None:
+    """How these arguments would be passed, or None if one of them cannot be (the caller uses numba)."""
+    try:
+        return [_describe(a) for a in args]
+    except TypeError:
+        return None
+
+
+_CTYPES = {"float64": "c_double", "float32": "c_float", "int64": "c_int64", "uint64": "c_uint64", "int32": "c_int32",
+           "uint32": "c_uint32", "int16": "c_int16", "uint16": "c_uint16", "int8": "c_int8", "uint8": "c_uint8"}
+
+
+def _array_struct_as_expected() -> bool:
+    """Whether numpy's array struct lies where the entry reads it (64-bit CPython, little-endian): checked on a
+    view, once per process. If not, nothing loads and numba's dispatcher runs."""
+    import ctypes
+    import sys
+    if sys.byteorder != "little" or ctypes.sizeof(ctypes.c_void_p) != 8:
+        return False
+    probe = np.zeros((4, 3))[1:3]
+    words = (ctypes.c_int64 * 9).from_address(id(probe))
+    dims = (ctypes.c_int64 * 2).from_address(words[4])
+    arrays = (words[1] == id(np.ndarray) and words[2] == probe.ctypes.data and words[3] & 0xFFFFFFFF == 2
+              and tuple(dims) == (2, 3) and words[7] == id(probe.dtype) and words[8] & 1 == 1)
+    big, negative, value, real = 2 ** 40 + 3, -5, np.uint64(7), 2.5
+    digits = (ctypes.c_uint32 * 2).from_address(id(big) + 24)
+    held = (big, negative, value, real)
+    items = (ctypes.c_int64 * 7).from_address(id(held))
+    scalars = (items[2] == 4 and items[3] == id(big) and (ctypes.c_int64 * 3).from_address(id(big))[2] == 2
+               and digits[0] | digits[1] << 30 == big and (ctypes.c_int64 * 3).from_address(id(negative))[2] == -1
+               and (ctypes.c_uint64 * 3).from_address(id(value))[2] == 7
+               and (ctypes.c_double * 3).from_address(id(real))[2] == 2.5)
+    native_, swapped = np.dtype("=f8"), np.dtype(">f8")
+    dtypes = ((ctypes.c_int64 * 3).from_address(id(native_))[2] == id(np.float64)
+              and (ctypes.c_uint8 * 32).from_address(id(native_))[26] in (ord("="), ord("<"))
+              and (ctypes.c_uint8 * 32).from_address(id(swapped))[26] == ord(">"))
+    return arrays and scalars and dtypes
+
+
+class NativeFunction:
+    """Calls the loaded machine code like the numba dispatcher: f(*args) (then the declared scratch arrays).
+
+    The entry reads the argument tuple in place (numpy's array struct, scalars' values), so a call costs one
+    ctypes call with one object, less than numba's dispatcher typing each argument. An argument of another type
+    (an array of another dtype or not C-contiguous, a large Python int) is refused by the entry: it is
+    converted, passed again and (arrays) written back."""
+
+    def __init__(self, address: int, kinds: list, returns: list, scratch: list):
+        import ctypes
+        import threading
+        self._call = ctypes.CFUNCTYPE(ctypes.c_int32, ctypes.py_object, ctypes.c_void_p, ctypes.c_void_p,
+                                      ctypes.c_void_p)(address)
+        self.kinds = kinds
+        self.n_returns, self.returns = returns
+        self.scratch = [tuple(int(x) for x in shape) for shape in scratch]
+        self._dtypes = [np.dtype(k[1]) for k in kinds]
+        # the dtype objects numpy uses for new arrays of these types (singletons): their addresses for the entry
+        self._expect = np.array(_expected(kinds), dtype=np.int64)
+        self._expect_address = self._expect.ctypes.data
+        self._local = threading.local()
+
+    def _rets(self):
+        local = self._local
+        if not hasattr(local, "address"):
+            import ctypes
+            # ctypes numbers: .value is the Python int or float numba's dispatcher would return
+            local.results = [getattr(ctypes, _CTYPES[name])() for name in self.returns]
+            local.rets = (ctypes.c_void_p * max(len(self.returns), 1))(*[ctypes.addressof(r) for r in local.results])
+            local.address = ctypes.addressof(local.rets)
+            local.work = np.zeros(max(_work_size(self.kinds), 1), dtype=np.int64)
+            local.work_address = local.work.ctypes.data
+        return local
+
+    def _returned(self, local):
+        if self.n_returns is None:
+            return None
+        if self.n_returns == 0:
+            return local.results[0].value
+        return tuple([r.value for r in local.results])
+
+    def call_checked(self, args):
+        """f(*args) for a function without scratch, or REFUSED when an array is not of the compiled type."""
+        local = self._rets()
+        if self._call(args, self._expect_address, local.address, local.work_address):
+            return REFUSED
+        return self._returned(local)
+
+    def __call__(self, *args):
+        if len(args) + len(self.scratch) != len(self.kinds):
+            raise TypeError(f"takes {len(self.kinds) - len(self.scratch)} arguments, got {len(args)}")
+        if self.scratch:
+            args = args + tuple(np.empty(shape) for shape in self.scratch)
+        local = self._rets()
+        if self._call(args, self._expect_address, local.address, local.work_address):
+            self._convert_and_call(args, local)
+        return self._returned(local)
+
+    def _convert_and_call(self, args, local) -> None:
+        """The machine code indexes C-contiguous arrays of its dtypes: work on copies, written back after."""
+        converted, copies = list(args), []
+        for i, value in enumerate(args):
+            kind = self.kinds[i]
+            if kind[0] != "array":
+                converted[i] = self._dtypes[i].type(value)
+                continue
+            if not isinstance(value, np.ndarray) or value.ndim != kind[2]:
+                raise TypeError(f"argument {i}: expected an array of {kind[2]} dimensions")
+            if type(value) is not np.ndarray or value.dtype is not self._dtypes[i] or not value.flags.c_contiguous:
+                contiguous = np.empty(value.shape, dtype=self._dtypes[i])     # numpy's own dtype object
+                contiguous[...] = value
+                converted[i] = contiguous
+                copies.append((value, contiguous))
+        if self._call(tuple(converted), self._expect_address, local.address, local.work_address):
+            raise TypeError("arguments not of the types the machine code was compiled for")
+        for original, contiguous in copies:
+            if original.flags.writeable:
+                original[...] = contiguous
+
+
+def _numba_extension(name: str, relative: str):
+    """A numba C extension module loaded from its file, without running numba/__init__.py."""
+    spec = importlib.util.find_spec("numba")
+    if spec is None or not spec.submodule_search_locations:
+        raise ImportError("numba is not installed")
+    folder = Path(list(spec.submodule_search_locations)[0]) / Path(relative).parent
+    stem = Path(relative).name + "."
+    candidates = [p for p in folder.iterdir() if p.name.startswith(stem) and p.suffix in (".so", ".pyd")]
+    if not candidates:
+        raise ImportError(f"numba extension {relative} not found")
+    ext_spec = importlib.util.spec_from_file_location(name, candidates[0])
+    module = importlib.util.module_from_spec(ext_spec)
+    ext_spec.loader.exec_module(module)
+    return module
+
+
+def _jit_engine():
+    """A fresh llvmlite MCJIT engine (one per object: objects may define the same linked-in helpers), with the
+    symbols numba-compiled code refers to (the names numba itself registers) added once per process."""
+    global _symbols_added
+    import llvmlite.binding as llvm
+    if not _symbols_added:
+        import builtins
+        llvm.initialize_native_target()
+        llvm.initialize_native_asmprinter()
+        helpers = _numba_extension("numba._helperlib", "_helperlib")
+        nrt = _numba_extension("numba.core.runtime._nrt_python", "core/runtime/_nrt_python")
+        llvm.add_symbol("_Py_NoneStruct", id(None))
+        for py_name, address in helpers.c_helpers.items():
+            llvm.add_symbol("numba_" + py_name, address)
+        for py_name, address in nrt.c_helpers.items():
+            llvm.add_symbol(py_name if py_name.startswith("_") else "NRT_" + py_name, address)
+        for obj in vars(builtins).values():
+            if isinstance(obj, type) and issubclass(obj, BaseException):
+                llvm.add_symbol(f"PyExc_{obj.__name__}", id(obj))
+        _symbols_added = True
+    machine = llvm.Target.from_default_triple().create_target_machine()
+    return llvm.create_mcjit_compiler(llvm.parse_assembly(""), machine)
+
+
+def load(path: Path) -> tuple[NativeFunction, dict] | None:
+    """The function `export` wrote to `path` and its `meta`, or None if there is none, it is damaged or it
+    cannot be linked here."""
+    try:
+        blob = path.read_bytes()
+    except OSError:
+        return None
+    body = blob[len(_MAGIC) + 32:]
+    if blob[:len(_MAGIC)] != _MAGIC or blob[len(_MAGIC):len(_MAGIC) + 32] != hashlib.sha256(body).digest():
+        return None
+    try:
+        import llvmlite.binding as llvm
+        size = int.from_bytes(body[:4], "little")
+        header = json.loads(body[4:4 + size])
+        engine = _jit_engine()
+        engine.add_object_file(llvm.ObjectFileRef.from_data(body[4 + size:]))
+        engine.finalize_object()
+        address = engine.get_function_address(header["entry"])
+        if not address:
+            return None
+        if not _array_struct_as_expected():
+            return None
+        meta = header["meta"]
+        function = NativeFunction(address, header["kinds"], header["returns"], meta.get("scratch", []))
+        function.engine = engine     # the machine code lives as long as its engine
+        return function, meta
+    except Exception:      # noqa: BLE001 -- a foreign object or llvmlite without MCJIT: compile again
+        return None

@@ -1,0 +1,130 @@
+"""numba functions kept as machine code (machine_code): what the loaded object computes equals what numba's
+dispatcher computes for the same source (the oracle), for scalars of several dtypes, arrays, tuple results and
+arrays allocated inside; warm runs import no numba; a damaged object is compiled again."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numba
+import numpy as np
+import pytest
+
+from machine_code import objects
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@numba.njit(cache=False)
+def _mixed(key, scale, values, out, n):
+    """uint64 and float32 inputs, an array written in place, a scratch array allocated, a tuple returned."""
+    tmp = np.zeros(3, dtype=np.float32)
+    total = 0.0
+    for i in range(n):
+        out[i] = values[i] * scale + float(key % np.uint64(7))
+        tmp[i % 3] += np.float32(out[i])
+        total += out[i]
+    return n, total, tmp[0]
+
+
+def test_exported_function_equals_numba_dispatcher(tmp_path):
+    values = np.linspace(-1.0, 2.0, 10)
+    args = (np.uint64(2**63 + 12345), np.float32(1.5), values, np.zeros(10), 8)
+    path = tmp_path / "mixed.o"
+    assert objects.export(_mixed, args, path, {"note": "x"})
+    function, meta = objects.load(path)
+    assert meta == {"note": "x"}
+    expected_out, got_out = np.zeros(10), np.zeros(10)
+    expected = _mixed(args[0], args[1], values, expected_out, 8)
+    got = function(args[0], args[1], values, got_out, 8)
+    assert got == expected and np.array_equal(got_out, expected_out)
+    # a view that is not contiguous is written through
+    wide = np.zeros((10, 2))
+    function(args[0], args[1], values, wide[:, 1], 8)
+    assert np.array_equal(wide[:, 1], expected_out) and not wide[:, 0].any()
+    with pytest.raises(TypeError):
+        function(args[0], args[1], values[None, :], got_out, 8)
+
+
+@pytest.mark.parametrize("damage", [lambda b: b[: len(b) // 2], lambda b: b[:-50] + bytes([b[-50] ^ 1]) + b[-49:],
+                                    lambda b: b"garbage"])
+def test_damaged_object_does_not_load(tmp_path, damage):
+    path = tmp_path / "mixed.o"
+    assert objects.export(_mixed, (np.uint64(1), np.float32(1.0), np.zeros(3), np.zeros(3), 3), path, {})
+    path.write_bytes(damage(path.read_bytes()))
+    assert objects.load(path) is None
+
+
+def _run(code: str, cache: Path, native: bool = True) -> list:
+    env = {**os.environ, "IMU_EMULATOR_CACHE": str(cache), "IMU_EMULATOR_NATIVE": "1" if native else "0"}
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, env=env)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout.splitlines()[-1])     # after what the command itself printed
+
+
+def test_deferred_function_runs_without_numba_once_cached(tmp_path):
+    code = ("import sys, json; from imu_emulator.counter_rng import normals; "
+            "print(json.dumps([normals(2**64 - 5, 7, 6).tolist(), 'numba' in sys.modules]))")
+    first, second = _run(code, tmp_path), _run(code, tmp_path)
+    oracle = _run(code, tmp_path, native=False)              # numba's dispatcher on the same source
+    assert first[1] is True and second[1] is False and oracle[1] is True
+    assert first[0] == second[0] == oracle[0]
+    # damaged: numba compiles it again and rewrites it
+    (path,) = (tmp_path / "functions").glob("*.o")
+    path.write_bytes(path.read_bytes()[:100])
+    again = _run(code, tmp_path)
+    assert again == first and objects.load(path) is not None
+
+
+def test_warm_stream_imports_no_numba_and_sends_the_same_bytes(tmp_path):
+    scene = ROOT / "examples" / "circle.toml"
+
+    def stream_to(name: str) -> str:
+        return ("import sys, json; from imu_emulator.cli import main; "
+                f"main(['stream', {str(scene)!r}, '--format', 'mavlink-highres', '--to', "
+                f"{'file:' + str(tmp_path / name)!r}, '--speed', '0', '--duration', '0.5', '--quiet']); "
+                "print(json.dumps('numba' in sys.modules))")
+    assert _run(stream_to("cold.bin"), tmp_path / "cache") is True       # first run: compiles
+    assert _run(stream_to("warm.bin"), tmp_path / "cache") is False      # warm: machine code only
+    assert _run(stream_to("numba.bin"), tmp_path / "cache", native=False) is True
+    warm = (tmp_path / "warm.bin").read_bytes()
+    assert len(warm) > 0 and warm == (tmp_path / "numba.bin").read_bytes() == (tmp_path / "cold.bin").read_bytes()
+
+
+@numba.njit(cache=False)
+def _scaled_sum(values, k, x):
+    """Writes its array in place and returns what it read: a tuple of an int64 and a float64."""
+    values[0] += k * x
+    return k, values.sum()
+
+
+@pytest.mark.parametrize("case", ["plain", "numpy_scalars", "negative_two_digit_int", "int_beyond_two_digits",
+                                  "int_for_float", "not_contiguous", "other_dtype",
+                                  "equal_dtype_another_object", "byte_swapped"])
+def test_entry_reads_arguments_in_place_or_converts_them(tmp_path, case):
+    """The entry reads the argument tuple in place (numpy's array struct, scalars' values) and refuses what it was
+    not compiled for, which the caller converts: either way the numbers are numba's dispatcher's (the oracle, run
+    on a copy of the same arguments)."""
+    compiled_for = (np.zeros((2, 3)), 5, 2.0)
+    path = tmp_path / "f.o"
+    assert objects.export(_scaled_sum, compiled_for, path, {})
+    function = objects.load(path)[0]
+    base = np.arange(12.0).reshape(4, 3)
+    args = {"plain": (base[:2].copy(), 7, 0.5), "numpy_scalars": (base[:2].copy(), np.int64(-3), np.float64(1.25)),
+            "negative_two_digit_int": (base[:2].copy(), -(2**40 + 9), 1.0),
+            "int_beyond_two_digits": (base[:2].copy(), 2**62 + 1, 1.0),
+            "int_for_float": (base[:2].copy(), 2, 3),
+            "not_contiguous": (base[::2], 3, 1.5), "other_dtype": (base[:2].astype(np.float32), 4, 0.25),
+            # a dtype equal to float64 but another object (as arrays from other libraries carry)
+            "equal_dtype_another_object": (base[:2].copy().view(np.dtype("=f8", metadata={"unit": "m"})), 2, 0.5),
+            "byte_swapped": (base[:2].astype(">f8"), 2, 0.5)}[case]
+    oracle_args = (np.array(args[0], dtype=np.float64), np.int64(args[1]), float(args[2]))
+    expected = _scaled_sum(*oracle_args)
+    got = function(*args)
+    assert got == expected and type(got[0]) is int and type(got[1]) is float
+    assert np.array_equal(args[0], oracle_args[0].astype(args[0].dtype))      # written back in place
+    if case == "not_contiguous":
+        assert np.array_equal(base[1], [3.0, 4.0, 5.0])                       # rows between untouched
