@@ -21,7 +21,9 @@ DETERMINISTIC = [name for name, effect in EFFECTS.items() if not effect.random]
 
 
 def _scene(imus: list[dict]):
-    return scene_from_dict({"scene": {"rate_hz": 200, "duration_s": 2.0},
+    # every deterministic effect includes the Earth's, which need the tangent point
+    return scene_from_dict({"scene": {"rate_hz": 200, "duration_s": 2.0,
+                                      "origin": {"lat_deg": 47.4, "lon_deg": 8.5, "height_m": 400.0}},
                             "trajectory": {"x": "3*cos(t)", "y": "2*sin(1.3*t)", "z": "0.2*t*t"},
                             "attitude": {"roll": "0.1*sin(t)", "pitch": "0.05*t", "yaw": "0.2*t"},
                             "imu": imus, "effects": {name: True for name in DETERMINISTIC}})
