@@ -6,7 +6,7 @@ import time
 import can
 import pytest
 
-from test_stream_can import _multicast_route_or_skip
+from test_stream_can import _multicast_route_or_skip, free_udp_port
 from test_stream_support import Emulator, write_scene
 
 j1939 = pytest.importorskip("j1939")
@@ -34,11 +34,12 @@ def _pgn(can_id):
 def test_address_claim_requests_nack_and_a_lost_contention(tmp_path):
     _multicast_route_or_skip()
     scene_path = write_scene(tmp_path, rate=50, duration=60.0)
-    bus = can.Bus(interface="udp_multicast", channel=GROUP)
+    port = free_udp_port()
+    bus = can.Bus(interface="udp_multicast", channel=GROUP, port=port)
     ecu = j1939.ElectronicControlUnit()
-    ecu.connect(interface="udp_multicast", channel=GROUP)
+    ecu.connect(interface="udp_multicast", channel=GROUP, port=port)
     try:
-        with Emulator(scene_path, "--format", "j1939", "--to", f"can:udp_multicast:{GROUP}", "--duration", "40",
+        with Emulator(scene_path, "--format", "j1939", "--to", f"can:udp_multicast:{GROUP}:{port}", "--duration", "40",
                       "--option", f"ecu_name={OUR_NAME}") as emu:
             first = bus.recv(timeout=30)          # the stream runs (start-up may take seconds under load)
             assert first is not None

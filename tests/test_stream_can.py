@@ -1,5 +1,6 @@
 """CAN targets on a host without SocketCAN: a virtual SLCAN adapter on a pty, python-can udp_multicast,
 and capture logs. Readers are python-can in this (separate) process; dronecan decodes the transfers."""
+import socket
 import subprocess
 
 import can
@@ -58,13 +59,21 @@ def _multicast_route_or_skip():
             pytest.skip(f"no multicast route on lo and cannot add one ({' '.join(command)}: {done.stderr.strip()})")
 
 
+def free_udp_port() -> int:
+    """A UDP port nobody holds now. udp_multicast's fixed default port (43113) let two test runs on one host
+    hear each other's frames: a socket bound to the port receives every group joined on it."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("", 0))
+        return probe.getsockname()[1]
+
+
 def test_udp_multicast_to_reader_in_another_process(tmp_path):
     _multicast_route_or_skip()
-    group = "239.74.163.2"
-    bus = can.Bus(interface="udp_multicast", channel=group)
+    group, port = "239.74.163.2", free_udp_port()
+    bus = can.Bus(interface="udp_multicast", channel=group, port=port)
     try:
         scene_path = write_scene(tmp_path, rate=200, duration=5.0)
-        with Emulator(scene_path, "--format", "dronecan-rawimu", "--to", f"can:udp_multicast:{group}",
+        with Emulator(scene_path, "--format", "dronecan-rawimu", "--to", f"can:udp_multicast:{group}:{port}",
                       "--count", "200") as emu:
             frames = _receive(bus, limit=1400)
             code, err = emu.wait()

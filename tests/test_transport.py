@@ -19,7 +19,10 @@ from imu_emulator.transport.slcan_pty import slcan_lines
     ("serial:/dev/ttyUSB0", dict(kind="serial", rate=115200)),
     ("can:socketcan:vcan0", dict(kind="can", interface="socketcan", path="vcan0", rate=None)),
     ("can:slcan:/dev/ttyACM0@500000", dict(interface="slcan", path="/dev/ttyACM0", rate=500000)),
-    ("can:udp_multicast:239.74.163.2", dict(interface="udp_multicast", path="239.74.163.2")),
+    ("can:udp_multicast:239.74.163.2", dict(interface="udp_multicast", path="239.74.163.2", port=0)),
+    ("can:udp_multicast:239.74.163.2:43200", dict(interface="udp_multicast", path="239.74.163.2", port=43200)),
+    ("can:udp_multicast:[ff15::1]:43201", dict(interface="udp_multicast", path="ff15::1", port=43201)),
+    ("can:udp_multicast:ff15::1", dict(interface="udp_multicast", path="ff15::1", port=0)),
     ("udp:[::1]:14550", dict(kind="udp", path="::1", port=14550)),
     ("file:out/imu.blf", dict(kind="file", path="out/imu.blf")),
 ])
@@ -30,7 +33,8 @@ def test_parse_target(text, fields):
 
 
 @pytest.mark.parametrize("text", ["", "pty:x", "serial:", "serial:/dev/x@0", "can:virtual", "can::x", "udp:h:0",
-                                  "tcp:h:1"])
+                                  "tcp:h:1", "can:udp_multicast:239.1.2.3:0",
+                                  "can:udp_multicast:239.1.2.3:x", "can:udp_multicast:[ff15::1]"])
 def test_malformed_target_raises_target_error(text):
     with pytest.raises(TargetError):
         parse_target(text)

@@ -3,7 +3,8 @@
     pty                              new virtual serial port; prints the slave path (--link makes a symlink)
     serial:DEVICE[@BAUD]             serial port through pyserial (default 115200 baud)
     can:INTERFACE:CHANNEL[@BITRATE]  any python-can interface: socketcan:vcan0, virtual:ch0, slcan:/dev/ttyACM0,
-                                     udp_multicast:239.74.163.2; slcan:pty makes a virtual SLCAN adapter on a pty
+                                     udp_multicast:239.74.163.2[:PORT] ([GROUP]:PORT for IPv6 groups; python-can's
+                                     port 43113 by default); slcan:pty makes a virtual SLCAN adapter on a pty
     udp:HOST:PORT                    one datagram per sample (serial formats)
     file:PATH                        capture: raw bytes (serial formats) or a CAN log chosen by suffix
 
@@ -37,7 +38,7 @@ class TargetSpec:
     text: str             # as written, for messages
     path: str = ""        # device, CAN channel, host or file
     interface: str = ""   # python-can interface (can)
-    port: int = 0         # udp
+    port: int = 0         # udp; udp_multicast (0: python-can's default)
     rate: int | None = None   # baud (serial) or bit rate (can), when the spec names one
 
 
@@ -48,6 +49,23 @@ def _split_rate(text: str, body: str, what: str) -> tuple[str, int | None]:
     if not rate.isdigit() or int(rate) <= 0:
         raise TargetError(f"{text}: {what} after '@' must be a positive integer, got {rate!r}")
     return head, int(rate)
+
+
+def _multicast_port(text: str, channel: str) -> tuple[str, int]:
+    """GROUP[:PORT] of python-can's udp_multicast: an IPv4 group may take a port after its last ':', an IPv6
+    group only in brackets ([ff15::1]:43200), since its own colons would be read as one. Two benches (or test
+    runs) on one host need different ports: a socket bound to the port hears every group joined on it."""
+    if channel.startswith("["):
+        group, sep, port = channel[1:].partition("]")
+        port = port[1:] if port.startswith(":") else port
+    elif channel.count(":") == 1:
+        group, sep, port = channel.partition(":")
+    else:
+        return channel, 0
+    if not group or not sep or not port.isdigit() or not 0 < int(port) < 65536:
+        raise TargetError(f"{text}: expected can:udp_multicast:GROUP[:PORT] ([GROUP]:PORT for IPv6) "
+                          "with a port between 1 and 65535")
+    return group, int(port)
 
 
 def parse_target(text: str) -> TargetSpec:
@@ -75,7 +93,8 @@ def parse_target(text: str) -> TargetSpec:
         channel, bitrate = _split_rate(text, channel, "bit rate")
         if not interface or not sep or not channel:
             raise TargetError(f"{text}: expected {syntax}")
-        return TargetSpec("can", text, path=channel, interface=interface, rate=bitrate)
+        channel, port = _multicast_port(text, channel) if interface == "udp_multicast" else (channel, 0)
+        return TargetSpec("can", text, path=channel, interface=interface, rate=bitrate, port=port)
     if kind == "udp":
         host, sep, port = rest.rpartition(":")
         host = host.strip("[]")   # [::1]:14550
@@ -129,7 +148,7 @@ def open_target(spec: TargetSpec, format_kind: str, options: TargetOptions = Tar
         from imu_emulator.transport.slcan_pty import SlcanPtyTransport
         return SlcanPtyTransport(options)
     from imu_emulator.transport.canbus import CanBusTransport
-    return CanBusTransport(spec.interface, spec.path, options)
+    return CanBusTransport(spec.interface, spec.path, options, port=spec.port)
 
 
 __all__ = ["TARGET_KINDS", "LinkCapacity", "check_carries", "TargetOptions", "TargetSpec", "Transport", "link_capacity", "open_target",

@@ -21,7 +21,7 @@ _BLOCKING_TIMEOUT_S = 1.0
 
 class CanBusTransport(Transport):
 
-    def __init__(self, interface: str, channel: str, options: TargetOptions):
+    def __init__(self, interface: str, channel: str, options: TargetOptions, port: int = 0):
         if interface not in can.interfaces.VALID_INTERFACES:
             raise TargetError(f"can:{interface}: unknown python-can interface "
                               f"(known: {', '.join(sorted(can.interfaces.VALID_INTERFACES))})")
@@ -31,6 +31,8 @@ class CanBusTransport(Transport):
             kwargs["bitrate"] = options.bitrate
         if options.data_bitrate and interface not in ("socketcan", "virtual", "udp_multicast"):
             kwargs["data_bitrate"] = options.data_bitrate
+        if port:
+            kwargs["port"] = port    # udp_multicast only: the target parser takes a port for nothing else
         if interface == "slcan":
             kwargs["sleep_after_open"] = 0.1   # python-can waits 2 s for Arduino-style resets by default
         try:
