@@ -2,7 +2,7 @@
 
 CSV: a header row, then one row per sample. Columns t, ax, ay, az, gx, gy, gz (s, m/s², rad/s), in any
 order, names matched after stripping spaces and ignoring case. The emulator's CSV adds a column `imu` (one
-row per IMU per sample) and, with --truth, its truth columns; both are understood. Any other column is an
+row per IMU per sample) and, with --truth or --increments, their columns (an Earth scene's too); all are understood. Any other column is an
 error: a column we silently ignored (a "gx_dps", a second clock) is one the user believed we used.
 
 NPZ: what `imu-emulator generate -o run.npz` writes (t, imu_names, accel and gyro shaped (imu, n, 3), and t_imu
@@ -20,7 +20,7 @@ import numpy as np
 
 from imu_emulator.derivatives import validate_samples
 from imu_emulator.errors import DataError
-from imu_emulator.output import BIAS_COLUMNS, TRUTH_COLUMNS
+from imu_emulator.output import BIAS_COLUMNS, INCREMENT_COLUMNS, TRUTH_COLUMNS
 from imu_emulator.trackfile import _parse_table, read_csv_rows, read_npz_arrays
 
 SAMPLE_COLUMNS = ("t", "ax", "ay", "az", "gx", "gy", "gz")
@@ -79,7 +79,9 @@ def _read_csv(path: Path) -> dict[str | None, ImuLog]:
         raise DataError(f"{where}: row {header_line}: missing column{'s' if len(missing) > 1 else ''} "
                         f"{', '.join(missing)} (the header has {', '.join(names)}; need "
                         f"{', '.join(SAMPLE_COLUMNS)})")
-    known = set(SAMPLE_COLUMNS) | {"imu", "temp_c"} | set(TRUTH_COLUMNS) | set(BIAS_COLUMNS)
+    from imu_emulator.earth_truth import COLUMNS as EARTH_COLUMNS    # an Earth scene's --truth output
+    known = (set(SAMPLE_COLUMNS) | {"imu", "temp_c"} | set(TRUTH_COLUMNS) | set(BIAS_COLUMNS)
+             | set(INCREMENT_COLUMNS) | {name for names in EARTH_COLUMNS.values() for name in names})
     for name in names:
         if name not in known:
             raise DataError(f"{where}: row {header_line}: unexpected column '{name}' (expected "

@@ -18,6 +18,9 @@ _MAX_LINE_POINTS = 20_000     # plotted per curve; more only blurs the line and 
 _TRIANGLES = 12
 
 
+UNSTATED = "unstated"      # PlotData.frame of an output that does not say which frame its positions are in
+
+
 @dataclass
 class PlotData:
     t: np.ndarray                           # (n,)
@@ -61,6 +64,7 @@ def from_output(path: str) -> PlotData:
     accel_bias, gyro_bias = _bias_truth(Path(path), len(records))
     return PlotData(records[0].t[:n], names, np.stack([r.accel[:n] for r in records]),
                     np.stack([r.gyro[:n] for r in records]), position, euler, title=str(path),
+                    frame=_stated_frame(Path(path)),
                     accel_bias=None if accel_bias is None else accel_bias[:, :n],
                     gyro_bias=None if gyro_bias is None else gyro_bias[:, :n])
 
@@ -81,6 +85,23 @@ def _read_columns(path: Path, npz_keys: tuple[str, ...], csv_columns: tuple[str,
     if not set(csv_columns) <= set(header):
         return None
     return np.loadtxt(path, delimiter=",", skiprows=skip, usecols=[header.index(c) for c in csv_columns], ndmin=2)
+
+
+def _stated_frame(path: Path) -> str:
+    """The frame the file's conventions state for px py pz (NPZ "conventions", CSV '#' lines: written for Earth
+    scenes, imu_emulator.earth_truth), else UNSTATED: a flat scene's output does not say whether z is up."""
+    if path.suffix.lower() == ".npz":
+        with np.load(path) as data:
+            lines = [str(line) for line in data["conventions"]] if "conventions" in data else []
+    else:
+        with open(path) as f:
+            lines = []
+            line = f.readline()
+            while line.startswith("#"):
+                lines.append(line[1:].strip())
+                line = f.readline()
+    stated = next((line for line in lines if line.startswith("frame:")), "")
+    return next((frame for frame in ("ECEF", "ECI", "NED", "ENU") if frame in stated), UNSTATED)
 
 
 def _truth(path: Path, n_imu: int):
@@ -153,7 +174,8 @@ def draw(data: PlotData, output: str | Path):
         axes3d.set_xlabel("x (m)")
         axes3d.set_ylabel("y (m)")
         axes3d.set_zlabel("z (m)")
-        axes3d.set_title(f"trajectory ({data.frame} frame), body as triangles")
+        axes3d.set_title("trajectory (the file does not state its frame: z drawn up), body as triangles"
+                         if data.frame == UNSTATED else f"trajectory ({data.frame} frame), body as triangles")
         axes3d.legend(loc="upper left", fontsize=7)
     step = _decimate(len(data.t))
     t = data.t[step]

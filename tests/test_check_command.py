@@ -1,4 +1,5 @@
 """`imu-emulator check`: validates without running, describes the scene, exits 2 with one line on a bad one."""
+import math
 import os
 from pathlib import Path
 
@@ -109,3 +110,19 @@ def test_check_bad_scene_is_one_error_line_exit_2(text, message, tmp_path, capsy
 def test_check_missing_file(capsys, cache):
     assert main(["check", "/nonexistent/scene.toml"]) == 2
     assert "cannot read scene file" in capsys.readouterr().err
+
+
+def test_check_lists_each_effects_nonzero_parameters_in_si_one_a_line(capsys, cache):
+    """examples/drone_imu.toml: the preset's and the scene's datasheet units, converted by hand (0.5 deg/s =
+    0.5 pi/180 rad/s; 0.014 deg/s/sqrt(Hz) from the bosch-bmi088 preset; 10 mg = 0.0980665 m/s^2), each under
+    its effect; a parameter left at zero (the constant bias) is not listed."""
+    assert main(["check", str(ROOT / "examples" / "drone_imu.toml")]) == 0
+    out = capsys.readouterr().out
+    lines = out.splitlines()
+    at = lines.index("  imu fc:")
+    block = lines[at + 1:]
+    assert block[0].split() == ["bias", "gyro.turn_on_bias_sd", "=", f"{0.5 * math.pi / 180:.6g}", "rad/s"]
+    assert block[1].split() == ["accel.turn_on_bias_sd", "=", f"{0.010 * 9.80665:.6g}", "m/s^2"]
+    noise = next(i for i, line in enumerate(block) if line.split()[0] == "noise")
+    assert block[noise].split()[1:] == ["gyro.noise_density", "=", f"{0.014 * math.pi / 180:.6g}", "rad/s/sqrt(Hz)"]
+    assert "gyro.bias =" not in out and "accel.bias =" not in out

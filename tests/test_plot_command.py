@@ -38,8 +38,11 @@ def test_plot_every_example(path, tmp_path):
     fig = plotting.draw(data, png)
     _assert_png(png)
     _axes_hold(fig, data.position)
-    # one 3-D view plus specific force and angular rate per IMU
-    assert len(fig.axes) == 1 + 2 * len(data.imu_names)
+    # one 3-D view plus specific force and angular rate per IMU, and a realized-bias axis beside each triad whose
+    # error effects make a bias (examples/drone_imu.toml, earth_turn.toml)
+    twins = sum(bias is not None for bias in (data.accel_bias, data.gyro_bias)) * len(data.imu_names)
+    assert len(fig.axes) == 1 + 2 * len(data.imu_names) + twins
+    assert sum(ax.get_ylabel().startswith("realized bias") for ax in fig.axes) == twins
 
 
 def test_plot_cli_on_scene_and_on_generate_outputs(tmp_path, capsys):
@@ -97,3 +100,48 @@ def test_plot_of_a_truth_output_overlays_each_imus_realized_bias(tmp_path):
                                and np.array_equal(line.get_ydata(), expected)
                                for ax in fig.axes for line in ax.get_lines()), (name, m, axis)
         assert len(fig.axes) == 1 + 4 * len(data.imu_names)   # each signal axes has its bias twin
+
+
+def test_plot_of_an_output_draws_the_frame_its_conventions_state_and_says_when_none_is_stated(tmp_path):
+    """examples/earth_turn.toml (NED, 1000 m up: pz = -1000) written with --truth states its frame in its
+    conventions: down is drawn down (the z axis inverted, as for the scene itself). A flat scene's output states
+    none, and the title says so instead of naming a frame it cannot know."""
+    import tomllib
+    earth = tomllib.loads((ROOT / "examples" / "earth_turn.toml").read_text())
+    earth["scene"]["duration_s"] = 2.0
+    earth_path = tmp_path / "earth.toml"
+    earth_path.write_text(_toml(earth))
+    flat = str(ROOT / "examples" / "two_imus.toml")
+    # the CSV also carries increments: its reader once refused the Earth and increment columns
+    for scene, name, more in ((str(earth_path), "earth.csv", ["--increments"]), (str(earth_path), "earth.npz", []),
+                              (flat, "flat.csv", [])):
+        assert main(["generate", scene, "-o", str(tmp_path / name), "--quiet", "--truth", *more]) == 0
+    for name in ("earth.csv", "earth.npz"):
+        data = plotting.from_output(str(tmp_path / name))
+        assert data.frame == "NED"
+        fig = plotting.draw(data, tmp_path / (name + ".png"))
+        ax3d = next(ax for ax in fig.axes if ax.name == "3d")
+        low, high = ax3d.get_zlim3d()
+        assert low > high and "NED frame" in ax3d.get_title()
+    data = plotting.from_output(str(tmp_path / "flat.csv"))
+    fig = plotting.draw(data, tmp_path / "flat.png")
+    ax3d = next(ax for ax in fig.axes if ax.name == "3d")
+    assert data.frame == plotting.UNSTATED and "does not state its frame" in ax3d.get_title()
+
+
+def _toml(table: dict) -> str:
+    """Just enough TOML for a scene: tables of scalars, inline tables and lists, arrays of tables."""
+    def value(v):
+        if isinstance(v, dict):
+            return "{ " + ", ".join(f"{k} = {value(x)}" for k, x in v.items()) + " }"
+        if isinstance(v, (list, tuple)):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        return repr(v) if isinstance(v, (int, float)) else f'"{v}"'
+    out = []
+    for key, body in table.items():
+        for item in (body if isinstance(body, list) else [body]):
+            out.append(f"[[{key}]]" if isinstance(body, list) else f"[{key}]")
+            out += [f"{k} = {value(v)}" for k, v in item.items()]
+    return "\n".join(out) + "\n"

@@ -26,6 +26,27 @@ def output_sizes(scene, truth: bool, increments: bool = False) -> dict[str, int]
     return {**sizes, "CSV bound": csv_bytes(scene, truth, increments)}
 
 
+def _compact(value) -> str:
+    """A parameter's value for reading: one number for three equal axes, 6 significant digits."""
+    array = np.asarray(value, dtype=float)
+    if array.ndim == 1 and array.size and np.all(array == array[0]):
+        array = array[0]
+    if array.ndim == 0:
+        return f"{float(array):.6g}"
+    return "[" + ", ".join(_compact(row) for row in array) + "]"
+
+
+def imu_parameter_lines(imu, effect_names, records) -> list[str]:
+    """The non-zero parameters of the effects that are on, one a line in the records' (SI) units, under the
+    effect's name; a parameter left at zero means that error is absent and is not listed."""
+    lines = []
+    for name in effect_names:
+        shown = [f"{param.path[4:]} = {_compact(imu.values[param.path])} {param.unit}"
+                 for param in records[name].params if np.any(np.asarray(imu.values[param.path], dtype=float) != 0)]
+        lines += [f"{name if i == 0 else '':16} {text}" for i, text in enumerate(shown)]
+    return lines
+
+
 def _describe_part(part) -> str:
     from imu_emulator.scene import Expressions
     if isinstance(part, Expressions):
@@ -65,10 +86,10 @@ def cmd_check(args) -> int:
     for name in sorted(scene.effects):
         print(f"    {name:16} {EFFECTS[name].description}")
     for imu in scene.imus:
-        # the parameters of the effects that are on, in the records' units
-        values = ", ".join(f"{param.path[4:]} = {np.asarray(imu.values[param.path]).tolist()} {param.unit}"
-                           for name in sorted(scene.effects) for param in EFFECTS[name].params)
-        print(f"  imu {imu.name}: {values or 'no parameters'}")
+        print(f"  imu {imu.name}:" + (f" time offset {imu.time_offset_s!r} s" if imu.time_offset_s else ""))
+        lines = imu_parameter_lines(imu, sorted(scene.effects), EFFECTS)
+        for line in lines or ["no parameters"]:
+            print(f"    {line}")
     for warning in scene.warnings:
         print(f"  warning: {warning}")
     sizes = output_sizes(scene, truth=False)
