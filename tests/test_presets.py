@@ -92,6 +92,19 @@ def test_keys_beside_the_model_override_it_and_presets_do_not_warn():
     assert over.imus[0].values["imu.accel.noise_density"] == values["imu.accel.noise_density"]
 
 
+@pytest.mark.parametrize("name,triad", [(n, t) for n in presets.names() for t in ("gyro", "accel")
+                                         if "resolution" in presets.describe(n)[t]])
+def test_preset_resolution_is_one_count_of_a_16_bit_word_at_full_scale(name, triad):
+    """The vendors' drivers read these parts' 16-bit two's-complement words as full scale / 2**15 per count
+    (Bosch BMI08x Sensor API lsb_to_dps / lsb_to_mps2, PX4's ICM42688P driver), so one LSB is range / 32768
+    exactly; a datasheet's rounded sensitivity (16.4 LSB/(deg/s) for 16.384) would be off by 0.1 %."""
+    from imu_emulator.units import to_unit
+    table = presets.describe(name)[triad]
+    unit = "rad/s" if triad == "gyro" else "m/s^2"
+    lsb, full_scale = to_unit(table["resolution"], unit, name), to_unit(table["range"], unit, name)
+    assert lsb == pytest.approx(full_scale / 2 ** 15, rel=1e-12)
+
+
 def test_unknown_model_is_an_error_naming_the_key():
     with pytest.raises(SceneError, match=r"imu\[0\]\.model: unknown model 'mpu-6050' \(known: .*xsens-mti-3"):
         preset_scene(["mpu-6050"], 100, 1.0)
