@@ -9,6 +9,7 @@ from machine_code.lazy import jit
 import numpy as np
 
 from firmware_protocols.base import SaturationStats, empty_frames
+from firmware_protocols.frame_rows import DATA_AT, put_header, rows
 
 @dataclass(frozen=True)
 class AxisMap:
@@ -103,9 +104,10 @@ class SignalLayout:
     def pack(self, sources: np.ndarray, counter: int, saturated: SaturationStats) -> np.ndarray:
         """sources: (n, k) float64, finite. Returns n * messages frames, sample-major."""
         frames = empty_frames(sources.shape[0] * len(self.can_ids))
+        # flags as ints and the frames as bytes: plain arguments, which a warm run passes to machine code
         total = _pack(np.ascontiguousarray(sources, dtype=np.float64), self.spec, self.values, self.template,
-                      self.can_ids, self.extended, counter, self.counter_byte, self.crc8, CRC8_J1850_TABLE,
-                      frames, self._counts)
+                      self.can_ids, int(self.extended), counter, self.counter_byte, int(self.crc8), CRC8_J1850_TABLE,
+                      rows(frames), self._counts)
         if total:
             for name, count in zip(self.names, self._counts):
                 saturated.add(name, int(count))
@@ -114,12 +116,7 @@ class SignalLayout:
 
 @jit(cache=True, nogil=True)
 def _pack(sources, spec, values, template, can_ids, extended, counter, counter_byte, crc8, crc_table,
-          frames, counts):
-    f_sample = frames.sample
-    f_id = frames.can_id
-    f_ext = frames.extended
-    f_len = frames.length
-    f_data = frames.data
+          frame_rows, counts):
     counts[:] = 0
     n = sources.shape[0]
     m = can_ids.shape[0]
@@ -128,14 +125,11 @@ def _pack(sources, spec, values, template, can_ids, extended, counter, counter_b
         base = i * m
         for k in range(m):
             f = base + k
-            f_sample[f] = i
-            f_id[f] = can_ids[k]
-            f_ext[f] = extended
-            f_len[f] = 8
+            put_header(frame_rows, f, i, can_ids[k], extended, 0, 8)
             for b in range(8):
-                f_data[f, b] = template[k, b]
+                frame_rows[f, DATA_AT + b] = template[k, b]
             if counter_byte >= 0:
-                f_data[f, counter_byte] = (template[k, counter_byte] & 0xF0) | ((counter + i) & 0xF)
+                frame_rows[f, DATA_AT + counter_byte] = (template[k, counter_byte] & 0xF0) | ((counter + i) & 0xF)
         for r in range(spec.shape[0]):
             raw = np.rint((sources[i, spec[r, 3]] * values[r, 0] - values[r, 2]) / values[r, 1])
             if raw < values[r, 3]:
@@ -148,14 +142,14 @@ def _pack(sources, spec, values, template, can_ids, extended, counter, counter_b
                 total += 1
             word = np.int64(raw)
             f = base + spec[r, 0]
-            f_data[f, spec[r, 1]] = word & 0xFF
+            frame_rows[f, DATA_AT + spec[r, 1]] = word & 0xFF
             if spec[r, 2] == 2:
-                f_data[f, spec[r, 1] + 1] = (word >> 8) & 0xFF
+                frame_rows[f, DATA_AT + spec[r, 1] + 1] = (word >> 8) & 0xFF
         if crc8:
             for k in range(m):
                 f = base + k
                 crc = 0xFF
                 for b in range(7):
-                    crc = crc_table[crc ^ f_data[f, b]]
-                f_data[f, 7] = crc ^ 0xFF
+                    crc = crc_table[crc ^ frame_rows[f, DATA_AT + b]]
+                frame_rows[f, DATA_AT + 7] = crc ^ 0xFF
     return total

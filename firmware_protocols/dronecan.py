@@ -52,6 +52,7 @@ from firmware_protocols.base import (CLASSIC_FRAME_DTYPE, FD_FRAME_DTYPE, FD_LEN
                                      DecoderStats, EncodeError, Packet, SaturationStats, Samples, empty_frames,
                                      integration_intervals)
 from firmware_protocols.crc import crc16_ccitt, crc16_ccitt_bytes
+from firmware_protocols.frame_rows import DATA_AT, put_header, rows
 from firmware_protocols.registry import FormatInfo, register
 
 FLOAT16_MAX = 65504.0
@@ -97,9 +98,9 @@ def _f16_from_f32_bits(u):
 
 
 @jit(cache=True, nogil=True)
-def _encode_transfers(time_ns, sources, ops, params, counts, frames):
+def _encode_transfers(time_ns, sources, ops, params, counts, frame_rows):
     """Serialise every sample per the op program and cut it into DroneCAN frames, written straight into
-    the frame columns.
+    the frames' bytes (frame_rows.rows: plain arrays, so that a warm run calls this as machine code).
 
     sources: tuple of (n, w) float64 arrays (RawIMU: sources[0][:, 0] is the integration interval).
     ops rows: (opcode, source, column, saturation counter).
@@ -107,13 +108,6 @@ def _encode_transfers(time_ns, sources, ops, params, counts, frames):
     counts (per wire field) are zeroed here and hold this call's saturations on return.
     Returns (frames written, failing sample, failing op, saturations); failing sample is -1 on success.
     """
-    # Column views inside the kernel: passing the record array alone keeps the dispatch cheap.
-    f_sample = frames.sample
-    f_id = frames.can_id
-    f_ext = frames.extended
-    f_fd = frames.fd
-    f_len = frames.length
-    f_data = frames.data
     counts[:] = 0
     n = time_ns.shape[0]
     length = params[0]
@@ -177,15 +171,11 @@ def _encode_transfers(time_ns, sources, ops, params, counts, frames):
             # Single-frame transfer: no transfer CRC; FD pads with zeros up to a valid data length.
             total = FD_LENGTH_TABLE[length + 1] if fd else length + 1
             for b in range(length):
-                f_data[fi, b] = stream[b]
+                frame_rows[fi, DATA_AT + b] = stream[b]
             for b in range(length, total - 1):
-                f_data[fi, b] = 0
-            f_data[fi, total - 1] = 0xC0 | tail_id
-            f_sample[fi] = k
-            f_id[fi] = can_id
-            f_ext[fi] = True
-            f_fd[fi] = fd
-            f_len[fi] = total
+                frame_rows[fi, DATA_AT + b] = 0
+            frame_rows[fi, DATA_AT + total - 1] = 0xC0 | tail_id
+            put_header(frame_rows, fi, k, can_id, 1, fd, total)
             fi += 1
             continue
         crc = crc16_ccitt(stream, 2, length + 2, sig_crc)
@@ -197,18 +187,14 @@ def _encode_transfers(time_ns, sources, ops, params, counts, frames):
         for f in range(per_transfer):
             chunk = min(stream_len - j, mtu)
             for b in range(chunk):
-                f_data[fi, b] = stream[j + b]
+                frame_rows[fi, DATA_AT + b] = stream[j + b]
             tail = tail_id | toggle
             if f == 0:
                 tail |= 0x80
             if f == per_transfer - 1:
                 tail |= 0x40
-            f_data[fi, chunk] = tail
-            f_sample[fi] = k
-            f_id[fi] = can_id
-            f_ext[fi] = True
-            f_fd[fi] = fd
-            f_len[fi] = chunk + 1
+            frame_rows[fi, DATA_AT + chunk] = tail
+            put_header(frame_rows, fi, k, can_id, 1, fd, chunk + 1)
             toggle ^= 0x20
             j += chunk
             fi += 1
@@ -339,7 +325,8 @@ class _DroneCanEncoder:
         n = len(samples)
         needed = n * len(self._lengths)
         wanted = FD_FRAME_DTYPE if self.fd else CLASSIC_FRAME_DTYPE
-        if frames.dtype not in (wanted, FD_FRAME_DTYPE) or frames.ndim != 1 or frames.shape[0] < needed:
+        if (frames.dtype not in (wanted, FD_FRAME_DTYPE) or frames.ndim != 1 or frames.shape[0] < needed
+                or not frames.flags.c_contiguous):
             raise ValueError(f"frames must be an empty_frames(count, fd={self.fd}) array of at least {needed} rows")
         message, sources = self._program(samples)
         params = self._params
@@ -347,7 +334,7 @@ class _DroneCanEncoder:
         counts = self._counts
         ops = message.program(self.fd)
         written, bad_sample, bad_op, saturated = _encode_transfers(samples.time_ns, sources, ops, params, counts,
-                                                                   frames)
+                                                                   rows(frames))
         if bad_sample >= 0:
             field = message.sources[ops[bad_op, 1]]
             component = "" if field == "integration_interval" else f", component {ops[bad_op, 2]}"

@@ -9,7 +9,8 @@ with `@jit(...)` instead of `@numba.njit(...)`: the name holds a `Deferred`.
   argument types under the cache directory (IMU_EMULATOR_CACHE, like the kernels), keyed on the bytes of every
   module of the function's package, numba's version and the argument types; if there is none (or it is damaged),
   numba compiles it once and writes it. Arguments that cannot be passed that way (structured arrays, objects),
-  results that are arrays, and IMU_EMULATOR_NATIVE=0 take numba's dispatcher.
+  results that are arrays, and IMU_EMULATOR_NATIVE=0 take numba's dispatcher (tuples of arrays and numbers
+are passed).
 - `realize()` imports numba, builds every declared dispatcher and puts each in its module's globals under its own
   name, so that numba's typing (which reads those globals) and `from module import name` after that see the real
   dispatcher. Code that numba compiles and that calls these functions must call `realize()` first.
@@ -66,7 +67,7 @@ class Deferred:
 
     def _machine_code(self, args):
         # the types that decide the compiled code, cheaply (dtype names cost microseconds to build)
-        quick = tuple((a.dtype, a.ndim) if type(a) is np.ndarray else type(a) for a in args)
+        quick = tuple(_quick(a) for a in args)
         if quick in self._native:
             return self._native[quick]
         from machine_code import objects
@@ -100,6 +101,14 @@ class Deferred:
 
     def __repr__(self) -> str:
         return f"<deferred numba function {self.py_func.__module__}.{self.py_func.__qualname__}>"
+
+
+def _quick(value):
+    if type(value) is np.ndarray:
+        return value.dtype, value.ndim
+    if type(value) is tuple:      # the encoders' sources: one compiled function per kind of tuple
+        return tuple(_quick(item) for item in value)
+    return type(value)
 
 
 _REFUSED = []

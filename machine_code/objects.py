@@ -11,8 +11,9 @@ place (numpy's array struct, scalar objects' values), so a call from Python cost
 numba's dispatcher costs; the struct layout is checked once per process (_array_struct_as_expected).
 
 The wrapper is built from the argument values of a trial call, not from a hand-kept list: whatever arguments a
-function grows, an integer/float scalar or an array of a plain dtype and any rank is passed through, and it may
-return nothing, a number or a tuple of numbers. Arrays the function allocates live in numba's runtime (NRT): its
+function grows, an integer/float scalar or an array of a plain dtype and any rank is passed through, or a tuple of
+those (numba's UniTuple of arrays, which the wire encoders take as their sources), and it may return nothing, a
+number or a tuple of numbers. Arrays the function allocates live in numba's runtime (NRT): its
 C helpers and its reference-counting functions are loaded without the numba package. Trailing scratch arguments
 the caller does not pass may be declared (`scratch` shapes): the loader allocates them per call.
 
@@ -29,15 +30,18 @@ from pathlib import Path
 
 import numpy as np
 
-_MAGIC = b"IMUK5"     # 5: the argument tuple passed as PyObject* (the entry reads it in place)
+_MAGIC = b"IMUK6"     # 6: tuples of arguments (5: the argument tuple passed as PyObject*, read in place)
 _ENTRY = "entry_c"
 _DTYPES = ("float64", "float32", "int64", "uint64", "int32", "uint32", "int16", "uint16", "int8", "uint8")
 _symbols_added = False
 REFUSED = object()      # NativeFunction.call_checked: an array argument not of the type compiled for
 
 
-def _describe(value) -> list:
-    """How one argument is passed: ["scalar", dtype] or ["array", dtype, ndim] (numba's own typing of it)."""
+def _describe(value, nested: bool = False) -> list:
+    """How one argument is passed: ["scalar", dtype], ["array", dtype, ndim] (numba's own typing of it) or
+    ["tuple", [element, ...]] (elements of the first two kinds)."""
+    if type(value) is tuple and not nested and value:
+        return ["tuple", [_describe(item, nested=True) for item in value]]
     if isinstance(value, np.ndarray):
         if value.dtype.name not in _DTYPES or value.ndim == 0:
             raise TypeError(f"no native passing for {value.dtype} arrays")
@@ -53,45 +57,69 @@ def _describe(value) -> list:
     raise TypeError(f"no native passing for {type(value).__name__}")
 
 
+def _slots(kinds: list) -> list[tuple[list, int, int]]:
+    """What the entry checks, in its order: (kind, parent, index) for each argument (parent -1), then each
+    element of a tuple argument (parent: the argument's position, index: its position in the tuple)."""
+    slots = [(kind, -1, 0) for kind in kinds]
+    for position, kind in enumerate(kinds):
+        if kind[0] == "tuple":
+            slots += [(item, position, index) for index, item in enumerate(kind[1])]
+    return slots
+
+
 def _expected(kinds: list) -> list[int]:
-    """What the entry compares with, in its order: numpy's ndarray type, then per argument four words: its code
-    (0 array, 1 int64, 2 float64, 3 another scalar), the address of its dtype (arrays) or of its numpy scalar
-    type, that of the Python type numba types the same (int, float; else 0, matching nothing) or for an array its
-    dtype's scalar type (an equal dtype that is another object), its rank.
+    """What the entry compares with, in its order: numpy's ndarray type and Python's tuple type, then per slot
+    (_slots) six words: its code (0 array, 1 int64, 2 float64, 3 another scalar, 4 tuple), the address of its
+    dtype (arrays) or of its numpy scalar type, that of the Python type numba types the same (int, float; else 0,
+    matching nothing) or for an array its dtype's scalar type (an equal dtype that is another object), its rank
+    (a tuple: its length), its parent and index (_slots).
     Addresses differ per process: the table is built at load and passed at each call."""
-    expect = [id(np.ndarray)]
-    for kind in kinds:
-        dtype = np.dtype(kind[1])
-        if kind[0] == "array":
+    expect = [id(np.ndarray), id(tuple)]
+    for kind, parent, index in _slots(kinds):
+        if kind[0] == "tuple":
+            expect += [4, 0, 0, len(kind[1])]
+        elif kind[0] == "array":
+            dtype = np.dtype(kind[1])
             expect += [0, id(dtype), id(dtype.type), int(kind[2])]
         else:
+            dtype = np.dtype(kind[1])
             code = {"int64": 1, "float64": 2}.get(kind[1], 3)
             expect += [code, id(dtype.type), id({1: int, 2: float}[code]) if code < 3 else 0, 0]
+        expect += [parent, index]
     return expect
 
 
 def _work_size(kinds: list) -> int:
-    """The entry's per-call words: a pointer per argument, an int per argument, then the arrays' dimensions."""
-    return 2 * len(kinds) + sum(int(k[2]) for k in kinds if k[0] == "array")
+    """The entry's per-call words: a pointer per slot, an int per slot, then the arrays' dimensions."""
+    slots = _slots(kinds)
+    return 2 * len(slots) + sum(int(k[2]) for k, _, _ in slots if k[0] == "array")
 
 
 # The entry's check of every argument, one loop whatever the arguments (typing unrolled per-argument checks cost
-# numba seconds for a kernel's 20 arguments): it fills work with each argument's data pointer (an array's data, a
+# numba seconds for a kernel's 20 arguments): it fills work with each slot's data pointer (an array's data, a
 # scalar's value: a numpy scalar's or a Python float's at byte 16, a Python int of up to two 30-bit digits read
-# into work) and the arrays' dimensions, or returns 1 if one is not of the type the code was compiled for.
+# into work) and the arrays' dimensions, or returns 1 if one is not of the type the code was compiled for. A tuple
+# is checked (type, length) before its elements, which are read from its items (PyTupleObject word 3 on).
 _CHECK = """
     x = numba.carray(expect, (N_EXPECT,), np.int64)
     t = numba.carray(args, (3 + N_ARGS,), np.int64)
     w = numba.carray(work, (N_WORK,), np.int64)
     if t[2] != N_ARGS:
         return 1
-    s = 2 * N_ARGS
-    for j in range(N_ARGS):
-        o = t[3 + j]
+    s = 2 * N_SLOTS
+    for j in range(N_SLOTS):
+        code, own, python, parent = x[2 + 6 * j], x[3 + 6 * j], x[4 + 6 * j], x[6 + 6 * j]
+        if parent < 0:
+            o = t[3 + j]
+        else:
+            o = numba.carray(_address(t[3 + parent] + 24 + 8 * x[7 + 6 * j]), (1,), np.int64)[0]
         h = numba.carray(_address(o), (9,), np.int64)
-        code, own, python = x[1 + 4 * j], x[2 + 4 * j], x[3 + 4 * j]
+        if code == 4:
+            if h[1] != x[1] or h[2] != x[5 + 6 * j]:
+                return 1
+            continue
         if code == 0:
-            nd = x[4 + 4 * j]
+            nd = x[5 + 6 * j]
             # PyArrayObject words: 1 type, 2 data, 3 nd (int), 4 dimensions, 7 descr, 8 flags (1: C-contiguous)
             if h[1] != x[0] or (h[3] & 0xFFFFFFFF) != nd or (h[8] & 1) == 0:
                 return 1
@@ -118,8 +146,8 @@ _CHECK = """
                 value |= np.int64(g[1]) << 30
             if h[2] < 0:
                 value = -value
-            w[N_ARGS + j] = value
-            w[j] = _integer(work) + 8 * (N_ARGS + j)
+            w[N_SLOTS + j] = value
+            w[j] = _integer(work) + 8 * (N_SLOTS + j)
         else:
             return 1
 """
@@ -133,15 +161,20 @@ def _wrapper_source(kinds: list, n_returns: int | None) -> str:
     (None: nothing; 0: a number; n: a tuple of n). Only integers reach this source; dtypes are looked up by
     position in the namespace (D0, ..., R0, ...)."""
     n = len(kinds)
-    lines, at = [], 2 * n
-    for i, kind in enumerate(kinds):
+    slots = _slots(kinds)
+    lines, at = [], 2 * len(slots)
+    for i, (kind, _, _) in enumerate(slots):
         if kind[0] == "array":
             nd = int(kind[2])
             shape = "".join(f"w[{at + d}], " for d in range(nd))
             lines.append(f"    a{i} = numba.carray(_address(w[{i}]), ({shape}), D{i})")
             at += nd
-        else:
+        elif kind[0] == "scalar":
             lines.append(f"    a{i} = numba.carray(_address(w[{i}]), (1,), D{i})[0]")
+    for i, (kind, parent, _) in enumerate(slots):
+        if kind[0] == "tuple":
+            items = "".join(f"a{j}, " for j, (_, p, _) in enumerate(slots) if p == i)
+            lines.append(f"    a{i} = ({items})")
     call = f"function({', '.join(f'a{i}' for i in range(n))})"
     if n_returns is None:
         lines.append(f"    {call}")
@@ -193,6 +226,15 @@ def _returns(function, args) -> tuple[int | None, list[str]]:
     return 0, [as_dtype(result).name]
 
 
+def _contiguous(value):
+    """The argument as the entry passes it: arrays (also in a tuple) C-contiguous."""
+    if isinstance(value, np.ndarray):
+        return np.ascontiguousarray(value)
+    if type(value) is tuple:
+        return tuple(_contiguous(item) for item in value)
+    return value
+
+
 def export(function, args: tuple, path: Path, meta: dict) -> bool:
     """Compile `function` (a numba dispatcher) for the types of `args` behind a C entry, and write its object
     code with `meta` (JSON) to `path` atomically. False if this numba cannot."""
@@ -200,16 +242,18 @@ def export(function, args: tuple, path: Path, meta: dict) -> bool:
         import numba
         from numba import types
         kinds = [_describe(a) for a in args]
-        args = tuple(np.ascontiguousarray(a) if isinstance(a, np.ndarray) else a for a in args)
+        args = tuple(_contiguous(a) for a in args)
         n_returns, returns = _returns(function, args)
         if any(name not in _DTYPES for name in returns):
             return False
         address, integer = _address_intrinsic()
         namespace = {"numba": numba, "np": np, "function": function, "_address": address, "_integer": integer,
                      "N_EXPECT": len(_expected(kinds)), "N_ARGS": len(kinds), "N_WORK": _work_size(kinds),
+                     "N_SLOTS": len(_slots(kinds)),
                      "SIGNATURE": types.int32(types.voidptr, types.voidptr, types.CPointer(types.voidptr),
                                               types.voidptr)}
-        namespace.update({f"D{i}": np.dtype(k[1]).type for i, k in enumerate(kinds)})
+        namespace.update({f"D{i}": np.dtype(k[1]).type for i, (k, _, _) in enumerate(_slots(kinds))
+                          if k[0] != "tuple"})
         namespace.update({f"R{j}": np.dtype(name).type for j, name in enumerate(returns)})
         exec(compile(_wrapper_source(kinds, n_returns), f"<native wrapper {path.name}>", "exec"), namespace)
         entry = namespace[_ENTRY]
@@ -281,7 +325,7 @@ class NativeFunction:
         self.kinds = kinds
         self.n_returns, self.returns = returns
         self.scratch = [tuple(int(x) for x in shape) for shape in scratch]
-        self._dtypes = [np.dtype(k[1]) for k in kinds]
+        self._dtypes = [[np.dtype(item[1]) for item in k[1]] if k[0] == "tuple" else np.dtype(k[1]) for k in kinds]
         # the dtype objects numpy uses for new arrays of these types (singletons): their addresses for the entry
         self._expect = np.array(_expected(kinds), dtype=np.int64)
         self._expect_address = self._expect.ctypes.data
@@ -325,20 +369,25 @@ class NativeFunction:
 
     def _convert_and_call(self, args, local) -> None:
         """The machine code indexes C-contiguous arrays of its dtypes: work on copies, written back after."""
-        converted, copies = list(args), []
-        for i, value in enumerate(args):
-            kind = self.kinds[i]
+        copies = []
+
+        def convert(value, kind, dtype, where):
+            if kind[0] == "tuple":
+                if not isinstance(value, tuple) or len(value) != len(kind[1]):
+                    raise TypeError(f"{where}: expected a tuple of {len(kind[1])}")
+                return tuple(convert(v, k, d, f"{where}[{j}]") for j, (v, k, d) in enumerate(zip(value, kind[1], dtype)))
             if kind[0] != "array":
-                converted[i] = self._dtypes[i].type(value)
-                continue
+                return dtype.type(value)
             if not isinstance(value, np.ndarray) or value.ndim != kind[2]:
-                raise TypeError(f"argument {i}: expected an array of {kind[2]} dimensions")
-            if type(value) is not np.ndarray or value.dtype is not self._dtypes[i] or not value.flags.c_contiguous:
-                contiguous = np.empty(value.shape, dtype=self._dtypes[i])     # numpy's own dtype object
+                raise TypeError(f"{where}: expected an array of {kind[2]} dimensions")
+            if type(value) is not np.ndarray or value.dtype is not dtype or not value.flags.c_contiguous:
+                contiguous = np.empty(value.shape, dtype=dtype)     # numpy's own dtype object
                 contiguous[...] = value
-                converted[i] = contiguous
                 copies.append((value, contiguous))
-        if self._call(tuple(converted), self._expect_address, local.address, local.work_address):
+                return contiguous
+            return value
+        converted = tuple(convert(value, self.kinds[i], self._dtypes[i], f"argument {i}") for i, value in enumerate(args))
+        if self._call(converted, self._expect_address, local.address, local.work_address):
             raise TypeError("arguments not of the types the machine code was compiled for")
         for original, contiguous in copies:
             if original.flags.writeable:

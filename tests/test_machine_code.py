@@ -128,3 +128,78 @@ def test_entry_reads_arguments_in_place_or_converts_them(tmp_path, case):
     assert np.array_equal(args[0], oracle_args[0].astype(args[0].dtype))      # written back in place
     if case == "not_contiguous":
         assert np.array_equal(base[1], [3.0, 4.0, 5.0])                       # rows between untouched
+
+
+@numba.njit(cache=False)
+def _picked(sources, which, out):
+    """Reads and writes arrays picked from a tuple by index, as the wire encoders' source tuples are read."""
+    total = 0.0
+    for i in range(out.shape[0]):
+        source = sources[which[i]]
+        out[i] = source[i % source.shape[0], source.shape[1] - 1] * 2.0
+        source[0, 0] += 1.0
+        total += out[i]
+    return total, which.shape[0]
+
+
+@pytest.mark.parametrize("case", ["plain", "element_not_contiguous", "element_of_another_dtype", "list_for_tuple",
+                                  "shorter_tuple"])
+def test_tuple_of_arrays_is_passed_or_converted_as_numba_would(tmp_path, case):
+    """A tuple of arrays (numba's UniTuple) is read in place element by element; a tuple the code was not compiled
+    for is refused by the entry, and converted if it can be (written back in place): the numbers and the written
+    arrays are numba's dispatcher's (the oracle, run on copies)."""
+    compiled_for = ((np.zeros((3, 2)), np.zeros((1, 2)), np.zeros((4, 1))), np.zeros(5, dtype=np.int64), np.zeros(5))
+    path = tmp_path / "picked.o"
+    assert objects.export(_picked, compiled_for, path, {})
+    function = objects.load(path)[0]
+    which = np.array([0, 1, 2, 0, 2], dtype=np.int64)
+    wide = np.zeros((4, 3))
+    wide[:, 1] = [7.0, 8.0, 9.0, 10.0]
+    plain = (np.arange(6.0).reshape(3, 2), np.ones((1, 3)), np.full((4, 1), 7.0))
+    sources = {"plain": plain, "element_not_contiguous": plain[:2] + (wide[:, 1:2],),
+               "element_of_another_dtype": plain[:2] + (np.full((4, 1), 7, dtype=np.int32),),
+               "list_for_tuple": list(plain), "shorter_tuple": plain[:2]}[case]
+    oracle_sources = tuple(np.array(s, dtype=np.float64) for s in sources)
+    oracle_out, out = np.zeros(5), np.zeros(5)
+    accepted = function.call_checked((sources, which, out)) is not objects.REFUSED
+    assert accepted == (case == "plain")
+    if case in ("list_for_tuple", "shorter_tuple"):
+        with pytest.raises(TypeError):
+            function(sources, which, out)
+        return
+    if accepted:      # run once more from the same state for the comparison
+        sources, out = tuple(s.copy() for s in oracle_sources), np.zeros(5)
+    expected = _picked(oracle_sources, which, oracle_out)
+    got = function(sources, which, out)
+    assert got == expected and np.array_equal(out, oracle_out)
+    for source, oracle in zip(sources, oracle_sources):        # each array written back in place
+        assert np.array_equal(source, oracle.astype(source.dtype))
+    if case == "element_not_contiguous":
+        assert np.array_equal(wide[:, 1], oracle_sources[2][:, 0]) and not wide[:, 0].any()
+
+
+def test_warm_stream_of_every_format_imports_no_numba(tmp_path):
+    """Every wire format's encoder (and device) runs as machine code on a warm run: a process streaming each
+    format once imports no numba, and writes what the process that filled the cache wrote. The cache is the
+    suite's own (the encoders' tests have filled most of it); the kernel and the encoders' bytes against numba's
+    dispatcher are checked above and by each format's oracle tests."""
+    scene = ROOT / "examples" / "circle.toml"
+
+    def stream_all(folder: Path) -> str:
+        return ("import sys, json; from imu_emulator.cli import main; import firmware_protocols as fp\n"
+                "for name, info in sorted(fp.formats().items()):\n"
+                f"    path = {str(folder)!r} + '/' + name + ('.log' if info.kind == 'can' else '.bin')\n"
+                f"    main(['stream', {str(scene)!r}, '--format', name, '--to', 'file:' + path, '--count', '3',"
+                "'--speed', '0', '--quiet'])\n"
+                "print(json.dumps('numba' in sys.modules))")
+    env_cache = os.environ.get("IMU_EMULATOR_CACHE")
+    cache = Path(env_cache) if env_cache else Path.home() / ".cache" / "imu-emulator"
+    (tmp_path / "first").mkdir()
+    (tmp_path / "warm").mkdir()
+    _run(stream_all(tmp_path / "first"), cache)
+    assert _run(stream_all(tmp_path / "warm"), cache) is False
+    first = sorted(p.name for p in (tmp_path / "first").iterdir())
+    assert len(first) >= 16 and first == sorted(p.name for p in (tmp_path / "warm").iterdir())
+    for name in first:
+        written = (tmp_path / "warm" / name).read_bytes()
+        assert written and written == (tmp_path / "first" / name).read_bytes(), name

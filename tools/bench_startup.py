@@ -1,10 +1,14 @@
 """Start-up cost of the command line, warm cache: `generate examples/circle.toml -o x.npz` (600 s at 1 kHz) end to
 end (kernel loaded as machine code, and with IMU_EMULATOR_NATIVE=0 from numba's cache), and the time from
 launching `stream` to its first packet on a pty. Each run is a fresh process; the two are
-interleaved; wall time and the child's CPU time (user + sys) are printed as min/median/max. With --importtime,
-also the slowest imports of one `generate` (python -X importtime). Prints figures, asserts nothing.
+interleaved; wall time and the child's CPU time (user + sys) are printed as min/median/max.
 
-    .venv/bin/python tools/bench_startup.py [--repeats 7] [--importtime]
+Then, for every format of `imu-emulator formats` (interleaved): launch to the first packet (serial formats on a
+pty, CAN formats on a virtual SLCAN adapter's pty, both read by this process) and the whole process of a stream of
+one sample to a file, wall and CPU. With --importtime, also the slowest imports of one `generate` and the total
+(python -X importtime). Prints figures, asserts nothing.
+
+    .venv/bin/python tools/bench_startup.py [--repeats 7] [--importtime] [--formats a,b] [--no-formats]
 
 Also prints the cold-start compile time of examples/helix.toml (empty kernel cache) unless --no-cold.
 """
@@ -36,17 +40,51 @@ def run_timed(args, env) -> tuple[float, float]:
     return wall, usage.ru_utime + usage.ru_stime
 
 
-def first_packet(directory: Path, native: bool = True) -> float:
+def first_packet(directory: Path, native: bool = True, fmt: str = "mavlink-highres", kind: str = "serial",
+                 seconds: float = 1.0) -> float:
     os.environ["IMU_EMULATOR_NATIVE"] = "1" if native else "0"     # launch() passes our environment on
+    # CAN formats on a virtual SLCAN adapter; beyond its nominal 1 Mbit/s at 1 kHz for the 7-frame formats
+    target, extra = ("can:slcan:pty", ("--allow-overload",)) if kind == "can" else ("pty", ())
     try:
-        proc, fd, started = launch(directory, 1000, 1.0, directory / "first.json")
-        return read_until_exit(proc, fd) - started
+        proc, fd, started = launch(directory, 1000, seconds, directory / "first.json", fmt, target, extra)
+        first = read_until_exit(proc, fd)
+        if first is None:
+            raise SystemExit(f"stream of {fmt} to {target}: nothing arrived")
+        return first - started
     finally:
         del os.environ["IMU_EMULATOR_NATIVE"]
 
 
 def summary(values, unit="s") -> str:
     return f"{min(values):.3f}/{statistics.median(values):.3f}/{max(values):.3f} {unit}"
+
+
+def every_format(tmp: Path, env: dict, repeats: int, only: list[str] | None) -> None:
+    """Per format: launch to the first packet, and a stream of one sample to a file as a whole process."""
+    import firmware_protocols as fp
+    kinds = {name: info.kind for name, info in sorted(fp.formats().items()) if not only or name in only}
+
+    def to_file(name: str) -> list:
+        path = tmp / f"one.{'log' if kinds[name] == 'can' else 'bin'}"
+        return [sys.executable, "-m", "imu_emulator", "stream", "examples/circle.toml", "--format", name, "--to",
+                f"file:{path}", "--count", "1", "--quiet"]
+    first, wall, cpu = ({name: [] for name in kinds} for _ in range(3))
+    for name in kinds:                 # fill the encoders' and devices' caches
+        run_timed(to_file(name), env)
+        first_packet(tmp, fmt=name, kind=kinds[name], seconds=0.2)
+    for _ in range(repeats):           # interleaved, the machine is shared
+        for name in kinds:
+            first[name].append(first_packet(tmp, fmt=name, kind=kinds[name], seconds=0.2))
+            w, c = run_timed(to_file(name), env)
+            wall[name].append(w)
+            cpu[name].append(c)
+    print(f"every format, warm (min/median/max of {repeats}): launch to first packet (serial: pty, CAN: can:slcan:pty);"
+          " whole process of `stream --to file:... --count 1`")
+    print(f"  {'format':22s} {'first packet wall':>24s} {'one sample to a file, wall':>28s} {'CPU':>22s}")
+    for name in kinds:
+        print(f"  {name:22s} {summary(first[name]):>24s} {summary(wall[name]):>28s} {summary(cpu[name]):>22s}")
+    worst = max(kinds, key=lambda n: statistics.median(first[n]))
+    print(f"  slowest median first packet: {worst} {statistics.median(first[worst]):.3f} s")
 
 
 def importtime(env, out: Path, top: int = 12) -> None:
@@ -58,6 +96,9 @@ def importtime(env, out: Path, top: int = 12) -> None:
             _, cumulative, name = line[len("import time:"):].split("|")
             rows.append((int(cumulative), name[1:]))
     top_level = [(c, n) for c, n in rows if not n.startswith(" ")]
+    print(f"imports of a warm generate (-X importtime): {sum(c for c, _ in top_level) / 1e3:.1f} ms in all "
+          f"(top-level cumulative), {len(rows)} modules; imu_emulator.effects "
+          f"{'imported' if any(n.strip() == 'imu_emulator.effects' for _, n in rows) else 'not imported'}")
     print("slowest top-level imports of a warm generate (cumulative, -X importtime):")
     for cumulative, name in sorted(top_level, reverse=True)[:top]:
         print(f"  {cumulative / 1e3:8.1f} ms  {name}")
@@ -68,6 +109,8 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--importtime", action="store_true")
     parser.add_argument("--no-cold", action="store_true")
+    parser.add_argument("--no-formats", action="store_true", help="skip the per-format table")
+    parser.add_argument("--formats", help="comma-separated formats for the per-format table (default: all)")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -101,16 +144,10 @@ def main() -> None:
         for name in packet:
             print(f"warm stream (mavlink-highres, 1 kHz), launch to first packet on a pty, {name}: "
                   f"wall {summary(packet[name])}")
-        # DroneCAN's encoders take structured arrays and stay on numba: the whole process to one frame in a file
-        to_file = [[sys.executable, "-m", "imu_emulator", "stream", "examples/circle.toml", "--format", f, "--to",
-                    f"file:{tmp / name}", "--count", "1"] for f, name in (("dronecan-rawimu", "x.log"),
-                                                                           ("mavlink-highres", "x.bin"))]
-        for command in to_file:          # warm their encoders' caches
-            run_timed(command, env)
-        dronecan = [run_timed(command, env)[0] for _ in range(args.repeats) for command in to_file]
-        print(f"warm stream to a file, whole process to one sample: dronecan-rawimu wall {summary(dronecan[0::2])}, "
-              f"mavlink-highres wall {summary(dronecan[1::2])}")
         print(f"(min/median/max of {args.repeats}; 1-minute load average {load:.1f} on {os.cpu_count()} CPUs)")
+        if not args.no_formats:
+            every_format(tmp, env, args.repeats, args.formats.split(",") if args.formats else None)
+            print(f"(1-minute load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs)")
         if args.importtime:
             importtime(env, tmp / "x.npz")
 

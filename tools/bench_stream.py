@@ -43,14 +43,17 @@ gravity = true
 """
 
 
-def launch(directory: Path, rate: float, seconds: float, stats: Path):
+def launch(directory: Path, rate: float, seconds: float, stats: Path, fmt: str = "mavlink-highres",
+           target: str = "pty", extra: tuple = ()):
+    """Start a stream to a pty (or a virtual SLCAN adapter's pty: target can:slcan:pty) and open the pty."""
     scene = directory / f"bench_{int(rate)}.toml"
     scene.write_text(SCENE.format(rate=rate))
     started = time.monotonic()
     proc = subprocess.Popen([sys.executable, "-m", "imu_emulator", "stream", str(scene), "--format",
-                             "mavlink-highres", "--to", "pty", "--loop", "--duration", str(seconds), "--quiet",
-                             "--stats-json", str(stats)], stdout=subprocess.PIPE, cwd=REPO, text=True)
-    path = proc.stdout.readline().split("-> ")[1].split()[0]
+                             fmt, "--to", target, "--loop", "--duration", str(seconds), "--quiet",
+                             "--stats-json", str(stats), *extra], stdout=subprocess.PIPE, cwd=REPO, text=True)
+    line = proc.stdout.readline()
+    path = next(word for word in line.split("-> ")[1].split() if word.startswith("/"))
     fd = os.open(path, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
     return proc, fd, started
 

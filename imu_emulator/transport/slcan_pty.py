@@ -5,9 +5,7 @@ The emulator plays the adapter side, so it writes lines an adapter sends for rec
 """
 from __future__ import annotations
 
-import can
-from can.util import len2dlc
-
+from firmware_protocols.base import FD_LENGTHS
 from imu_emulator.transport.base import TargetOptions
 from imu_emulator.transport.pty import PtyTransport
 
@@ -19,7 +17,7 @@ def slcan_lines(rows, bitrate_switch: bool = False) -> bytes:
         data = r["data"][:length].tobytes().hex().upper()
         if r["fd"]:
             letter = ("B" if bitrate_switch else "D") if r["extended"] else ("b" if bitrate_switch else "d")
-            dlc = f"{len2dlc(length):X}"
+            dlc = f"{FD_LENGTHS.index(length):X}"     # the FD DLC: its position in ISO 11898-1's lengths
         else:
             letter, dlc = ("T" if r["extended"] else "t"), str(length)
         ident = f"{int(r['can_id']):08X}" if r["extended"] else f"{int(r['can_id']):03X}"
@@ -41,6 +39,7 @@ def parse_slcan_line(line: bytes):
         return None
     if length > 8 or len(data) != length:
         return None
+    import can      # here: python-can's import (its loggers, asyncio) would delay a stream's first frame
     return can.Message(arbitration_id=can_id, is_extended_id=width == 8, data=data)
 
 
