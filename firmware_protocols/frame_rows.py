@@ -9,7 +9,7 @@ from __future__ import annotations
 from machine_code.lazy import jit
 import numpy as np
 
-from firmware_protocols.base import CLASSIC_FRAME_DTYPE, FD_FRAME_DTYPE
+from firmware_protocols.base import CLASSIC_FRAME_DTYPE, FD_FRAME_DTYPE, FRAME_DTYPES
 
 
 def _offset(name: str) -> int:
@@ -25,11 +25,17 @@ if (CLASSIC_FRAME_DTYPE.fields["sample"][0].str, CLASSIC_FRAME_DTYPE.fields["can
     raise ImportError("put_header writes sample as <i8 and can_id as <u4")
 
 
+_BYTE = np.dtype(np.uint8)
+
+
 def rows(frames: np.ndarray) -> np.ndarray:
-    """The frames' bytes, one row per frame: a view (writes land in `frames`)."""
-    if frames.dtype not in (CLASSIC_FRAME_DTYPE, FD_FRAME_DTYPE) or frames.ndim != 1 or not frames.flags.c_contiguous:
+    """The frames' bytes, one row per frame: a view (writes land in `frames`). Built on the array's buffer, the
+    cheapest view numpy makes (devices encode one sample at a time: tools/bench_encode.py --per-sample)."""
+    dtype = frames.dtype
+    if ((dtype is not CLASSIC_FRAME_DTYPE and dtype is not FD_FRAME_DTYPE and dtype not in FRAME_DTYPES)
+            or frames.ndim != 1 or not frames.flags.c_contiguous):
         raise ValueError("frames must be a contiguous empty_frames(...) array")
-    return frames.view(np.uint8).reshape(frames.shape[0], frames.dtype.itemsize)
+    return np.ndarray((frames.shape[0], dtype.itemsize), _BYTE, frames)
 
 
 @jit(cache=True, nogil=True, inline="always")

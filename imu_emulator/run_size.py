@@ -59,14 +59,17 @@ def _csv_size(scene, truth: bool, increments: bool, chars_per_number: int) -> in
 
 def row_numbers(scene, truth: bool, increments: bool) -> tuple[int, int]:
     """The numbers of a CSV/Parquet row besides its time: (per IMU, shared by the IMUs of a sample)."""
-    from imu_emulator import earth_truth
+    from imu_emulator.earth_motion import model_on
     from imu_emulator.kernel import EffectPlan
     from imu_emulator.output import BIAS_COLUMNS, INCREMENT_COLUMNS, TRUTH_COLUMNS
     per_imu = 6 + (len(INCREMENT_COLUMNS) if increments else 0) + ("temperature" in scene.effects)
     per_imu += len(BIAS_COLUMNS) if truth and EffectPlan(scene).bias_truth else 0
     shared = 0
     if truth:
-        shared += len(TRUTH_COLUMNS) + (3 * len(earth_truth.KEYS) if earth_truth.on(scene) else 0)
+        shared += len(TRUTH_COLUMNS)
+        if model_on(scene):      # earth_truth (frames, rotations) imported only for scenes on the Earth
+            from imu_emulator.earth_truth import KEYS
+            shared += 3 * len(KEYS)
     return per_imu, shared
 
 
@@ -91,7 +94,7 @@ def output_bytes(scene, fmt: str, truth: bool, increments: bool = False) -> int:
 
 def _npz_bytes(scene, truth: bool, increments: bool) -> int:
     """output.Writer._save_npz's arrays: (count of numbers per sample, arrays) summed, as float64."""
-    from imu_emulator import earth_truth
+    from imu_emulator.earth_motion import model_on
     from imu_emulator.kernel import EffectPlan
     from imu_emulator.simulation import TRUTH_KEYS
     n, n_imu = scene.n_samples, len(scene.imus)
@@ -107,11 +110,12 @@ def _npz_bytes(scene, truth: bool, increments: bool) -> int:
         parts.append((3 * len(TRUTH_KEYS), len(TRUTH_KEYS)))
         if EffectPlan(scene).bias_truth:
             parts.append((6 * n_imu, 2))
-        if earth_truth.on(scene):
+        if model_on(scene):
+            from imu_emulator import earth_truth
             parts.append((3 * len(earth_truth.KEYS), len(earth_truth.KEYS)))
             lines = earth_truth.conventions(scene)
             text += 4 * max(len(line) for line in lines) * len(lines)
-    arrays = 1 + sum(count for _, count in parts) + (truth and earth_truth.on(scene))
+    arrays = 1 + sum(count for _, count in parts) + (truth and model_on(scene))
     return 8 * n * sum(numbers for numbers, _ in parts) + text + NPZ_ARRAY_OVERHEAD * arrays
 
 

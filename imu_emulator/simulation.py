@@ -41,8 +41,8 @@ class Simulation:
         self._stateful = bool(self._plan.slots)
         #: each IMU's temperature profile reaches the samples when the temperature effect is on
         self.temperature = "temperature" in scene.effects
-        from imu_emulator import earth_truth
-        self._earth_truth = truth and earth_truth.on(scene)   # geodetic, NED, ECEF truth (earth_truth.KEYS)
+        from imu_emulator.earth_motion import model_on    # not earth_truth (frames, rotations) unless it is used
+        self._earth_truth = truth and model_on(scene)   # geodetic, NED, ECEF truth (earth_truth.KEYS)
         self._position = self._series(scene.trajectory, 3 if scene.attitude_mode == "tangent" else 2, "trajectory")
         self._euler = self._series(scene.attitude, 2, "attitude")
         self.kernel = compile_kernel(scene, attitude=attitude, truth=truth, increments=self.increments)

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-_MAGIC = b"IMUK6"     # 6: tuples of arguments (5: the argument tuple passed as PyObject*, read in place)
+_MAGIC = b"IMUK7"     # 7: memory read by intrinsics; 6: tuples of arguments; 5: the argument tuple read in place
 _ENTRY = "entry_c"
 _DTYPES = ("float64", "float32", "int64", "uint64", "int32", "uint32", "int16", "uint16", "int8", "uint8")
 _symbols_added = False
@@ -96,58 +96,62 @@ def _work_size(kinds: list) -> int:
 
 
 # The entry's check of every argument, one loop whatever the arguments (typing unrolled per-argument checks cost
-# numba seconds for a kernel's 20 arguments): it fills work with each slot's data pointer (an array's data, a
+# numba seconds for a kernel's 20 arguments), reading memory with the intrinsics (plain loads: array indexing
+# cost numba half a second of lowering per export): it fills work with each slot's data pointer (an array's data, a
 # scalar's value: a numpy scalar's or a Python float's at byte 16, a Python int of up to two 30-bit digits read
 # into work) and the arrays' dimensions, or returns 1 if one is not of the type the code was compiled for. A tuple
 # is checked (type, length) before its elements, which are read from its items (PyTupleObject word 3 on).
 _CHECK = """
-    x = numba.carray(expect, (N_EXPECT,), np.int64)
-    t = numba.carray(args, (3 + N_ARGS,), np.int64)
-    w = numba.carray(work, (N_WORK,), np.int64)
-    if t[2] != N_ARGS:
+    xe = _integer(expect)
+    te = _integer(args)
+    we = _integer(work)
+    if _load(te + 16, I8) != N_ARGS:
         return 1
     s = 2 * N_SLOTS
     for j in range(N_SLOTS):
-        code, own, python, parent = x[2 + 6 * j], x[3 + 6 * j], x[4 + 6 * j], x[6 + 6 * j]
+        e = xe + 16 + 48 * j
+        code = _load(e, I8)
+        own = _load(e + 8, I8)
+        python = _load(e + 16, I8)
+        nd = _load(e + 24, I8)
+        parent = _load(e + 32, I8)
         if parent < 0:
-            o = t[3 + j]
+            o = _load(te + 24 + 8 * j, I8)
         else:
-            o = numba.carray(_address(t[3 + parent] + 24 + 8 * x[7 + 6 * j]), (1,), np.int64)[0]
-        h = numba.carray(_address(o), (9,), np.int64)
+            o = _load(_load(te + 24 + 8 * parent, I8) + 24 + 8 * _load(e + 40, I8), I8)
+        kind = _load(o + 8, I8)
         if code == 4:
-            if h[1] != x[1] or h[2] != x[5 + 6 * j]:
+            if kind != _load(xe + 8, I8) or _load(o + 16, I8) != nd:
                 return 1
             continue
         if code == 0:
-            nd = x[5 + 6 * j]
             # PyArrayObject words: 1 type, 2 data, 3 nd (int), 4 dimensions, 7 descr, 8 flags (1: C-contiguous)
-            if h[1] != x[0] or (h[3] & 0xFFFFFFFF) != nd or (h[8] & 1) == 0:
+            if kind != _load(xe, I8) or (_load(o + 24, I8) & 0xFFFFFFFF) != nd or (_load(o + 64, I8) & 1) == 0:
                 return 1
-            if h[7] != own:
+            descr = _load(o + 56, I8)
+            if descr != own:
                 # another dtype object: the same if its scalar type is (PyArray_Descr word 2) in native order
                 # (byte 26: '>' is the only foreign order on a little-endian machine)
-                descr = numba.carray(_address(h[7]), (4,), np.int64)
-                order = numba.carray(_address(h[7] + 24), (4,), np.uint8)
-                if descr[2] != python or order[2] == 62:
+                if _load(descr + 16, I8) != python or _load(descr + 26, U1) == 62:
                     return 1
-            w[j] = h[2]
-            dims = numba.carray(_address(h[4]), (nd,), np.int64)
+            _put(we + 8 * j, I8, _load(o + 16, I8))
+            dims = _load(o + 32, I8)
             for d in range(nd):
-                w[s + d] = dims[d]
+                _put(we + 8 * (s + d), I8, _load(dims + 8 * d, I8))
             s += nd
-        elif h[1] == own or (code == 2 and h[1] == python):
-            w[j] = o + 16
-        elif code == 1 and h[1] == python and -2 <= h[2] <= 2:
-            g = numba.carray(_address(o + 24), (2,), np.uint32)
+        elif kind == own or (code == 2 and kind == python):
+            _put(we + 8 * j, I8, o + 16)
+        elif code == 1 and kind == python and -2 <= _load(o + 16, I8) <= 2:
+            size = _load(o + 16, I8)
             value = np.int64(0)
-            if h[2] != 0:
-                value = np.int64(g[0])
-            if h[2] == 2 or h[2] == -2:
-                value |= np.int64(g[1]) << 30
-            if h[2] < 0:
+            if size != 0:
+                value = np.int64(_load(o + 24, U4))
+            if size == 2 or size == -2:
+                value |= np.int64(_load(o + 28, U4)) << 30
+            if size < 0:
                 value = -value
-            w[N_SLOTS + j] = value
-            w[j] = _integer(work) + 8 * (N_SLOTS + j)
+            _put(we + 8 * (N_SLOTS + j), I8, value)
+            _put(we + 8 * j, I8, we + 8 * (N_SLOTS + j))
         else:
             return 1
 """
@@ -166,11 +170,11 @@ def _wrapper_source(kinds: list, n_returns: int | None) -> str:
     for i, (kind, _, _) in enumerate(slots):
         if kind[0] == "array":
             nd = int(kind[2])
-            shape = "".join(f"w[{at + d}], " for d in range(nd))
-            lines.append(f"    a{i} = numba.carray(_address(w[{i}]), ({shape}), D{i})")
+            shape = "".join(f"_load(we + {8 * (at + d)}, I8), " for d in range(nd))
+            lines.append(f"    a{i} = _view(_load(we + {8 * i}, I8), ({shape}), D{i})")
             at += nd
         elif kind[0] == "scalar":
-            lines.append(f"    a{i} = numba.carray(_address(w[{i}]), (1,), D{i})[0]")
+            lines.append(f"    a{i} = _load(_load(we + {8 * i}, I8), D{i})")
     for i, (kind, parent, _) in enumerate(slots):
         if kind[0] == "tuple":
             items = "".join(f"a{j}, " for j, (_, p, _) in enumerate(slots) if p == i)
@@ -179,10 +183,10 @@ def _wrapper_source(kinds: list, n_returns: int | None) -> str:
     if n_returns is None:
         lines.append(f"    {call}")
     elif n_returns == 0:     # a single number
-        lines += [f"    r = {call}", "    numba.carray(rets[0], (1,), R0)[0] = r"]
+        lines += [f"    r = {call}", "    _put(rets[0], R0, r)"]
     else:
         lines.append(f"    r = {call}")
-        lines += [f"    numba.carray(rets[{j}], (1,), R{j})[0] = r[{j}]" for j in range(n_returns)]
+        lines += [f"    _put(rets[{j}], R{j}, r[{j}])" for j in range(n_returns)]
     lines.append("    return 0")
     return "\n".join([
         "@numba.cfunc(SIGNATURE, nogil=True, error_model='numpy')",
@@ -190,24 +194,63 @@ def _wrapper_source(kinds: list, n_returns: int | None) -> str:
     ]) + _CHECK + "\n".join(lines) + "\n"
 
 
-def _address_intrinsic():
-    """numba: an int64 address as a void pointer (carray takes pointers only)."""
+def _intrinsics() -> dict:
+    """The entry's memory access, as numba intrinsics (code emitted in place, nothing compiled on its own: numba's
+    carray compiled an overload per dtype and rank, and cost a third of every export):
+    _view(address, shape, dtype) a C-contiguous array over memory (no owner), _load(address, dtype) a number,
+    _put(address, dtype, value) stores one, _integer(pointer) a pointer as an int64. An address is an int64 or
+    a pointer."""
     from numba import types
     from numba.core import cgutils
     from numba.extending import intrinsic
+    from numba.np.arrayobj import make_array, populate_array
+
+    def pointer(context, builder, kind, value, dtype):
+        data = context.get_data_type(dtype).as_pointer()
+        if isinstance(kind, types.Integer):
+            return builder.inttoptr(value, data)
+        return builder.bitcast(value, data)
 
     @intrinsic
-    def _address(typingctx, value):
+    def _view(typingctx, address, shape, dtype):
+        if not isinstance(shape, types.BaseTuple) or not isinstance(dtype, types.DTypeSpec):
+            return None
+        array = types.Array(dtype.dtype, len(shape), "C")
+
         def codegen(context, builder, signature, args):
-            return builder.inttoptr(args[0], cgutils.voidptr_t)
-        return types.voidptr(types.int64), codegen
+            dims = [context.cast(builder, builder.extract_value(args[1], d), signature.args[1][d], types.intp)
+                    for d in range(len(shape))]
+            itemsize = context.get_abi_sizeof(context.get_data_type(array.dtype))
+            strides, stride = [], context.get_constant(types.intp, itemsize)
+            for dim in reversed(dims):
+                strides.insert(0, stride)
+                stride = builder.mul(stride, dim)
+            view = make_array(array)(context, builder)
+            populate_array(view, data=pointer(context, builder, signature.args[0], args[0], array.dtype), shape=dims,
+                           strides=strides, itemsize=itemsize, meminfo=None)
+            return view._getvalue()
+        return array(address, shape, dtype), codegen
 
     @intrinsic
-    def _integer(typingctx, pointer):
+    def _load(typingctx, address, dtype):
+        def codegen(context, builder, signature, args):
+            return builder.load(pointer(context, builder, signature.args[0], args[0], dtype.dtype))
+        return dtype.dtype(address, dtype), codegen
+
+    @intrinsic
+    def _put(typingctx, address, dtype, value):
+        def codegen(context, builder, signature, args):
+            stored = context.cast(builder, args[2], signature.args[2], dtype.dtype)
+            builder.store(stored, pointer(context, builder, signature.args[0], args[0], dtype.dtype))
+            return context.get_dummy_value()
+        return types.none(address, dtype, value), codegen
+
+    @intrinsic
+    def _integer(typingctx, address):
         def codegen(context, builder, signature, args):
             return builder.ptrtoint(args[0], cgutils.intp_t)
         return types.int64(types.voidptr), codegen
-    return _address, _integer
+    return {"_view": _view, "_load": _load, "_put": _put, "_integer": _integer}
 
 
 def _returns(function, args) -> tuple[int | None, list[str]]:
@@ -246,9 +289,9 @@ def export(function, args: tuple, path: Path, meta: dict) -> bool:
         n_returns, returns = _returns(function, args)
         if any(name not in _DTYPES for name in returns):
             return False
-        address, integer = _address_intrinsic()
-        namespace = {"numba": numba, "np": np, "function": function, "_address": address, "_integer": integer,
-                     "N_EXPECT": len(_expected(kinds)), "N_ARGS": len(kinds), "N_WORK": _work_size(kinds),
+        namespace = {"numba": numba, "np": np, "function": function, **_intrinsics(), "I8": np.int64,
+                     "U4": np.uint32, "U1": np.uint8,
+                     "N_ARGS": len(kinds),
                      "N_SLOTS": len(_slots(kinds)),
                      "SIGNATURE": types.int32(types.voidptr, types.voidptr, types.CPointer(types.voidptr),
                                               types.voidptr)}

@@ -57,9 +57,12 @@ def _generate(args, scene, stopped) -> int:
     # at its path only when every block is written (a failed run leaves nothing behind).
     from imu_emulator.kernel import EffectPlan
     bias_truth = EffectPlan(scene).bias_truth    # the realized-bias columns, known before compiling
-    from imu_emulator import earth_truth
+    from imu_emulator.earth_motion import model_on
     from imu_emulator.effects.noise import variances
-    conventions = earth_truth.conventions(scene) if earth_truth.on(scene) else None
+    conventions = None
+    if model_on(scene):        # earth_truth (frames, rotations) only for scenes on the Earth
+        from imu_emulator.earth_truth import conventions as earth_conventions
+        conventions = earth_conventions(scene)
     with open_writer(args.output, scene.imu_names, args.truth, bias_truth=bias_truth,
                      temperature="temperature" in scene.effects, increments=bool(args.increments),
                      metadata=_parquet_metadata(args.output, scene), conventions=conventions,

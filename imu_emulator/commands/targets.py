@@ -1,8 +1,6 @@
 """`imu-emulator targets`: the kinds of stream target."""
 from __future__ import annotations
 
-from imu_emulator.transport import TARGET_KINDS
-
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("targets", help="list stream target kinds")
@@ -10,6 +8,7 @@ def register(subparsers) -> None:
 
 
 def cmd_targets(args) -> int:
+    from imu_emulator.transport import TARGET_KINDS     # here: every command's start-up imports this module
     for syntax, text, carries in TARGET_KINDS.values():
         print(f"{syntax:34} {carries + ' formats':15} {text}")
     return 0
