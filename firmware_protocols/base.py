@@ -131,7 +131,8 @@ def integration_intervals(samples: Samples, period_s: float | None, last_time_ns
     if n:
         first = samples.time_ns[0] if last_time_ns is None else last_time_ns
         interval[0, 0] = (samples.time_ns[0] - first) * 1e-9
-        np.multiply(np.diff(samples.time_ns), 1e-9, out=interval[1:, 0])
+        if n > 1:       # not for a sample alone (as devices encode): numpy's calls on empty arrays cost 3 µs
+            np.multiply(np.diff(samples.time_ns), 1e-9, out=interval[1:, 0])
     return interval
 
 
