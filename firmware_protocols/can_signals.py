@@ -9,7 +9,7 @@ from machine_code.lazy import jit
 import numpy as np
 
 from firmware_protocols.base import SaturationStats, empty_frames
-from firmware_protocols.frame_rows import DATA_AT, put_header, rows
+from firmware_protocols.frame_rows import DATA_AT, frame_bytes, put_header
 
 @dataclass(frozen=True)
 class AxisMap:
@@ -95,6 +95,7 @@ class SignalLayout:
         self.values = np.array([[sig.factor, sig.scale, sig.offset, sig.lo, sig.hi] for sig in signals])
         self.counter_byte = int(counter_byte)
         self.crc8 = bool(crc8)
+        self._flags = (int(self.extended), int(self.crc8))   # as the compiled packer takes them
         self._counts = np.zeros(len(signals), dtype=np.int64)
 
     @property
@@ -105,9 +106,10 @@ class SignalLayout:
         """sources: (n, k) float64, finite. Returns n * messages frames, sample-major."""
         frames = empty_frames(sources.shape[0] * len(self.can_ids))
         # flags as ints and the frames as bytes: plain arguments, which a warm run passes to machine code
+        extended, crc8 = self._flags
         total = _pack(np.ascontiguousarray(sources, dtype=np.float64), self.spec, self.values, self.template,
-                      self.can_ids, int(self.extended), counter, self.counter_byte, int(self.crc8), CRC8_J1850_TABLE,
-                      rows(frames), self._counts)
+                      self.can_ids, extended, counter, self.counter_byte, crc8, CRC8_J1850_TABLE,
+                      frame_bytes(frames), self._counts)
         if total:
             for name, count in zip(self.names, self._counts):
                 saturated.add(name, int(count))

@@ -52,7 +52,7 @@ from firmware_protocols.base import (CLASSIC_FRAME_DTYPE, FD_FRAME_DTYPE, FD_LEN
                                      DecoderStats, EncodeError, Packet, SaturationStats, Samples, empty_frames,
                                      integration_intervals)
 from firmware_protocols.crc import crc16_ccitt, crc16_ccitt_bytes
-from firmware_protocols.frame_rows import DATA_AT, put_header, rows
+from firmware_protocols.frame_rows import DATA_AT, frame_bytes, put_header
 from firmware_protocols.registry import FormatInfo, register
 
 FLOAT16_MAX = 65504.0
@@ -316,7 +316,7 @@ class _DroneCanEncoder:
 
     def encode(self, samples: Samples) -> np.ndarray:
         frames = empty_frames(len(samples) * len(self._lengths), fd=self.fd)
-        self.encode_into(samples, frames)
+        self._encode(samples, frames)      # frames as encode_into requires them: no checks per sample
         return frames
 
     def encode_into(self, samples: Samples, frames: np.ndarray) -> int:
@@ -328,13 +328,17 @@ class _DroneCanEncoder:
         if (frames.dtype not in (wanted, FD_FRAME_DTYPE) or frames.ndim != 1 or frames.shape[0] < needed
                 or not frames.flags.c_contiguous):
             raise ValueError(f"frames must be an empty_frames(count, fd={self.fd}) array of at least {needed} rows")
+        return self._encode(samples, frames)
+
+    def _encode(self, samples: Samples, frames: np.ndarray) -> int:
+        n = len(samples)
         message, sources = self._program(samples)
         params = self._params
         params[4] = self.transfer_id
         counts = self._counts
         ops = message.program(self.fd)
         written, bad_sample, bad_op, saturated = _encode_transfers(samples.time_ns, sources, ops, params, counts,
-                                                                   rows(frames))
+                                                                   frame_bytes(frames))
         if bad_sample >= 0:
             field = message.sources[ops[bad_op, 1]]
             component = "" if field == "integration_interval" else f", component {ops[bad_op, 2]}"

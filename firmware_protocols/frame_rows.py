@@ -1,6 +1,6 @@
 """CAN frame arrays (base.CLASSIC_FRAME_DTYPE, FD_FRAME_DTYPE) as the plain bytes compiled encoders write.
 
-Machine code (machine_code.objects) passes plain arrays only, so an encoder takes `rows(frames)`, a uint8 view
+Machine code (machine_code.objects) passes plain arrays only, so an encoder takes `frame_bytes(frames)`, a uint8 view
 with one row of the record's bytes per frame, and writes each field at its offset in the record (read from the
 dtype here, the same in both widths), little-endian as the dtype declares. A warm stream then never needs numba.
 """
@@ -9,7 +9,7 @@ from __future__ import annotations
 from machine_code.lazy import jit
 import numpy as np
 
-from firmware_protocols.base import CLASSIC_FRAME_DTYPE, FD_FRAME_DTYPE, FRAME_DTYPES
+from firmware_protocols.base import CLASSIC_FRAME_DTYPE, FD_FRAME_DTYPE
 
 
 def _offset(name: str) -> int:
@@ -28,14 +28,11 @@ if (CLASSIC_FRAME_DTYPE.fields["sample"][0].str, CLASSIC_FRAME_DTYPE.fields["can
 _BYTE = np.dtype(np.uint8)
 
 
-def rows(frames: np.ndarray) -> np.ndarray:
-    """The frames' bytes, one row per frame: a view (writes land in `frames`). Built on the array's buffer, the
-    cheapest view numpy makes (devices encode one sample at a time: tools/bench_encode.py --per-sample)."""
-    dtype = frames.dtype
-    if ((dtype is not CLASSIC_FRAME_DTYPE and dtype is not FD_FRAME_DTYPE and dtype not in FRAME_DTYPES)
-            or frames.ndim != 1 or not frames.flags.c_contiguous):
-        raise ValueError("frames must be a contiguous empty_frames(...) array")
-    return np.ndarray((frames.shape[0], dtype.itemsize), _BYTE, frames)
+def frame_bytes(frames: np.ndarray) -> np.ndarray:
+    """The frames' bytes, one row per frame: a view (writes land in `frames`), built on the array's buffer, the
+    cheapest view numpy makes (devices encode one sample at a time: tools/bench_encode.py --per-sample). `frames`
+    is a contiguous empty_frames(...) array, which the encoder made itself or has checked."""
+    return np.ndarray((frames.shape[0], frames.dtype.itemsize), _BYTE, frames)
 
 
 @jit(cache=True, nogil=True, inline="always")
