@@ -39,10 +39,10 @@ def sincos_cycles(c):
     one_minus = 1.0 - hz
     co = one_minus + (((1.0 - one_minus) - hz) + z * rc)
     quadrant = int(q) & 3          # two's complement: also right for negative q
-    if quadrant == 0:
-        return s, co
-    if quadrant == 1:
-        return co, -s
-    if quadrant == 2:
-        return -s, -co
-    return -co, s
+    # quadrants 0..3 give (s, co), (co, -s), (-s, -co), (-co, s): one swap and exact sign flips (x * -1.0 is -x,
+    # signed zeros included) instead of four returns, so that a loop of these vectorizes (numba's four returns
+    # became a jump table on the quadrant, and the phase loop ran scalar)
+    a, b = s, co
+    if quadrant & 1:
+        a, b = co, s
+    return a * (1.0 - 2.0 * (quadrant >> 1)), b * (1.0 - 2.0 * (((quadrant + 1) >> 1) & 1))

@@ -10,7 +10,8 @@ time (time.thread_time_ns) beside wall time, in two ways:
   - "steady": the run continues the simulation's run-sample count (as a looped stream does), so only the
     kernel and the per-block Python work are timed;
   - "restart": every run starts at sample 0, so the state's reset (the initial draws) is timed too, once per run.
-Prints figures; asserts nothing. Compare the ratios: the machine is shared.
+Prints figures; asserts nothing. Compare the ratios: the machine is shared. Per mode it also prints each tree's
+full-model cost over its kinematics-only cost (same round), a figure that does not depend on the machine's speed.
 """
 from __future__ import annotations
 
@@ -44,8 +45,9 @@ def worker(tree: str, seconds: float) -> None:
     for label, effects in zip(VARIANTS, ([], FULL)):
         scene = circle(effects, seconds)
         sim = Simulation(scene, attitude=False)
-        sims[label] = (sim, sim.block(0, BLOCK), scene.n_samples)
-    after = dict.fromkeys(sims, BLOCK)   # the run sample each simulation's state is at (the warm-up block's end)
+        sims[label] = (sim, sim.block(0, min(BLOCK, scene.n_samples)), scene.n_samples)
+    # the run sample each simulation's state is at (the warm-up block's end)
+    after = {label: len(out.t_s) for label, (_, out, _) in sims.items()}
     print("ready", flush=True)
     for line in sys.stdin:
         label, mode = line.strip().rsplit(" ", 1)
@@ -55,7 +57,7 @@ def worker(tree: str, seconds: float) -> None:
         cpu0, wall0 = time.thread_time_ns(), time.perf_counter_ns()
         for k0 in range(0, n, BLOCK):
             size = min(BLOCK, n - k0)
-            sim.block(k0, size, out=out if size == BLOCK else None, run_sample=start + k0)
+            sim.block(k0, size, out=out if size == len(out.t_s) else None, run_sample=start + k0)
         print(time.thread_time_ns() - cpu0, time.perf_counter_ns() - wall0, n, flush=True)
 
 
@@ -112,8 +114,12 @@ def main() -> None:
                 print(f"  {mode:8} {variant:18} {name:10} {c.min():7.1f} {np.median(c):7.1f} {c.max():7.1f}   "
                       f"wall {np.median(wall[name, variant, mode]):7.1f}   {1e3 / np.median(c):6.2f} M/s")
             ours, theirs = (np.array(cpu[name, variant, mode]) for name in workers)
-            print(f"  {mode:8} {variant:18} ratio this tree / {args.ref}: median of per-round ratios "
-                  f"{np.median(ours / theirs):.3f}")
+            ratios = ours / theirs
+            print(f"  {mode:8} {variant:18} ratio this tree / {args.ref}: per-round ratios min {ratios.min():.3f} "
+                  f"median {np.median(ratios):.3f} max {ratios.max():.3f}")
+        for name in workers:   # the error model's cost in units of the kinematics': independent of the machine's speed
+            full, kinematics = (np.array(cpu[name, variant, mode]) for variant in VARIANTS[::-1])
+            print(f"  {mode:8} {name:10} full / kinematics only: per-round median {np.median(full / kinematics):.3f}")
 
 
 if __name__ == "__main__":
