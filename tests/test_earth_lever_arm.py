@@ -151,9 +151,10 @@ class Reference:
         return np.array([float(w[2, 1]), float(w[0, 2]), float(w[1, 0])]), w
 
     def lever(self, t, arm):
-        """C_i^b (C_b^i r)'': the arm's part of the IMU's specific force (body axes)."""
-        h, r = _mpf(H), mp.matrix([mp.mpf(float(x)) for x in arm])
-        u = [self.body_to_eci(t + s * h)[1] * r for s in (-1, 0, 1)]
+        """C_i^b (C_b^i r)'': the arm's part of the IMU's specific force (body axes); `arm` a triple or r(t)."""
+        h = _mpf(H)
+        r = arm if callable(arm) else (lambda s, c=mp.matrix([mp.mpf(float(x)) for x in arm]): c)
+        u = [self.body_to_eci(t + s * h)[1] * r(t + s * h) for s in (-1, 0, 1)]
         acc = (u[0] - 2 * u[1] + u[2]) / h ** 2
         return self.body_to_eci(t)[1].T * acc
 
@@ -278,3 +279,33 @@ def test_attitude_given_relative_to_ecef_or_eci(reference, effects):
     origin = (60.0, 5.0, 0.0)
     ref = Reference("NED", origin, MANOEUVRE, TURNING, reference=reference)
     _check(ref, _scene("NED", origin, MANOEUVRE, TURNING, effects, reference=reference))
+
+
+def test_linear_vibration_is_a_moving_lever_arm():
+    """Linear vibration moves the IMU along d(t) in body axes (effects/vibration.py): its terms read the same
+    omega_ib and omega_ib' as the lever arm, so f - f_S = C_i^b (C_b^i d)'' with d_x = -A/w^2 sin(w t),
+    d_y = -A/w^2 sin(w t + phase). Slow, large lines (0.5 Hz, 1 m/s^2: |d| ~ 0.1 m) on the body spinning at
+    1 rad/s at 45 deg: alpha_nb instead of omega_ib' is 4e-6 m/s^2 off (checked on the old code)."""
+    origin = (45.0, 10.0, 0.0)
+    trajectory = {"x": "0", "y": "0", "z": "0"}
+    attitude = {"roll": "t", "pitch": "0.4", "yaw": "0.7"}
+    lines = [{"axis": "x", "amplitude": 1.0, "frequency": 0.5}, {"axis": "y", "amplitude": 1.0, "frequency": 0.5,
+                                                                   "phase": 1.0}]
+    scene = scene_from_dict({
+        "scene": {"rate_hz": RATE_HZ, "duration_s": DURATION, "frame": "NED", "gravity_model": "wgs84",
+                  "origin": {"lat_deg": origin[0], "lon_deg": origin[1], "height_m": origin[2]}},
+        "trajectory": trajectory, "attitude": attitude,
+        "imu": [{"name": "s"}, {"name": "vib", "vibration": {"sines": lines}}],
+        "effects": {"gravity": True, "earth_rate": True, "coriolis": True, "vibration": True}})
+    out = Simulation(scene, attitude=False).run()
+    ref = Reference("NED", origin, trajectory, attitude)
+    with mp.workdps(DPS):
+        w = 2 * mp.pi * mp.mpf("0.5")
+
+        def d(t):
+            return mp.matrix([-mp.sin(w * t) / w ** 2, -mp.sin(w * t + 1) / w ** 2, 0])
+        for k in CHECKED:
+            t = mp.mpf(float(out.t_s[k]))
+            lever = ref.lever(t, d)
+            np.testing.assert_allclose(out.accel[1, k] - out.accel[0, k], [float(x) for x in lever],
+                                       rtol=0, atol=TOL_F)
