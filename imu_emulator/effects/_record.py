@@ -31,7 +31,8 @@ STAGE_CONTRACT = {
         "r00..r22 (body -> navigation), wx wy wz, alx aly alz (body rate and its derivative, body axes); "
         "updates fnx fny fnz (specific force, navigation axes; starts as ax ay az) and, for an effect declared "
         "with nav_rate=True, wnx wny wnz (rate of the navigation frame w.r.t. inertial space, navigation axes; "
-        "starts at 0, added to the gyros in body axes)"),
+        "starts at 0, added to the gyros in body axes) and dwnx dwny dwnz (the rate of change of those "
+        "components, for the inertial angular acceleration)"),
     Stage.BODY: (
         "reads  everything above, fbx fby fbz (specific force at the reference point, body axes); "
         "updates fax fay faz (specific force at this IMU, body axes; starts as fbx..) and gwx gwy gwz "
