@@ -265,9 +265,10 @@ def inertial_rate_lines(level_rate=("wx", "wy", "wz")) -> list[str]:
     acceleration the lever arm and vibration read (R' = R [omega_Lb x], omega_Lb = `level_rate`: w, or
     LEVEL_RATE with an [attitude] reference)."""
     lines = [f"wb{c} = r0{i} * wnx + r1{i} * wny + r2{i} * wnz" for i, c in enumerate("xyz")]
-    lines += _cross("gl_", level_rate, ("wbx", "wby", "wbz"))
-    lines += [f"gal{c} = al{c} + (r0{i} * dwnx + r1{i} * dwny + r2{i} * dwnz) - gl_{ned}"
-              for i, (c, ned) in enumerate(zip("xyz", "ned"))]
+    for i, c in enumerate("xyz"):   # component i of omega_Lb x wb
+        j, k = (i + 1) % 3, (i + 2) % 3
+        cross = f"{level_rate[j]} * wb{'xyz'[k]} - {level_rate[k]} * wb{'xyz'[j]}"
+        lines.append(f"gal{c} = al{c} + (r0{i} * dwnx + r1{i} * dwny + r2{i} * dwnz) - ({cross})")
     return lines
 
 
