@@ -157,11 +157,16 @@ def tangent_level_lines(scene) -> list[str]:
     return lines
 
 
+#: L' = v_N / (R_N + h), the latitude's rate (t_ld)
+LATITUDE_RATE = "t_ld = e_vn / e_rn"
+
+
 def rho_lines() -> list[str]:
     """rho = omega_en^n (t_rh..), v^n' (t_d..) and rho' (t_rp..) in NED, from the geometry's e_* (see
     tangent_level_lines)."""
     a, e2 = wgs84.A, wgs84.E2
     lines = [
+        LATITUDE_RATE,
         "t_tl = e_sl / e_cl",
         "t_rhn = e_ve / e_re",
         "t_rhe = -e_vn / e_rn",
@@ -170,7 +175,6 @@ def rho_lines() -> list[str]:
     rho = _ned("t_rh")
     lines += _cross("t_rv", rho, _ned("e_v")) + [f"t_d{axis} = e_a{axis} - t_rv{axis}" for axis in "ned"]
     lines += [
-        "t_ld = e_vn / e_rn",                                           # L'
         "t_scw = e_sl * e_cl / (e_w * e_w * e_w)",
         f"t_red = {a * e2!r} * t_scw * t_ld - e_vd",                    # (R_E + h)'
         f"t_rnd = {3.0 * a * (1.0 - e2) * e2!r} * t_scw / (e_w * e_w) * t_ld - e_vd",   # (R_N + h)'
@@ -181,20 +185,48 @@ def rho_lines() -> list[str]:
     return lines
 
 
+def earth_rate_lines() -> list[str]:
+    """omega_ie^n = omega_ie (cos L, 0, -sin L) (t_wi.., NED) and the rate of change of those components,
+    t_wp.. = omega_ie L' (-sin L, 0, -cos L) (= -rho x omega_ie^n: omega_ie^e is constant and the level frame
+    turns at rho against the Earth)."""
+    w = repr(wgs84.OMEGA_IE)
+    return [LATITUDE_RATE, f"t_win = {w} * e_cl", f"t_wid = -{w} * e_sl", f"t_wpn = -{w} * e_sl * t_ld",
+            f"t_wpd = -{w} * e_cl * t_ld"]
+
+
+#: omega_ie^n and its derivative as NED triples (after earth_rate_lines); rho and rho' (after rho_lines)
+EARTH_RATE = (("t_win", "0.0", "t_wid"), ("t_wpn", "0.0", "t_wpd"))
+TRANSPORT_RATE = (_ned("t_rh"), _ned("t_rp"))
+
+#: the kernel's rate of the body w.r.t. the local level frame, body axes, where w is not it (reference_lines)
+LEVEL_RATE = ("m_lx", "m_ly", "m_lz")
+
+
+def _sum(name: str, vectors) -> list[str]:
+    """name{n,e,d} = the sum of NED triples."""
+    return [f"{name}{axis} = {' + '.join(v[i] for v in vectors)}" for i, axis in enumerate("ned")]
+
+
+def _to_body(scene, name: str) -> list[str]:
+    """name_b{0,1,2} = R^T (the NED triple name{n,e,d} in the level axes)."""
+    lx, ly, lz = level(scene, *_ned(name))
+    return [f"{name}b{c} = r0{c} * ({lx}) + r1{c} * ({ly}) + r2{c} * ({lz})" for c in "012"]
+
+
 def reference_lines(scene, angles: bool, index: int | None) -> list[str]:
     """Lines after R, w, alpha are formed from the scene's attitude relative to X = [attitude] reference (ECEF,
     or ECI with its rotation angle in phase slot `index`): they turn them into the attitude relative to the
     local level frame L at the current position, which the navigation stage works in.
 
     R_Lb = C_X^L R_Xb. The gyros then add R^T w_n, the level frame's rate the Earth effects name (omega_ie^n
-    with earth_rate, rho = omega_en^n with coriolis), so w = omega_Xb - R^T u with u the part of omega_Xn^n
+    with earth_rate, rho = omega_en^n with coriolis), so w = omega_Xb - R^T u with u the part of omega_XL^L
     those effects add back: rho (coriolis) for X = ECEF, and omega_ie^n (earth_rate) + rho (coriolis) for ECI.
     The gyros read omega_Xb + omega_iX as far as the named effects reach (ECI: omega_ib; ECEF with earth_rate:
-    omega_eb + omega_ie). alpha = d/dt w = alpha_Xb - (R^T u' - w x R^T u), with
-    omega_ie^n' = -rho x omega_ie^n (omega_ie^e is constant) and rho' from rho_lines."""
-    w = repr(wgs84.OMEGA_IE)
+    omega_eb + omega_ie). alpha = d/dt w = alpha_Xb - (R^T u' - omega_Lb x R^T u), with u' the rate of change
+    of u's components (EARTH_RATE, TRANSPORT_RATE) and omega_Lb = omega_Xb - R^T omega_XL^L (LEVEL_RATE, R's
+    own rate: R' = R [omega_Lb x]; it equals w when u is all of omega_XL^L)."""
     eci = scene.attitude_reference == "ECI"
-    lines = rho_lines()
+    lines = rho_lines() + earth_rate_lines()
     if eci:   # C_i^n = C_e^n R_z(-theta): C_e^n at the celestial longitude lon + theta
         lines += [f"m_co = e_co * cph{index} - e_so * sph{index}", f"m_so = e_so * cph{index} + e_co * sph{index}"]
     else:
@@ -208,26 +240,35 @@ def reference_lines(scene, angles: bool, index: int | None) -> list[str]:
         for j in range(3):
             lines.append(f"q{i}{j} = {sign}({name}x * r0{j} + {name}y * r1{j} + {name}z * r2{j})")
     lines += [f"r{i}{j} = q{i}{j}" for i in range(3) for j in range(3)]
-    u, du = [], []
-    if "coriolis" in scene.effects:
-        u.append(_ned("t_rh"))
-        du.append(_ned("t_rp"))
+    frame_rate = [TRANSPORT_RATE] + ([EARTH_RATE] if eci else [])       # omega_XL^L
+    lines += _sum("m_x", [rate for rate, _ in frame_rate]) + _to_body(scene, "m_x")
+    lines += [f"{lw} = w{axis} - m_xb{c}" for lw, axis, c in zip(LEVEL_RATE, "xyz", "012")]
+    u = [TRANSPORT_RATE] if "coriolis" in scene.effects else []
     if eci and "earth_rate" in scene.effects:
-        lines += [f"m_wn = {w} * e_cl", f"m_wd = -{w} * e_sl"] + _cross("m_dw", _ned("t_rh"), ("m_wn", "0.0", "m_wd"))
-        u.append(("m_wn", "0.0", "m_wd"))
-        du.append(("-m_dwn", "-m_dwe", "-m_dwd"))
+        u.append(EARTH_RATE)
     if u:
-        lines += [f"m_u{axis} = {' + '.join(v[i] for v in u)}" for i, axis in enumerate("ned")]
-        lines += [f"m_du{axis} = {' + '.join(v[i] for v in du)}" for i, axis in enumerate("ned")]
-        for name in ("m_u", "m_du"):
-            lx, ly, lz = level(scene, *_ned(name))
-            lines += [f"{name}b{c} = r0{c} * ({lx}) + r1{c} * ({ly}) + r2{c} * ({lz})" for c in "012"]
+        lines += _sum("m_u", [rate for rate, _ in u]) + _sum("m_du", [derivative for _, derivative in u])
+        lines += _to_body(scene, "m_u") + _to_body(scene, "m_du")
         lines += [f"w{axis} -= m_ub{c}" for c, axis in zip("012", "xyz")]
-        lines += _cross("m_wu", ("wx", "wy", "wz"), ("m_ub0", "m_ub1", "m_ub2"))
+        lines += _cross("m_wu", LEVEL_RATE, ("m_ub0", "m_ub1", "m_ub2"))
         lines += [f"al{axis} -= m_dub{c} - m_wu{ned}" for c, axis, ned in zip("012", "xyz", "ned")]
     if angles:
         lines += ["roll = math.atan2(r21, r22)", "pitch = math.atan2(-r20, math.hypot(r21, r22))",
                   "yaw = math.atan2(r10, r00)"]
+    return lines
+
+
+def inertial_rate_lines(level_rate=("wx", "wy", "wz")) -> list[str]:
+    """After the navigation stage: its rate w_n (wn.., level axes; the Earth effects add omega_ie^n and rho)
+    and the rate of change of those components (dwn..) in body axes: wb.. = R^T w_n, which the gyros add to
+    w, and gal.. = d/dt (w + R^T w_n) = alpha + R^T w_n' - omega_Lb x R^T w_n, the inertial angular
+    acceleration the lever arm and vibration read (R' = R [omega_Lb x], omega_Lb = `level_rate`: w, or
+    LEVEL_RATE with an [attitude] reference)."""
+    lines = [f"wb{c} = r0{i} * wnx + r1{i} * wny + r2{i} * wnz" for i, c in enumerate("xyz")]
+    for i, c in enumerate("xyz"):   # component i of omega_Lb x wb
+        j, k = (i + 1) % 3, (i + 2) % 3
+        cross = f"{level_rate[j]} * wb{'xyz'[k]} - {level_rate[k]} * wb{'xyz'[j]}"
+        lines.append(f"gal{c} = al{c} + (r0{i} * dwnx + r1{i} * dwny + r2{i} * dwnz) - ({cross})")
     return lines
 
 

@@ -287,15 +287,17 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
         body += _rotation_and_rates()
     body += motion.after_rotation   # [attitude] reference other than local level (imu_emulator.earth_motion)
     navigation = list(plan.navigation)
-    if plan.nav_rate:
-        navigation = ["wnx = 0.0", "wny = 0.0", "wnz = 0.0"] + navigation
+    if plan.nav_rate:   # the navigation frame's rate, then it and its derivative in body axes (wb.., gal..)
+        from imu_emulator.earth_motion import inertial_rate_lines
+        navigation = ([f"{v}{a} = 0.0" for v in ("wn", "dwn") for a in "xyz"] + navigation
+                      + inertial_rate_lines(motion.level_rate))
 
     per_imu, frames = [], []
     for m, imu in enumerate(scene.imus):
         stages = plan.per_imu[m]
         gw = ("wx", "wy", "wz")
-        if plan.nav_rate:   # R^T w_n: the navigation frame's rate in body axes
-            gw = tuple(f"{w} + (r0{c} * wnx + r1{c} * wny + r2{c} * wnz)" for c, w in enumerate(gw))
+        if plan.nav_rate:   # plus R^T w_n: the navigation frame's rate in body axes
+            gw = tuple(f"{w} + wb{c}" for w, c in zip(gw, "xyz"))
         frame_slots = dict(m=m, gwx=gw[0], gwy=gw[1], gwz=gw[2], body=stages["body"], frame=stages["frame"])
         frames.append(fill(IMU_FRAME_TEMPLATE, **frame_slots, increment=[]).splitlines())
         quat = []

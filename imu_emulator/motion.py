@@ -36,6 +36,7 @@ class MotionCode:
     phase_vars: list[str] = field(default_factory=list)   # of its own so samples overlap in the CPU
     rotation_given: bool = False  # the lines define R (r00..r22), w and alpha themselves (quaternion input)
     after_rotation: list[str] = field(default_factory=list)   # run after R, w, alpha (attitude reference)
+    level_rate: tuple[str, str, str] = ("wx", "wy", "wz")     # the body's rate w.r.t. the level axes R maps to
 
 
 def _phase_constants(coef, offset, scene: Scene, index: int) -> dict[str, float]:
@@ -331,7 +332,7 @@ def motion_code(scene: Scene, angles: bool) -> MotionCode:
         lines += eci
     reference = getattr(scene, "attitude_reference", "local_level")
     if reference != "local_level":
-        from imu_emulator.earth_motion import reference_lines, sampled_eci_lines
+        from imu_emulator.earth_motion import LEVEL_RATE, reference_lines, sampled_eci_lines
         index = None
         if reference == "ECI":
             index = _earth_rotation_slot(sym)
@@ -339,9 +340,11 @@ def motion_code(scene: Scene, angles: bool) -> MotionCode:
             sym.constants.update(constants)
             sym.phase_lines += phase_lines
         sym.after_rotation = reference_lines(scene, angles, index)
+        sym.level_rate = LEVEL_RATE
     if not symbolic_parts and not sym.phase_lines:
         return MotionCode(lines=lines + attitude_lines, constants={}, needs_jerk=tangent,
-                          rotation_given=rotation_given, after_rotation=sym.after_rotation)
+                          rotation_given=rotation_given, after_rotation=sym.after_rotation,
+                          level_rate=sym.level_rate)
     if isinstance(scene.trajectory, Expressions):
         # Position and velocity feed no output in euler mode, yet an undefined position (log(400.0001 - t)
         # past t = 400) must stop the run: x - x is 0 for a finite x and NaN otherwise, so a non-finite p
@@ -349,7 +352,7 @@ def motion_code(scene: Scene, angles: bool) -> MotionCode:
         sym.lines += [f"a{axis} += (p{axis} - p{axis}) + (v{axis} - v{axis})" for axis in AXES]
     return MotionCode(lines=sym.lines + lines + attitude_lines, constants=sym.constants, needs_jerk=tangent,
                       phase_lines=sym.phase_lines, phase_vars=sym.phase_vars, rotation_given=rotation_given,
-                      after_rotation=sym.after_rotation)
+                      after_rotation=sym.after_rotation, level_rate=sym.level_rate)
 
 
 def _earth_rotation_slot(sym: MotionCode) -> int:

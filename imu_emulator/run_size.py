@@ -40,10 +40,14 @@ class RunSizeError(ImuEmulatorError):
     """The run would not fit in memory or on disk."""
 
 
-def memory_bytes(n_samples: int, n_imus: int, quat: bool, truth: bool) -> int:
-    """Bytes of the arrays that hold a whole run (float64)."""
-    per_sample = 1 + n_imus * (6 + (4 if quat else 0)) + (TRUTH_VALUES if truth else 0)
-    return 8 * n_samples * per_sample
+def memory_bytes(n_samples: int, n_imus: int, quat: bool, truth: bool, *, increments: bool = False,
+                 temperature: bool = False, earth_truth: bool = False, bias_truth: bool = False) -> int:
+    """Bytes of the arrays that hold a whole run (float64; Simulation.run's): t, accel and gyro, and per IMU
+    quat, dtheta and dvel, temperature, realized biases (truth); the truth's own columns and the Earth truth."""
+    from imu_emulator import earth_truth as earth
+    per_imu = 6 + 4 * quat + 6 * increments + temperature + 6 * (truth and bias_truth)
+    shared = (TRUTH_VALUES + 3 * len(earth.KEYS) * earth_truth) if truth else 0
+    return 8 * n_samples * (1 + n_imus * per_imu + shared)
 
 
 def csv_bytes(scene, truth: bool, increments: bool = False) -> int:
@@ -159,9 +163,10 @@ def _gib(n: float) -> str:
     return f"{n / 2 ** 30:.3g} GiB"
 
 
-def check_memory(n_samples: int, n_imus: int, quat: bool, truth: bool, what: str) -> None:
-    """RunSizeError when holding the whole run would take more than the memory available now."""
-    _check_fits(memory_bytes(n_samples, n_imus, quat, truth), n_samples, n_imus, what)
+def check_memory(n_samples: int, n_imus: int, quat: bool, truth: bool, what: str, **columns) -> None:
+    """RunSizeError when holding the whole run would take more than the memory available now (`columns`: the
+    optional groups memory_bytes counts)."""
+    _check_fits(memory_bytes(n_samples, n_imus, quat, truth, **columns), n_samples, n_imus, what)
 
 
 def _check_fits(need: int, n_samples: int, n_imus: int, what: str) -> None:

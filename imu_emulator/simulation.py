@@ -228,7 +228,9 @@ class Simulation:
     def run(self, block_size: int = 65536, progress=None) -> SampleBlock:
         """The whole scene in one SampleBlock; the kernel writes straight into the full arrays."""
         n_total = self.n_samples
-        check_memory(n_total, len(self.scene.imus), self.attitude, self.truth, "simulate")
+        check_memory(n_total, len(self.scene.imus), self.attitude, self.truth, "simulate",
+                     increments=bool(self.increments), temperature=self.temperature,
+                     earth_truth=self._earth_truth, bias_truth=self.bias_truth)
         whole = self._new_block(0, np.empty(n_total))
         for k0 in range(0, n_total, block_size):
             self.block(k0, min(block_size, n_total - k0), out=whole.view(k0, min(k0 + block_size, n_total)))

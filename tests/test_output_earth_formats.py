@@ -239,6 +239,26 @@ def test_run_size_matches_the_files_written(run):
         assert output_bytes(scene, fmt, False, False) < output_bytes(scene, fmt, True, fmt != "MCAP")
 
 
+def test_simulate_memory_check_counts_every_array(run, monkeypatch):
+    """simulate()'s memory check (run_size.check_memory) counts exactly the arrays Simulation.run allocates,
+    increments, temperature, realized biases and Earth truth included: with the available memory one byte
+    short of their nbytes it refuses, with exactly that it runs."""
+    from imu_emulator import run_size
+    from imu_emulator.scene import load_scene
+    from imu_emulator.simulation import simulate
+    scene = load_scene(run["scene"])
+    monkeypatch.setattr(run_size, "available_memory", lambda: None)
+    out = simulate(scene, truth=True, increments=4)
+    arrays = [out.t_s, out.accel, out.gyro, out.quat, out.temperature_c, out.dtheta, out.dvel, *out.truth.values()]
+    allocated = sum(a.nbytes for a in arrays)
+    assert len(out.truth) == 5 + 2 + 9      # the truth, the realized biases, the Earth truth: all counted
+    monkeypatch.setattr(run_size, "available_memory", lambda: allocated - 1)
+    with pytest.raises(run_size.RunSizeError, match=r"simulate: \d+ samples x 2 IMU"):
+        simulate(scene, truth=True, increments=4)
+    monkeypatch.setattr(run_size, "available_memory", lambda: allocated)
+    simulate(scene, truth=True, increments=4)
+
+
 def test_a_batch_writes_the_earth_truth_too(run, tmp_path, monkeypatch):
     """batch's Parquet files carry the same Earth truth columns (the truth does not depend on the seed)."""
     monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))

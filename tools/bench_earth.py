@@ -1,5 +1,6 @@
 """Cost of each Earth effect (issue 10) on the circle scene at 1 kHz: flat constant gravity against WGS-84
-gravity, earth_rate, coriolis and all three. Any one of them brings in the shared geometry (geodetic
+gravity, earth_rate, coriolis and all three, and a lever arm on the flat and on the all-Earth scene (the IMU
+has one; it costs only where the lever_arm effect is on). Any one of them brings in the shared geometry (geodetic
 position by fixed-point iteration, the local NED rotation), so each figure includes it once.
 
     .venv/bin/python tools/bench_earth.py [--rounds 7] [--seconds 60]
@@ -27,7 +28,10 @@ VARIANTS = [("flat: constant gravity", {}, "constant"),
             ("gravity_model = wgs84", {}, "wgs84"),
             ("+ earth_rate (constant g)", {"earth_rate": True}, "constant"),
             ("+ coriolis (constant g)", {"coriolis": True}, "constant"),
-            ("all: wgs84 + earth_rate + coriolis", {"earth_rate": True, "coriolis": True}, "wgs84")]
+            ("all: wgs84 + earth_rate + coriolis", {"earth_rate": True, "coriolis": True}, "wgs84"),
+            # the lever arm reads d/dt omega_ib when earth_rate or coriolis is on (earth_motion.inertial_rate_lines)
+            ("flat + lever_arm", {"lever_arm": True}, "constant"),
+            ("all + lever_arm", {"earth_rate": True, "coriolis": True, "lever_arm": True}, "wgs84")]
 
 
 def circle(effects: dict, gravity_model: str, seconds: float):
@@ -36,7 +40,7 @@ def circle(effects: dict, gravity_model: str, seconds: float):
                   "origin": {"lat_deg": 47.4, "lon_deg": 8.5, "height_m": 500.0}},
         "trajectory": {"shape": "circle", "radius_m": 5.0, "frequency_hz": 1.0},
         "attitude": {"mode": "tangent"},
-        "imu": [{"name": "imu0"}],
+        "imu": [{"name": "imu0", "lever_arm_m": [0.1, -0.05, 0.02]}],
         "effects": {"gravity": True, **effects},
     })
 

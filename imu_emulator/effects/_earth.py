@@ -6,5 +6,12 @@ from imu_emulator.earth_motion import EARTH_EFFECTS, level, model_on, position_f
 
 
 def add(scene, target: str, n: str, e: str, d: str) -> list[str]:
-    """Lines adding a NED vector to the level-axes variables target{x,y,z} (fn or wn)."""
+    """Lines adding a NED vector to the level-axes variables target{x,y,z} (fn, wn or dwn)."""
     return [f"{target}{axis} += {value}" for axis, value in zip("xyz", level(scene, n, e, d)) if value != "0.0"]
+
+
+def add_rate(scene, rate, derivative) -> list[str]:
+    """Lines adding a rate of the navigation frame (a NED triple) to wn.. and the rate of change of its
+    components to dwn.. (the lever arm's angular acceleration needs it: imu_emulator.earth_motion
+    .inertial_rate_lines)."""
+    return add(scene, "wn", *rate) + add(scene, "dwn", *derivative)

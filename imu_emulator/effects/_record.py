@@ -31,11 +31,13 @@ STAGE_CONTRACT = {
         "r00..r22 (body -> navigation), wx wy wz, alx aly alz (body rate and its derivative, body axes); "
         "updates fnx fny fnz (specific force, navigation axes; starts as ax ay az) and, for an effect declared "
         "with nav_rate=True, wnx wny wnz (rate of the navigation frame w.r.t. inertial space, navigation axes; "
-        "starts at 0, added to the gyros in body axes)"),
+        "starts at 0, added to the gyros in body axes) and dwnx dwny dwnz (the rate of change of those "
+        "components, for the inertial angular acceleration)"),
     Stage.BODY: (
         "reads  everything above, fbx fby fbz (specific force at the reference point, body axes); "
         "updates fax fay faz (specific force at this IMU, body axes; starts as fbx..) and gwx gwy gwz "
-        "(inertial angular rate, body axes; starts as the body rate plus the navigation stage's rate)"),
+        "(inertial angular rate, body axes; starts as the body rate plus the navigation stage's rate); its "
+        "derivative, the inertial angular acceleration, is the variables EmitContext.alpha names"),
     Stage.SENSOR: (
         "updates ox oy oz (accelerometer triad) and gx gy gz (gyro triad) in sensor axes; they start as the "
         "body-stage values; effects of order < FRAME_ORDERS (mounting) change axes, after them the kernel keeps "
@@ -120,6 +122,12 @@ class EmitContext:
     @property
     def dt(self) -> float:
         return 1.0 / self.scene.rate_hz
+
+    @property
+    def alpha(self) -> tuple[str, str, str]:
+        """The inertial angular acceleration d/dt gw.. in body axes, for the body stage: the body's alx.., or
+        gal.. when the navigation stage adds its frame's rate (imu_emulator.earth_motion.inertial_rate_lines)."""
+        return ("galx", "galy", "galz") if self.plan.nav_rate else ("alx", "aly", "alz")
 
     def value(self, path: str):
         """A parameter of this effect by its path ("imu.lever_arm_m", "imu.gyro.noise_density")."""

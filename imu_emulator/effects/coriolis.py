@@ -1,6 +1,7 @@
 """Coriolis and transport rate: f gains 2 omega_ie x v; the gyros sense omega_en, the turning of the local
 level frame as it follows the vehicle over the curved Earth (Groves 2nd ed. §5.4)."""
 from imu_emulator import wgs84
+from imu_emulator.earth_motion import TRANSPORT_RATE, rho_lines
 from imu_emulator.effects import _earth
 from imu_emulator.effects._record import Effect, Stage
 
@@ -11,10 +12,9 @@ def emit(ctx) -> list[str]:
     # 2 omega_ie^n x v^n with omega_ie^n = omega (cos L, 0, -sin L)
     coriolis = _earth.add(scene, "fn", f"{w2} * e_sl * e_ve", f"-{w2} * (e_sl * e_vn + e_cl * e_vd)",
                           f"{w2} * e_cl * e_ve")
-    # omega_en^n = (v_E / (R_E + h), -v_N / (R_N + h), -v_E tan L / (R_E + h)); tan L: the NED frame itself is
-    # undefined at the poles
-    transport = ["e_ten = e_ve / e_re"] + _earth.add(scene, "wn", "e_ten", "-e_vn / e_rn", "-e_ten * e_sl / e_cl")
-    return coriolis + transport
+    # omega_en^n = (v_E / (R_E + h), -v_N / (R_N + h), -v_E tan L / (R_E + h)) and its derivative
+    # (imu_emulator.earth_motion.rho_lines); tan L: the NED frame itself is undefined at the poles
+    return coriolis + rho_lines() + _earth.add_rate(scene, *TRANSPORT_RATE)
 
 
 EFFECT = Effect(

@@ -1,12 +1,11 @@
 """Earth rate: the gyros sense the Earth's rotation, omega_ie^n = omega_ie (cos L, 0, -sin L) in local NED."""
-from imu_emulator import wgs84
+from imu_emulator.earth_motion import EARTH_RATE, earth_rate_lines
 from imu_emulator.effects import _earth
 from imu_emulator.effects._record import Effect, Stage
 
 
 def emit(ctx) -> list[str]:
-    w = repr(wgs84.OMEGA_IE)
-    return _earth.add(ctx.scene, "wn", f"{w} * e_cl", "0.0", f"-{w} * e_sl")
+    return earth_rate_lines() + _earth.add_rate(ctx.scene, *EARTH_RATE)
 
 
 EFFECT = Effect(

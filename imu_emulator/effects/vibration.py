@@ -103,12 +103,13 @@ def emit(ctx) -> list[str]:
         ux, uy, uz = (ctx.var(f"u{a}") for a in AXES)
         lines += [f"{ux} = gwy * {d[2]} - gwz * {d[1]}", f"{uy} = gwz * {d[0]} - gwx * {d[2]}",
                   f"{uz} = gwx * {d[1]} - gwy * {d[0]}"]
+        al = ctx.alpha
         for j, a in enumerate(AXES):   # component j of d'' + 2 w x d' + alpha x d + w x (w x d)
             b, c = AXES[(j + 1) % 3], AXES[(j + 2) % 3]
             jb, jc = (j + 1) % 3, (j + 2) % 3
             term = acc[j] if j in linear else "0.0"
             lines.append(f"fa{a} += {term} + 2.0 * (gw{b} * {v[jc]} - gw{c} * {v[jb]}) "
-                         f"+ (al{b} * {d[jc]} - al{c} * {d[jb]}) + (gw{b} * {ctx.var('u' + c)} - gw{c} * "
+                         f"+ ({al[jb]} * {d[jc]} - {al[jc]} * {d[jb]}) + (gw{b} * {ctx.var('u' + c)} - gw{c} * "
                          f"{ctx.var('u' + b)})")
     if angular:
         lines += _rotate(ctx, angular, rate, angle)
