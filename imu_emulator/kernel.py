@@ -54,7 +54,8 @@ TRUTH_OUTPUTS = (("tr_pos", ("px", "py", "pz")), ("tr_vel", ("vx", "vy", "vz")),
 # The skeleton. $name lines are slots, replaced by lines indented like the slot. Samples go in chunks: first
 # every periodic phase of the chunk (short independent chains the CPU overlaps across samples: 50 -> 35
 # ns/sample on the circle scene; stored phases[i, jj], one contiguous row per phase, so that this loop
-# vectorizes: 40 -> 27 ns/sample of the kinematics alone, tools/bench_against.py), then the per-sample body. k = scene sample (motion), s = run sample (noise).
+# vectorizes: 40 -> 27 ns/sample of the kinematics alone, tools/bench_against.py), then the per-sample body.
+# k = scene sample (motion), s = run sample (noise).
 # kernel_body takes its scratch (`phases`) as an argument and allocates nothing, so its machine code runs
 # without numba's runtime (machine_code.objects); `kernel` is the same call with the scratch allocated.
 KERNEL_TEMPLATE = '''\
