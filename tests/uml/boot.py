@@ -32,8 +32,11 @@ def unavailable() -> str | None:
     return None
 
 
-def boot(result_dir: Path, script: Path | None = None, timeout: float = 150, mem: str = "512M") -> Boot:
-    """Run `script` (sh) inside the guest, or the socketcan tests when None; the guest has one CPU."""
+def boot(result_dir: Path, script: Path | None = None, timeout: float = 600, mem: str = "512M") -> Boot:
+    """Run `script` (sh) inside the guest, or the socketcan tests when None; the guest has one CPU. `timeout`
+    covers boot, the tests and power-off: the socketcan tests alone took 142 s of a loaded CI run (the guest runs
+    several times slower than the host), and 150 s cut off a guest whose tests had all passed; a hung guest
+    still fails, after 10 minutes."""
     result_dir.mkdir(parents=True, exist_ok=True)
     output_file = result_dir / "output.txt"
     output_file.touch()
