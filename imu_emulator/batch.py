@@ -123,7 +123,8 @@ def _write(task: Task, path: Path, identity: dict) -> float | None:
     if not loaded_before:
         load_s = KERNEL_LOADS[key] = time.perf_counter() - start
     from imu_emulator import earth_truth
-    conventions = earth_truth.conventions(scene) if task.truth and earth_truth.on(scene) else None   # Earth columns
+    from imu_emulator.earth_motion import model_on
+    conventions = earth_truth.conventions(scene) if task.truth and model_on(scene) else None   # Earth columns
     with open_writer(path, scene.imu_names, task.truth, bias_truth=sim.bias_truth,
                      temperature=sim.temperature, metadata=run_metadata(scene, batch={**identity, "truth": task.truth}),
                      conventions=conventions) as writer:

@@ -31,11 +31,6 @@ COLUMNS = {
 KEYS = tuple(COLUMNS)
 
 
-def on(scene) -> bool:
-    from imu_emulator.earth_motion import model_on
-    return model_on(scene)
-
-
 def conventions(scene) -> list[str]:
     """The frame and sign conventions of this scene's output, one statement a line (CSV comments, NPZ
     metadata)."""

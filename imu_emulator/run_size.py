@@ -44,9 +44,11 @@ def memory_bytes(n_samples: int, n_imus: int, quat: bool, truth: bool, *, increm
                  temperature: bool = False, earth_truth: bool = False, bias_truth: bool = False) -> int:
     """Bytes of the arrays that hold a whole run (float64; Simulation.run's): t, accel and gyro, and per IMU
     quat, dtheta and dvel, temperature, realized biases (truth); the truth's own columns and the Earth truth."""
-    from imu_emulator import earth_truth as earth
     per_imu = 6 + 4 * quat + 6 * increments + temperature + 6 * (truth and bias_truth)
-    shared = (TRUTH_VALUES + 3 * len(earth.KEYS) * earth_truth) if truth else 0
+    shared = TRUTH_VALUES if truth else 0
+    if truth and earth_truth:    # earth_truth (frames, rotations) imported only for scenes on the Earth
+        from imu_emulator.earth_truth import KEYS
+        shared += 3 * len(KEYS)
     return 8 * n_samples * (1 + n_imus * per_imu + shared)
 
 

@@ -69,7 +69,8 @@ def cmd_check(args) -> int:
     print(f"  frame      {scene.frame} (body {body}; at rest and level f = {gravity}, g = {scene.gravity_mps2!r} m/s²)")
     print("  attitude   z-y-x: R = Rz(yaw)·Ry(pitch)·Rx(roll) maps body to navigation; gyros give body-frame rate")
     from imu_emulator import earth_truth
-    if earth_truth.on(scene):
+    from imu_emulator.earth_motion import model_on
+    if model_on(scene):
         for line in earth_truth.conventions(scene)[:2] + earth_truth.conventions(scene)[4:5]:
             print(f"  earth      {line}")
     print(f"  time       {scene.n_samples:,} samples at {scene.rate_hz:g} Hz, t = {scene.t0_s!r} .. "
