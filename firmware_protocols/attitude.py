@@ -2,7 +2,7 @@
 blocks: scalar-first unit quaternions (w, x, y, z), Hamilton product, q rotating vectors v -> q v q*.
 
 firmware_protocols stands below the simulation in the import order, so it keeps these few lines of its own
-rather than reaching up into imu_emulator.rotations.
+rather than reaching up into imu_emulator.geo.rotations.
 """
 from __future__ import annotations
 

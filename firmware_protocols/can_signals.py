@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from machine_code.lazy import jit
+from imu_emulator.native.lazy import jit
 import numpy as np
 
 from firmware_protocols.base import SaturationStats, empty_frames

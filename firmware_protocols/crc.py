@@ -5,7 +5,7 @@ them per packet without leaving machine code.
   init 0xFFFF is CRC-16/CCITT-FALSE (DroneCAN transfer CRC). One function serves both.
 - crc16_mcrf4xx: poly 0x1021 reflected (0x8408), init 0xFFFF, no final xor (MAVLink's X.25 variant).
 """
-from machine_code.lazy import jit
+from imu_emulator.native.lazy import jit
 import numpy as np
 
 

@@ -38,14 +38,14 @@ the nominal sample period with the increments), else `sample_period_s`, else the
 sample of this stream (remembered across encode calls). The first sample of a stream without a known period
 gets interval 0, which the DSDL defines as "integrals not available". rate_gyro_integral /
 accelerometer_integral are Samples.delta_theta / delta_velocity when the block has them (the emulator's
-streams always do: imu_emulator.increments), otherwise latest × interval (the rate held constant over the
+streams always do: imu_emulator.codegen.increments), otherwise latest × interval (the rate held constant over the
 period: what a caller without increments gets).
 """
 from __future__ import annotations
 
 import math
 
-from machine_code.lazy import jit
+from imu_emulator.native.lazy import jit
 import numpy as np
 
 from firmware_protocols.base import (CLASSIC_FRAME_DTYPE, FD_FRAME_DTYPE, FD_LENGTH_TABLE, CanStreamDecoder,

@@ -1,12 +1,12 @@
 """CAN frame arrays (base.CLASSIC_FRAME_DTYPE, FD_FRAME_DTYPE) as the plain bytes compiled encoders write.
 
-Machine code (machine_code.objects) passes plain arrays only, so an encoder takes `frame_bytes(frames)`, a uint8 view
+Machine code (imu_emulator.native.objects) passes plain arrays only, so an encoder takes `frame_bytes(frames)`, a uint8 view
 with one row of the record's bytes per frame, and writes each field at its offset in the record (read from the
 dtype here, the same in both widths), little-endian as the dtype declares. A warm stream then never needs numba.
 """
 from __future__ import annotations
 
-from machine_code.lazy import jit
+from imu_emulator.native.lazy import jit
 import numpy as np
 
 from firmware_protocols.base import CLASSIC_FRAME_DTYPE, FD_FRAME_DTYPE

@@ -56,7 +56,7 @@ import struct
 import time
 from dataclasses import dataclass
 
-from machine_code.lazy import jit
+from imu_emulator.native.lazy import jit
 import numpy as np
 
 from firmware_protocols.base import DecoderStats, EncodeError, Packet, SaturationStats, Samples, SerialBatch

@@ -55,7 +55,7 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 
-from machine_code.lazy import jit
+from imu_emulator.native.lazy import jit
 import numpy as np
 
 from firmware_protocols.base import (_FIELD_WIDTHS, DecoderStats, EncodeError, Packet, SaturationStats, Samples,

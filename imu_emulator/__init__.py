@@ -4,19 +4,32 @@ Python API:
     scene = load_scene("examples/helix.toml")      # or scene_from_dict({...})
     samples = simulate(scene)                      # SampleBlock: t_s, accel, gyro (n_imu, n, 3), quat
     sim = Simulation(scene); sim.block(k0, n)      # block-wise, for long or live runs
+
+The package's layers, in the order data flows (README "Project layout"; the import contract in
+pyproject.toml checks that imports run this one way):
+    scene -> motion -> codegen -> runtime -> output | live -> analysis -> commands
+with geo, numerics, effects, native and errors as leaves any layer may use.
 """
 from imu_emulator.errors import DataError, ImuEmulatorError, SceneError, TargetError
-from imu_emulator.samples import SampleBlock
-from imu_emulator.scene import Scene, load_scene
-from imu_emulator.scene import from_dict as scene_from_dict
+
+# Where each public name lives. Imported on first use: firmware_protocols imports imu_emulator.native (its
+# encoders' machine code) and must not pull in scene validation; Simulation pulls in numba.
+_API = {
+    "SampleBlock": "imu_emulator.runtime.samples",
+    "Scene": "imu_emulator.scene.model",
+    "load_scene": "imu_emulator.scene.model",
+    "scene_from_dict": "imu_emulator.scene.model",
+    "Simulation": "imu_emulator.runtime.simulation",
+    "simulate": "imu_emulator.runtime.simulation",
+}
 
 
 def __getattr__(name):
-    # Simulation pulls in numba; importing the package for scene validation alone should not.
-    if name in ("Simulation", "simulate"):
+    if name in _API:
         import importlib
-        return getattr(importlib.import_module("imu_emulator.simulation"), name)
-    raise AttributeError(name)
+        module = importlib.import_module(_API[name])
+        return getattr(module, "from_dict" if name == "scene_from_dict" else name)
+    raise AttributeError(f"module 'imu_emulator' has no attribute {name!r}")
 
 
 __all__ = ["DataError", "ImuEmulatorError", "SampleBlock", "Scene", "SceneError", "Simulation", "TargetError",

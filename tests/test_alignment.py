@@ -1,4 +1,4 @@
-"""imu_emulator.alignment and `imu-emulator align`: the emulator knows the exact answer.
+"""imu_emulator.analysis.alignment and `imu-emulator align`: the emulator knows the exact answer.
 
 The oracle is the scene itself: B's mounting_rpy_deg (as a matrix from scipy's Rotation, independent of our
 rotations.py), B's lever arm, and the time offset and drift written into B's stamps."""
@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from imu_emulator.alignment import AlignOptions, align
+from imu_emulator.analysis.alignment import AlignOptions, align
 from imu_emulator.cli import main
 from imu_emulator.errors import DataError
-from imu_emulator.imulog import ImuLog
+from imu_emulator.analysis.imulog import ImuLog
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
 import bench_align as bench  # noqa: E402
@@ -214,8 +214,8 @@ def test_cli_plain_logs_at_different_rates_with_json(tmp_path, capsys):
 def test_cli_one_emulator_file_with_two_imus(tmp_path, capsys, suffix):
     # Same file for A and B: the emulator's CSV (an imu column) or NPZ (imu_names), IMUs picked by name.
     from imu_emulator import scene_from_dict
-    from imu_emulator.output import Writer
-    from imu_emulator.simulation import Simulation
+    from imu_emulator.output.writer import Writer
+    from imu_emulator.runtime.simulation import Simulation
     scene_dict = bench.three_axis_scene(seed=7, duration_s=8.0)
     scene_dict["imu"].insert(0, {"name": "other"})
     scene = scene_from_dict(scene_dict)
@@ -268,7 +268,7 @@ def test_jittered_time_stamps():
     # Real logs are not evenly spaced. Both sensors sampled at about 200 Hz with every instant moved by up to
     # ±1.5 ms (picked from an exact 2 kHz run, so every value is exact at its own stamp), independently.
     from imu_emulator import scene_from_dict
-    from imu_emulator.simulation import Simulation
+    from imu_emulator.runtime.simulation import Simulation
     out = Simulation(scene_from_dict(bench.three_axis_scene(seed=8, rate_hz=2000.0, duration_s=10.0)),
                      attitude=False).run()
     rng = np.random.default_rng(1)

@@ -15,7 +15,7 @@ import pytest
 allantools = pytest.importorskip("allantools")
 
 from imu_emulator import scene_from_dict  # noqa: E402
-from imu_emulator.simulation import Simulation  # noqa: E402
+from imu_emulator.runtime.simulation import Simulation  # noqa: E402
 
 ALPHA = {"white": 0, "flicker": -1, "random_walk": -2}   # power-law exponent of the rate's PSD
 

@@ -1,13 +1,13 @@
-"""Angular rate from sampled attitude (imu_emulator.attitude_rates) against the independent sympy oracle."""
+"""Angular rate from sampled attitude (imu_emulator.motion.attitude_rates) against the independent sympy oracle."""
 import numpy as np
 import pytest
 import sympy as sp
 
-from imu_emulator.attitude_rates import (dcm_rate, euler_matrix_e, euler_rate, increment_rate,
+from imu_emulator.motion.attitude_rates import (dcm_rate, euler_matrix_e, euler_rate, increment_rate,
                                          increment_rate_from_quaternions, quat_log)
-from imu_emulator.derivatives import wrap_angles
+from imu_emulator.numerics.derivatives import wrap_angles
 from imu_emulator.errors import DataError
-from imu_emulator.rotations import euler_to_matrix, euler_to_quat
+from imu_emulator.geo.rotations import euler_to_matrix, euler_to_quat
 from reference import imu_functions, t as T
 
 # the original tool's example 4: large roll and pitch together, where omega_N and omega_B differ a lot

@@ -14,9 +14,9 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from imu_emulator import batch
+from imu_emulator.analysis import batch
 from imu_emulator.cli import main
-from imu_emulator.output_parquet import read_metadata
+from imu_emulator.output.parquet import read_metadata
 
 SCENE = """
 [scene]

@@ -148,7 +148,7 @@ def test_stats_json_that_cannot_be_written_still_shows_the_figures(tmp_path):
 @pytest.mark.parametrize("name", ["out.csv", "out.npz"])
 def test_failing_later_block_leaves_no_file_and_keeps_the_old_one(tmp_path, capsys, monkeypatch, name):
     from imu_emulator.errors import ImuEmulatorError
-    from imu_emulator.simulation import Simulation
+    from imu_emulator.runtime.simulation import Simulation
     block = Simulation.block
 
     def fail_at_the_third(self, k0, n):

@@ -5,7 +5,7 @@ import time
 import numpy as np
 import pytest
 
-from imu_emulator.derivatives import (METHODS, SampledSeries, matlab_gradient, unwrap_angles,
+from imu_emulator.numerics.derivatives import (METHODS, SampledSeries, matlab_gradient, unwrap_angles,
                                       wrap_angles)
 from imu_emulator.errors import DataError
 
@@ -172,7 +172,7 @@ def test_spline5c_ends_as_accurate_as_the_interior():
 
 
 def test_end_derivative_weights_are_finite_differences_when_points_equal_degree_plus_one():
-    from imu_emulator.derivatives import end_derivative_weights, fd_weights
+    from imu_emulator.numerics.derivatives import end_derivative_weights, fd_weights
     x = 0.01 * np.arange(10)
     for d in (1, 2):
         np.testing.assert_allclose(end_derivative_weights(x, 9, d), fd_weights(x, d), rtol=1e-6)

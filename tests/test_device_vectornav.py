@@ -173,9 +173,9 @@ def test_ardupilot_vn300_start_up_sequence_and_its_gnss_packet(tmp_path):
     and its position checked against pymap3d from the scene's truth."""
     import pymap3d
 
-    from imu_emulator.geodesy import DEFAULT_ORIGIN
-    from imu_emulator.scene import load_scene
-    from imu_emulator.simulation import Simulation
+    from imu_emulator.geo.geodesy import DEFAULT_ORIGIN
+    from imu_emulator.scene.model import load_scene
+    from imu_emulator.runtime.simulation import Simulation
     rate, week = 400, 2345
     scene_path = write_scene(tmp_path, rate=rate, duration=60.0)
     with Emulator(scene_path, "--format", "vectornav-binary", "--to", "pty", "--duration", "40",

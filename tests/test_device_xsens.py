@@ -86,9 +86,9 @@ def test_ardupilot_configuration_then_exactly_the_configured_items(tmp_path):
     import pymap3d
     from scipy.spatial.transform import Rotation
 
-    from imu_emulator.geodesy import DEFAULT_ORIGIN
-    from imu_emulator.scene import load_scene
-    from imu_emulator.simulation import Simulation
+    from imu_emulator.geo.geodesy import DEFAULT_ORIGIN
+    from imu_emulator.scene.model import load_scene
+    from imu_emulator.runtime.simulation import Simulation
     rate = 400
     scene_path = write_scene(tmp_path, rate=rate, duration=60.0)
     scene, _, accel, gyro = reference(scene_path)

@@ -10,11 +10,11 @@ import pytest
 
 import firmware_protocols
 from firmware_protocols import Samples
-from imu_emulator.realtime import Pacer
-from imu_emulator.transport import TargetOptions
-from imu_emulator.transport.pty import PtyTransport
-from imu_emulator.transport.slcan_pty import parse_slcan_line
-from imu_emulator.transport.udp import UdpTransport
+from imu_emulator.live.realtime import Pacer
+from imu_emulator.live.transport import TargetOptions
+from imu_emulator.live.transport.pty import PtyTransport
+from imu_emulator.live.transport.slcan_pty import parse_slcan_line
+from imu_emulator.live.transport.udp import UdpTransport
 
 
 def test_pty_transport_returns_what_the_reader_writes():
@@ -119,7 +119,7 @@ def test_device_off_streams_blindly(tmp_path):
 
 def test_stream_table_device_key():
     from imu_emulator.errors import SceneError
-    from imu_emulator.streaming import streams_from_tables
+    from imu_emulator.live.streaming import streams_from_tables
     tables = [{"format": "mavlink-highres", "to": "pty", "device": False}, {"format": "j1939", "to": "file:x.log"}]
     configs = streams_from_tables(tables, ("imu0",))
     assert [c.device for c in configs] == [False, True]

@@ -1,7 +1,7 @@
 """The Earth under the IMU against closed forms (specs/earth.md; Groves 2nd ed. §2.4, §5.4; NIMA TR8350.2).
 
 The references here are written from the spec's formulas with the spec's constants, in mpmath at 40 digits,
-not imported from the package: a wrong constant or sign in imu_emulator.wgs84 or the kernel shows up as a
+not imported from the package: a wrong constant or sign in imu_emulator.geo.wgs84 or the kernel shows up as a
 mismatch.
 """
 from __future__ import annotations
@@ -14,7 +14,7 @@ import pytest
 
 from imu_emulator import scene_from_dict
 from imu_emulator.errors import SceneError
-from imu_emulator.simulation import Simulation
+from imu_emulator.runtime.simulation import Simulation
 
 mpmath.mp.dps = 40
 A = mpmath.mpf(6378137)
@@ -62,7 +62,7 @@ def run(scene):
 
 
 def test_normal_gravity_closed_values():
-    from imu_emulator import wgs84
+    from imu_emulator.geo import wgs84
     assert wgs84.normal_gravity(0.0, 0.0) == wgs84.GAMMA_E
     assert wgs84.normal_gravity(math.pi / 2, 0.0) == pytest.approx(wgs84.GAMMA_P, rel=2e-16)
     # the spec's value at 45°: 9.806 197 769...
@@ -139,7 +139,7 @@ def test_effects_off_add_nothing_and_a_missing_origin_is_said():
                                              "origin": {"lat_deg": 30, "lon_deg": 5, "height_m": 0}},
                                    "trajectory": {"shape": "static"}, "imu": [{"name": "a"}],
                                    "effects": {"gravity": True}})
-    from imu_emulator.kernel import generate_source
+    from imu_emulator.codegen.kernel import generate_source
     assert generate_source(flat, True, True) == generate_source(with_origin, True, True)
     with pytest.raises(SceneError, match=r"^scene.origin: effects.earth_rate needs the point where the ENU frame"):
         scene_from_dict({"scene": {"rate_hz": 10, "duration_s": 0.2}, "trajectory": {"shape": "static"},

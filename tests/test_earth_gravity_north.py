@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from imu_emulator import wgs84
+from imu_emulator.geo import wgs84
 
 GM, A, OMEGA = 3.986004418e14, 6378137.0, 7.292115e-5
 J2, J4 = 1.082626683553151e-3, -2.37091222e-6

@@ -27,7 +27,7 @@ import pytest
 import sympy
 
 from imu_emulator import scene_from_dict
-from imu_emulator.simulation import Simulation
+from imu_emulator.runtime.simulation import Simulation
 
 DPS = 60
 H = "1e-12"

@@ -13,7 +13,7 @@ import pytest
 
 from imu_emulator import scene_from_dict
 from imu_emulator.errors import SceneError
-from imu_emulator.simulation import Simulation
+from imu_emulator.runtime.simulation import Simulation
 
 OMEGA = 7.292115e-5
 ORIGIN = {"lat_deg": 40.0, "lon_deg": -105.0, "height_m": 1600.0}

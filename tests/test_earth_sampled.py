@@ -9,7 +9,7 @@ import pytest
 
 from imu_emulator import scene_from_dict
 from imu_emulator.errors import SceneError
-from imu_emulator.simulation import Simulation
+from imu_emulator.runtime.simulation import Simulation
 
 ORIGIN = (-33.9, 151.2, 45.0)
 EFFECTS = {"gravity": True, "earth_rate": True, "coriolis": True}

@@ -19,7 +19,7 @@ import pytest
 
 from imu_emulator import scene_from_dict
 from imu_emulator.errors import SceneError
-from imu_emulator.simulation import Simulation
+from imu_emulator.runtime.simulation import Simulation
 
 mpmath.mp.dps = 40
 A = 6378137.0

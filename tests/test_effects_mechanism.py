@@ -12,11 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from imu_emulator import kernel as kernel_module
+from imu_emulator.codegen import kernel as kernel_module
 from imu_emulator import scene_from_dict
 from imu_emulator.effects import EFFECTS, STAGE_CONTRACT, Stage, all_params
 from imu_emulator.errors import SceneError
-from imu_emulator.kernel import compile_kernel, generate_source, generator_modules, scene_key
+from imu_emulator.codegen.kernel import compile_kernel, generate_source, generator_modules, scene_key
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"
@@ -116,7 +116,7 @@ def test_generator_modules_are_found_by_their_imports():
                      *(f"effects/{name}.py" for name in EFFECTS)):
         assert f"imu_emulator/{expected}" in names, expected
     # how the kernel's machine code is written and loaded is part of the entry too
-    assert {"machine_code/objects.py", "machine_code/lazy.py"} <= names
+    assert {"imu_emulator.native/objects.py", "imu_emulator.native/lazy.py"} <= names
 
 
 @pytest.mark.parametrize("scene_path", sorted(EXAMPLES.glob("*.toml")), ids=lambda p: p.stem)
@@ -157,7 +157,7 @@ def _entries(root: Path) -> list[str]:
 
 
 def _run(scene):
-    from imu_emulator.simulation import Simulation
+    from imu_emulator.runtime.simulation import Simulation
     return Simulation(scene).run()
 
 

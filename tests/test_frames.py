@@ -1,4 +1,4 @@
-"""imu_emulator.frames against independent implementations: pymap3d for geodetic/ECEF/local positions and
+"""imu_emulator.geo.frames against independent implementations: pymap3d for geodetic/ECEF/local positions and
 vectors, scipy's Rotation for attitude, mpmath for the Earth rotation angle far from t = 0."""
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from imu_emulator import frames
+from imu_emulator.geo import frames
 
 pymap3d = pytest.importorskip("pymap3d")
 

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from imu_emulator.geodesy import DEFAULT_ORIGIN, local_to_geodetic, to_ned
+from imu_emulator.geo.geodesy import DEFAULT_ORIGIN, local_to_geodetic, to_ned
 
 pymap3d = pytest.importorskip("pymap3d")
 

@@ -8,12 +8,12 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from imu_emulator import DataError, SceneError, load_scene, scene_from_dict
-from imu_emulator.attitude_rates import euler_rate, increment_rate, increment_rate_from_quaternions, quat_log
-from imu_emulator.derivatives import wrap_angles
-from imu_emulator.rotations import (euler_to_matrix, euler_to_quat, matrix_to_euler, matrix_to_quat,
+from imu_emulator.motion.attitude_rates import euler_rate, increment_rate, increment_rate_from_quaternions, quat_log
+from imu_emulator.numerics.derivatives import wrap_angles
+from imu_emulator.geo.rotations import (euler_to_matrix, euler_to_quat, matrix_to_euler, matrix_to_quat,
                                     quat_to_euler, quat_to_matrix)
-from imu_emulator.scene import DEFAULT_DERIVATIVE
-from imu_emulator.simulation import Simulation
+from imu_emulator.scene.model import DEFAULT_DERIVATIVE
+from imu_emulator.runtime.simulation import Simulation
 from reference import imu_functions, t as T
 
 G0 = 9.80665
@@ -235,7 +235,7 @@ def test_spline5c_end_fit_is_exact_for_a_fast_ramp():
     # Data exactly representable (t = k/8192, slope 1000), so the only error is the spline's own rounding:
     # ulp(max|y|) times the interior second-derivative gain, sum|w| = 10/h^2 (quintic spline, measured by
     # fitting unit impulses). The ends must not exceed that floor (before the fix: 8.1e-5 > 3.8e-5).
-    from imu_emulator.derivatives import SampledSeries
+    from imu_emulator.numerics.derivatives import SampledSeries
     h = 1.0 / 8192
     t = np.arange(2001) * h
     y = 1000.0 * t

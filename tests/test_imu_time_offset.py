@@ -6,8 +6,8 @@ import pytest
 
 from imu_emulator import ImuEmulatorError, scene_from_dict
 from imu_emulator.cli import main
-from imu_emulator.imulog import read_logs
-from imu_emulator.simulation import Simulation
+from imu_emulator.analysis.imulog import read_logs
+from imu_emulator.runtime.simulation import Simulation
 
 OFFSET_S = 3.7e-3      # not a multiple of the 10 ms sample period
 RATE_HZ = 100.0

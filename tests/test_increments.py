@@ -1,4 +1,4 @@
-"""Integrated outputs (imu_emulator.increments): Δθ and Δv against the analytic integrals of a symbolic motion.
+"""Integrated outputs (imu_emulator.codegen.increments): Δθ and Δv against the analytic integrals of a symbolic motion.
 
 The reference is derived here with sympy from the definitions in DESIGN.md, independently of the kernel's
 code: R = Rz(yaw) Ry(pitch) Rx(roll), [ω]× = Rᵀ dR/dt, f = Rᵀ(a − g) + ω×(ω×r) + α×r at the lever arm r,
@@ -18,9 +18,9 @@ from sympy.simplify.fu import TR8
 from scipy.spatial.transform import Rotation
 
 from imu_emulator import scene_from_dict
-from imu_emulator.increments import DEFAULT_NODES, nodes
-from imu_emulator.kernel import generate_source
-from imu_emulator.simulation import Simulation
+from imu_emulator.codegen.increments import DEFAULT_NODES, nodes
+from imu_emulator.codegen.kernel import generate_source
+from imu_emulator.runtime.simulation import Simulation
 
 G0 = sympy.Rational("9.80665")
 LEVER = (sympy.Rational(1, 10), sympy.Rational(-1, 20), sympy.Rational(1, 50))
@@ -157,11 +157,11 @@ def test_kernel_without_increments_is_unchanged_and_with_them_names_the_outputs(
     assert "out_dtheta" not in off and "inc_" not in off
     assert "out_dtheta, out_dvel" in on and f"for q in range({DEFAULT_NODES})" in on
     # the module that writes those lines is part of the cache key
-    from imu_emulator.kernel import generator_modules
+    from imu_emulator.codegen.kernel import generator_modules
     assert any(path.name == "increments.py" for path in generator_modules())
 
 
-# --- sensor errors on the increments (module docstring of imu_emulator.increments) -----------------------
+# --- sensor errors on the increments (module docstring of imu_emulator.codegen.increments) -----------------------
 
 def _pair(effects, gyro=None, accel=None, truth=False, seed=None, **imu):
     """The same motion without and with the given sensor-stage effects."""
@@ -294,7 +294,7 @@ def test_stateful_or_random_navigation_effects_are_refused():
     # numbers would do so once per node. None exists today: a record built here stands for a future one.
     from imu_emulator.effects import EFFECTS, Effect, Stage
     from imu_emulator.errors import ImuEmulatorError
-    from imu_emulator.increments import check_integrable
+    from imu_emulator.codegen.increments import check_integrable
     check_integrable(EFFECTS.values())
     drifting = Effect(name="drift", description="", stage=Stage.BODY, order=5, emit=lambda ctx: [], state=("x",))
     with pytest.raises(ImuEmulatorError, match="effect 'drift' keeps state"):

@@ -1,4 +1,4 @@
-"""Logged velocity as data in the position fit (imu_emulator.logs.joint_fit), issue 14.
+"""Logged velocity as data in the position fit (imu_emulator.scene.logs.joint_fit), issue 14.
 
 Synthetic log with known motion and noise (tools/smoothing_scan.py's track: a 5 m circle at 0.2 Hz and a 0.5 m
 weave at 0.5 Hz): positions at 50 Hz with sigma_p = 1 cm, velocities at 50 Hz with sigma_v = 3 cm/s, independent.
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from imu_emulator.errors import DataError
-from imu_emulator.logs.joint_fit import JointFit
+from imu_emulator.scene.logs.joint_fit import JointFit
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
 from smoothing_scan import track  # noqa: E402
@@ -87,8 +87,9 @@ def test_scene_fits_the_log_positions_jointly_with_its_velocity(tmp_path, monkey
     # scene's positions come from the joint fit (knot spacing by Lepski's rule), and their acceleration, through
     # the same SampledSeries the kernel builds, is closer to the analytic one than `smooth` on the positions alone
     # with the true noise stated; by the closed form above (2.3x at 0.4 s knots) a margin of 1.5x is asked
-    from imu_emulator import logs, scene_from_dict
-    from imu_emulator.derivatives import SampledSeries
+    from imu_emulator import scene_from_dict
+    from imu_emulator.scene import logs
+    from imu_emulator.numerics.derivatives import SampledSeries
     from imu_emulator.errors import SceneError
     from smoothing_scan import rms_error
     from test_log_velocity import acceleration_error, synthetic_log

@@ -16,7 +16,7 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 RUN = ("import sys\n"
        "from imu_emulator import load_scene\n"
-       "from imu_emulator.simulation import Simulation\n"
+       "from imu_emulator.runtime.simulation import Simulation\n"
        "Simulation(load_scene('examples/circle.toml'), attitude=False).block(0, 10)\n"
        "print('numba imported:', 'numba' in sys.modules)\n")
 

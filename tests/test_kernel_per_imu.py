@@ -11,8 +11,8 @@ import pytest
 
 from imu_emulator import scene_from_dict
 from imu_emulator.effects import EFFECTS, all_params
-from imu_emulator.kernel import INLINE_IMUS, generate_source
-from imu_emulator.simulation import Simulation
+from imu_emulator.codegen.kernel import INLINE_IMUS, generate_source
+from imu_emulator.runtime.simulation import Simulation
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_effects_mechanism import _imu_with, _sample_value  # noqa: E402

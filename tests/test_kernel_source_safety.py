@@ -12,8 +12,8 @@ import tokenize
 import pytest
 
 from imu_emulator import SceneError, scene_from_dict
-from imu_emulator.kernel import generate_source
-from imu_emulator.simulation import Simulation
+from imu_emulator.codegen.kernel import generate_source
+from imu_emulator.runtime.simulation import Simulation
 
 EXPLOIT = 'a\nimport os; os.system("touch PWNED")\nif 1:\n    if 1:'
 HOSTILE = [

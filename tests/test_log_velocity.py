@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from imu_emulator import scene_from_dict
-from imu_emulator.derivatives import SampledSeries
+from imu_emulator.numerics.derivatives import SampledSeries
 from imu_emulator.errors import SceneError
-from imu_emulator.logs import LogMotion, Series
-from imu_emulator.logs.velocity import noise_from_velocity
+from imu_emulator.scene.logs import LogMotion, Series
+from imu_emulator.scene.logs.velocity import noise_from_velocity
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
 from smoothing_scan import W_CIRCLE, W_WEAVE, rms_error, track  # noqa: E402
@@ -54,7 +54,7 @@ def test_smoothing_chosen_from_the_velocity_is_near_the_true_noises():
 
 
 def test_scene_takes_the_noise_from_the_velocity(tmp_path, monkeypatch):
-    from imu_emulator import logs
+    from imu_emulator.scene import logs
     log = synthetic_log()
     monkeypatch.setattr(logs, "load_log", lambda *args, **kwargs: log)
     (tmp_path / "synthetic.ulg").write_bytes(b"")

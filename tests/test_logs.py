@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from imu_emulator import scene_from_dict
 from imu_emulator.errors import DataError, SceneError
-from imu_emulator.logs import load_log, load_recorded_imu
+from imu_emulator.scene.logs import load_log, load_recorded_imu
 from reference import imu_functions, t as T
 
 DATA = Path(__file__).resolve().parent / "data"
@@ -170,7 +170,7 @@ def test_synthetic_bag_replays_to_the_symbolic_twin(tmp_path):
                              "imu": [{"name": "a", "lever_arm_m": [0.1, 0.0, -0.05]}],
                              "effects": {"gravity": True, "lever_arm": True}})
     assert scene.frame == "ENU"
-    from imu_emulator.simulation import Simulation
+    from imu_emulator.runtime.simulation import Simulation
     out = Simulation(scene).run()
     ref = imu_functions([sp.sympify(e, locals={"t": T}) for e in POSITION],
                         [sp.sympify(e, locals={"t": T}) for e in EULER], lever=(0.1, 0.0, -0.05))

@@ -1,4 +1,4 @@
-"""numba functions kept as machine code (machine_code): what the loaded object computes equals what numba's
+"""numba functions kept as machine code (imu_emulator.native): what the loaded object computes equals what numba's
 dispatcher computes for the same source (the oracle), for scalars of several dtypes, arrays, tuple results and
 arrays allocated inside; warm runs import no numba; a damaged object is compiled again."""
 from __future__ import annotations
@@ -13,7 +13,7 @@ import numba
 import numpy as np
 import pytest
 
-from machine_code import objects
+from imu_emulator.native import objects
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -66,7 +66,7 @@ def _run(code: str, cache: Path, native: bool = True) -> list:
 
 
 def test_deferred_function_runs_without_numba_once_cached(tmp_path):
-    code = ("import sys, json; from imu_emulator.counter_rng import normals; "
+    code = ("import sys, json; from imu_emulator.numerics.counter_rng import normals; "
             "print(json.dumps([normals(2**64 - 5, 7, 6).tolist(), 'numba' in sys.modules]))")
     first, second = _run(code, tmp_path), _run(code, tmp_path)
     oracle = _run(code, tmp_path, native=False)              # numba's dispatcher on the same source

@@ -1,4 +1,4 @@
-"""Kernels compiled once are loaded as machine code without numba (machine_code.objects): the same numbers as
+"""Kernels compiled once are loaded as machine code without numba (imu_emulator.native.objects): the same numbers as
 numba's dispatcher (the oracle: the same generated source run by numba), no numba import on a warm start, a
 damaged or mismatched object is compiled again, and the numba dispatcher is used when the object cannot load."""
 from __future__ import annotations
@@ -11,11 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from imu_emulator import kernel as kernel_module
+from imu_emulator.codegen import kernel as kernel_module
 from imu_emulator import load_scene, scene_from_dict
-from machine_code import objects as native
+from imu_emulator.native import objects as native
 from imu_emulator.effects import EFFECTS, all_params
-from imu_emulator.simulation import Simulation
+from imu_emulator.runtime.simulation import Simulation
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(Path(__file__).parent))

@@ -5,9 +5,9 @@ import io
 import numpy as np
 
 from imu_emulator.cli import main
-from imu_emulator.output import CSV_COLUMNS, TRUTH_COLUMNS, csv_rows
-from imu_emulator.samples import SampleBlock
-from imu_emulator.simulation import TRUTH_KEYS
+from imu_emulator.output.writer import CSV_COLUMNS, TRUTH_COLUMNS, csv_rows
+from imu_emulator.runtime.samples import SampleBlock
+from imu_emulator.runtime.simulation import TRUTH_KEYS
 
 # Doubles whose text is easy to get wrong: subnormals, the extremes, negative zero, values needing all 17
 # digits, powers of ten at the switch to exponent notation, integers beyond 2**53.
@@ -74,8 +74,8 @@ def test_names_with_quotes_are_quoted():
 def test_every_column_group_and_clock_offsets_read_back_exactly():
     """Per-IMU groups (increments, temperature, realized biases), shared ones (truth, Earth truth) and per-IMU
     time stamps ([[imu]] time_offset_s) land in the right row and column, each number Python's float() of it."""
-    from imu_emulator.earth_truth import KEYS
-    from imu_emulator.output import BIAS_COLUMNS, INCREMENT_COLUMNS, csv_segments
+    from imu_emulator.motion.earth_truth import KEYS
+    from imu_emulator.output.writer import BIAS_COLUMNS, INCREMENT_COLUMNS, csv_segments
     rng = np.random.default_rng(5)
     n, n_imu = 300, 3
     block = _block(n, n_imu, rng)

@@ -72,8 +72,8 @@ def run(tmp_path_factory):
 
 def _npz_columns(npz) -> dict[str, np.ndarray]:
     """The NPZ's arrays as rows of (sample, IMU), IMU fastest, under the CSV's column names."""
-    from imu_emulator.earth_truth import COLUMNS
-    from imu_emulator.output import BIAS_COLUMNS, INCREMENT_COLUMNS, TRUTH_COLUMNS
+    from imu_emulator.motion.earth_truth import COLUMNS
+    from imu_emulator.output.writer import BIAS_COLUMNS, INCREMENT_COLUMNS, TRUTH_COLUMNS
     n_imu = len(npz["imu_names"])
 
     def per_imu(a):                              # (n_imu, n, k) -> (n * n_imu, k)
@@ -134,7 +134,7 @@ def test_parquet_equals_npz_column_by_column_in_an_earth_scene(run):
     t_ns = table.column("t_ns").to_numpy().reshape(-1, len(names))
     np.testing.assert_allclose(t_ns * 1e-9, want["t"].reshape(-1, len(names)), rtol=0, atol=1e-12)
     assert np.array_equal(t_ns[:, 1] - t_ns[:, 0], np.full(len(t_ns), offsets_ns[1] - offsets_ns[0]))
-    from imu_emulator.output_parquet import read_metadata
+    from imu_emulator.output.parquet import read_metadata
     assert any("f = a - g" in line for line in read_metadata(run[".parquet"])["conventions"])
 
 
@@ -223,8 +223,8 @@ def test_run_size_matches_the_files_written(run):
     dictionary pages a short file keeps beside its values)."""
     import os
 
-    from imu_emulator.run_size import CSV_ESTIMATE_MARGIN, csv_bytes, output_bytes
-    from imu_emulator.scene import load_scene
+    from imu_emulator.output.size import CSV_ESTIMATE_MARGIN, csv_bytes, output_bytes
+    from imu_emulator.scene.model import load_scene
     scene = load_scene(run["scene"])
     size = {suffix: os.path.getsize(run[suffix]) for suffix in (".npz", ".csv", ".parquet", ".mcap")}
     assert abs(size[".npz"] / output_bytes(scene, "NPZ", True, True) - 1) < 0.01
@@ -243,9 +243,9 @@ def test_simulate_memory_check_counts_every_array(run, monkeypatch):
     """simulate()'s memory check (run_size.check_memory) counts exactly the arrays Simulation.run allocates,
     increments, temperature, realized biases and Earth truth included: with the available memory one byte
     short of their nbytes it refuses, with exactly that it runs."""
-    from imu_emulator import run_size
-    from imu_emulator.scene import load_scene
-    from imu_emulator.simulation import simulate
+    from imu_emulator.output import size as run_size
+    from imu_emulator.scene.model import load_scene
+    from imu_emulator.runtime.simulation import simulate
     scene = load_scene(run["scene"])
     monkeypatch.setattr(run_size, "available_memory", lambda: None)
     out = simulate(scene, truth=True, increments=4)
@@ -264,8 +264,8 @@ def test_a_batch_writes_the_earth_truth_too(run, tmp_path, monkeypatch):
     monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
     import pyarrow.parquet as pq
 
-    from imu_emulator import batch
-    from imu_emulator.earth_truth import COLUMNS
+    from imu_emulator.analysis import batch
+    from imu_emulator.motion.earth_truth import COLUMNS
     result = batch.run(str(run["scene"]), 1, 3, tmp_path / "mc", truth=True)
     assert result.ok, result.failures
     table = pq.read_table(batch.run_file(tmp_path / "mc", 0))

@@ -7,7 +7,7 @@ import pytest
 
 from imu_emulator import load_scene
 from imu_emulator.cli import main
-from imu_emulator.simulation import Simulation
+from imu_emulator.runtime.simulation import Simulation
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 

@@ -10,8 +10,8 @@ import pyarrow.parquet as pq
 import pytest
 
 from imu_emulator.cli import main
-from imu_emulator.progress import bar
-from imu_emulator.run_size import memory_bytes
+from imu_emulator.runtime.progress import bar
+from imu_emulator.output.size import memory_bytes
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
@@ -87,7 +87,7 @@ noise = true
 # hook, which the block loop calls after writing each block; --quiet only hides the bar).
 _RSS_TRACE = """
 import json, sys
-from imu_emulator import progress
+from imu_emulator.runtime import progress
 from imu_emulator.cli import main
 trace = []
 def record(self, done, total):

@@ -1,12 +1,12 @@
-"""sincos_cycles (imu_emulator.phase) against mpmath at 50 digits: every quadrant, its edges, signed zeros."""
+"""sincos_cycles (imu_emulator.numerics.phase) against mpmath at 50 digits: every quadrant, its edges, signed zeros."""
 import math
 
 import mpmath
 import numpy as np
 import pytest
 
-from machine_code import lazy
-from imu_emulator import phase
+from imu_emulator.native import lazy
+from imu_emulator.numerics import phase
 
 
 @pytest.fixture(scope="module")

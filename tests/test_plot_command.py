@@ -6,7 +6,7 @@ import pytest
 
 pytest.importorskip("matplotlib")
 
-from imu_emulator import plotting  # noqa: E402
+from imu_emulator.analysis import plotting  # noqa: E402
 from imu_emulator.cli import main  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent

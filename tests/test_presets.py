@@ -17,10 +17,11 @@ import math
 import numpy as np
 import pytest
 
-from imu_emulator import presets, scene_from_dict
+from imu_emulator import scene_from_dict
+from imu_emulator.scene import presets
 from imu_emulator.commands.models import cmd_models
 from imu_emulator.errors import SceneError
-from imu_emulator.simulation import Simulation
+from imu_emulator.runtime.simulation import Simulation
 
 allantools = pytest.importorskip("allantools")
 
@@ -98,7 +99,7 @@ def test_preset_resolution_is_one_count_of_a_16_bit_word_at_full_scale(name, tri
     """The vendors' drivers read these parts' 16-bit two's-complement words as full scale / 2**15 per count
     (Bosch BMI08x Sensor API lsb_to_dps / lsb_to_mps2, PX4's ICM42688P driver), so one LSB is range / 32768
     exactly; a datasheet's rounded sensitivity (16.4 LSB/(deg/s) for 16.384) would be off by 0.1 %."""
-    from imu_emulator.units import to_unit
+    from imu_emulator.scene.units import to_unit
     table = presets.describe(name)[triad]
     unit = "rad/s" if triad == "gyro" else "m/s^2"
     lsb, full_scale = to_unit(table["resolution"], unit, name), to_unit(table["range"], unit, name)

@@ -1,6 +1,6 @@
 """Attitude given as quaternions (qw, qx, qy, qz): rates come from the fitted quaternion curve on the rotation
 group, never through Euler angles. Oracles: scipy's Rotation builds the quaternions (independently of
-imu_emulator.rotations), tests/reference.py (sympy, rates from R^T dR/dt) gives the exact IMU output."""
+imu_emulator.geo.rotations), tests/reference.py (sympy, rates from R^T dR/dt) gives the exact IMU output."""
 import numpy as np
 import pytest
 import sympy as sp
@@ -8,9 +8,9 @@ from scipy.spatial.transform import Rotation
 
 from imu_emulator import scene_from_dict
 from imu_emulator.errors import DataError, SceneError
-from imu_emulator.rotations import continuous_quaternions
-from imu_emulator.simulation import Simulation
-from imu_emulator.trackfile import load_track
+from imu_emulator.geo.rotations import continuous_quaternions
+from imu_emulator.runtime.simulation import Simulation
+from imu_emulator.scene.trackfile import load_track
 from reference import imu_functions, t as T
 
 LEVER = (0.1, -0.05, 0.2)

@@ -12,11 +12,11 @@ import time
 import numpy as np
 import pytest
 
-from imu_emulator import realtime
-from imu_emulator.realtime import LatenessStats, Pacer, drop_realtime, enable_realtime
-from imu_emulator.transport import TargetOptions
-from imu_emulator.transport.pty import PtyTransport
-from imu_emulator.transport.udp import UdpTransport
+from imu_emulator.live import realtime
+from imu_emulator.live.realtime import LatenessStats, Pacer, drop_realtime, enable_realtime
+from imu_emulator.live.transport import TargetOptions
+from imu_emulator.live.transport.pty import PtyTransport
+from imu_emulator.live.transport.udp import UdpTransport
 from test_stream_support import Emulator, mavlink_parse, open_pty_reader, read_for, write_scene
 
 
@@ -83,7 +83,7 @@ def test_usable_cpus_follows_affinity():
     # The child restricts itself to one CPU first: the count is the affinity's, not the machine's.
     cpu = min(os.sched_getaffinity(0))
     out = subprocess.run([sys.executable, "-c", f"import os; os.sched_setaffinity(0, {{{cpu}}}); "
-                          "from imu_emulator.realtime import usable_cpus; print(usable_cpus())"],
+                          "from imu_emulator.live.realtime import usable_cpus; print(usable_cpus())"],
                          capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "1"
 
@@ -261,7 +261,7 @@ def _read_until_closed(fd, timeout=60.0) -> bytes:
 def test_serve_margin_follows_the_dearest_answer_within_its_bounds():
     """Input is not served within serve_margin_ns of a wake-up; the margin is twice the dearest answer's CPU time
     plus 30 us of slack, never under 50 us nor over the 300 us it starts at (module constants)."""
-    from imu_emulator import realtime
+    from imu_emulator.live import realtime
     pacer = Pacer(fifo=False, period_ns=1_000_000)
     assert pacer.serve_margin_ns == realtime._SERVE_MARGIN_NS == 300_000
     pacer._answered(20_000)

@@ -1,4 +1,4 @@
-"""`imu-emulator replay` and the fidelity figures (imu_emulator.fidelity)."""
+"""`imu-emulator replay` and the fidelity figures (imu_emulator.analysis.fidelity)."""
 import json
 from pathlib import Path
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from imu_emulator.cli import main
-from imu_emulator.fidelity import compare, lowpass
+from imu_emulator.analysis.fidelity import compare, lowpass
 from test_logs import ULOG, write_bag
 
 

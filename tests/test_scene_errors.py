@@ -8,7 +8,7 @@ import pytest
 
 import imu_emulator as imu
 from imu_emulator import DataError, SceneError, load_scene, scene_from_dict
-from imu_emulator.simulation import Simulation
+from imu_emulator.runtime.simulation import Simulation
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -230,7 +230,7 @@ def test_cli_generate_npz_with_truth(tmp_path):
 
 def test_second_run_uses_the_cached_kernel_without_sympy(tmp_path):
     path = _write(tmp_path, GOOD)
-    code = ("import sys; from imu_emulator import load_scene; from imu_emulator.simulation import Simulation; "
+    code = ("import sys; from imu_emulator import load_scene; from imu_emulator.runtime.simulation import Simulation; "
             f"Simulation(load_scene({str(path)!r})).run(); print('sympy' in sys.modules)")
     env = {"IMU_EMULATOR_CACHE": str(tmp_path / "cache"), "PATH": "/usr/bin:/bin"}
     first = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
@@ -331,7 +331,7 @@ def test_csv_beyond_the_free_disk_is_refused_with_the_figure(tmp_path):
 
 
 def test_npz_beyond_memory_is_refused_and_allow_large_overrides_only_a_csv(tmp_path):
-    from imu_emulator.run_size import RunSizeError, check_output
+    from imu_emulator.output.size import RunSizeError, check_output
     scene = load_scene(_write(tmp_path, HUGE))
     check_output(scene, tmp_path / "out.csv", truth=True, allow_large=True)
     with pytest.raises(RunSizeError, match="in memory.*write a .csv"):
@@ -339,7 +339,7 @@ def test_npz_beyond_memory_is_refused_and_allow_large_overrides_only_a_csv(tmp_p
 
 
 def test_simulate_refuses_a_run_beyond_memory_before_allocating(tmp_path):
-    from imu_emulator.run_size import RunSizeError
+    from imu_emulator.output.size import RunSizeError
     with pytest.raises(RunSizeError, match=r"simulate: 1000000000000 samples x 1 IMU\(s\) take"):
         imu.simulate(load_scene(_write(tmp_path, HUGE)))
 

@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 
 from imu_emulator import scene_from_dict
 from imu_emulator.errors import SceneError
-from imu_emulator.simulation import Simulation
+from imu_emulator.runtime.simulation import Simulation
 
 G0 = 9.80665
 W = 0.7                       # rad/s yaw rate
@@ -297,7 +297,7 @@ def test_clock_error_samples_the_motion_at_the_actual_instants():
 
 
 def test_clock_jitter_moves_the_instants_by_seeded_normals():
-    from imu_emulator.counter_rng import normals, stream_key
+    from imu_emulator.numerics.counter_rng import normals, stream_key
     rate, n, sigma = 100.0, 500, 2e-4
     clocked = Simulation(clock_scene(rate, n / rate, clock={"clock_jitter_s": sigma}, seed=7), truth=True).run()
     jitter = sigma * normals(np.uint64(stream_key(7, -1, "clock.jitter")), 0, n)

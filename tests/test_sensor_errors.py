@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from imu_emulator import scene_from_dict
-from imu_emulator.counter_rng import normals, stream_key
-from imu_emulator.simulation import Simulation
+from imu_emulator.numerics.counter_rng import normals, stream_key
+from imu_emulator.runtime.simulation import Simulation
 
 G0 = 9.80665
 SEEDS = (1, 2, 3)

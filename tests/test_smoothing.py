@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from imu_emulator import scene_from_dict
-from imu_emulator.derivatives import SampledSeries
+from imu_emulator.numerics.derivatives import SampledSeries
 from imu_emulator.errors import SceneError
-from imu_emulator.scene import DEFAULT_DERIVATIVE
+from imu_emulator.scene.model import DEFAULT_DERIVATIVE
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
 from smoothing_scan import ecef_case, noisy_case  # noqa: E402
@@ -31,7 +31,7 @@ def test_ecef_sized_track_by_default_is_within_10x_of_the_same_track_at_the_orig
     # issue 14's goal: the default derivative method on a 1 kHz, 5 m / 1 Hz circle at 6.4e6 m against the analytic
     # acceleration (-5 w^2 cos wt, ...), compared with the same circle at the origin. The interpolating spline
     # alone turns the 2.7e-10 m rounding of the input into 3.4e-3 m/s^2 (56 000x the origin's 6.05e-8), so this
-    # fails without the rounding rule (imu_emulator.rounding_smoothing)
+    # fails without the rounding rule (imu_emulator.numerics.smoothing)
     at_origin, at_ecef = ecef_case(0.0, DEFAULT_DERIVATIVE), ecef_case(6.4e6, DEFAULT_DERIVATIVE)
     assert at_ecef <= 10 * at_origin, (at_ecef, at_origin)
 
@@ -53,7 +53,7 @@ def test_rounding_rule_noise_gain_matches_a_monte_carlo():
     # confidence interval: the sample std of 400 Gaussian values has relative standard error 1/sqrt(2*399)=3.5 %,
     # so the largest over the points must lie within 4 standard errors (14 %) below or at the formula's value
     from scipy.interpolate import make_lsq_spline
-    from imu_emulator.rounding_smoothing import DEGREE, acceleration_noise, uniform_knots
+    from imu_emulator.numerics.smoothing import DEGREE, acceleration_noise, uniform_knots
     rate, spacing, span = 100.0, 0.2, 6.0
     t = np.arange(int(span * rate) + 1) / rate
     knots = uniform_knots(span, DEGREE, spacing)

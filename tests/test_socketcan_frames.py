@@ -15,8 +15,8 @@ import pytest
 from can.interfaces.socketcan.socketcan import build_can_frame
 
 from firmware_protocols.base import empty_frames
-from imu_emulator.transport.frames import to_messages
-from imu_emulator.transport.socketcan_frames import CAN_MTU, CANFD_MTU, FrameSender, pack
+from imu_emulator.live.transport.frames import to_messages
+from imu_emulator.live.transport.socketcan_frames import CAN_MTU, CANFD_MTU, FrameSender, pack
 
 
 def _random_rows(rng, count: int, fd: bool) -> np.ndarray:

@@ -9,7 +9,7 @@ below the goal, so what is left is what the emulator got wrong. The same loop fe
 
 Gravity here is the spec's: Somigliana with TR8350.2's height term along the ellipsoid normal, plus its north
 component off the ellipsoid, from geodetic coordinates computed below by Bowring's formula iterated (not
-imu_emulator.frames).
+imu_emulator.geo.frames).
 """
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from imu_emulator import scene_from_dict
-from imu_emulator.simulation import Simulation
+from imu_emulator.runtime.simulation import Simulation
 
 A, F, W = 6378137.0, 1 / 298.257223563, 7.292115e-5
 E2 = F * (2 - F)

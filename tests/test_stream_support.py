@@ -52,8 +52,8 @@ def write_scene(directory: Path, rate: float = 200, duration: float = 5.0, extra
 
 def reference(scene_path: Path, imu: int = 0):
     """The samples the emulator should send, computed here in-process from the same scene."""
-    from imu_emulator.scene import load_scene
-    from imu_emulator.simulation import Simulation
+    from imu_emulator.scene.model import load_scene
+    from imu_emulator.runtime.simulation import Simulation
     scene = load_scene(scene_path)
     block = Simulation(scene).block(0, scene.n_samples)
     return scene, block.t_s, block.accel[imu], block.gyro[imu]

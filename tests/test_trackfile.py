@@ -5,9 +5,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from imu_emulator.derivatives import wrap_angles
+from imu_emulator.numerics.derivatives import wrap_angles
 from imu_emulator.errors import DataError
-from imu_emulator.trackfile import load_track, track_from_arrays
+from imu_emulator.scene.trackfile import load_track, track_from_arrays
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "data" / "loop_track.csv"
 

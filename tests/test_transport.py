@@ -8,9 +8,9 @@ import pytest
 
 from firmware_protocols import CAN_FRAME_DTYPE
 from imu_emulator.errors import TargetError
-from imu_emulator.transport import TargetOptions, link_capacity, parse_target
-from imu_emulator.transport.fdwriter import FdPacketWriter
-from imu_emulator.transport.slcan_pty import slcan_lines
+from imu_emulator.live.transport import TargetOptions, link_capacity, parse_target
+from imu_emulator.live.transport.fdwriter import FdPacketWriter
+from imu_emulator.live.transport.slcan_pty import slcan_lines
 
 
 @pytest.mark.parametrize("text, fields", [

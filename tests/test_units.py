@@ -4,7 +4,7 @@ import math
 import pytest
 
 from imu_emulator.errors import SceneError
-from imu_emulator.units import parse, to_unit
+from imu_emulator.scene.units import parse, to_unit
 
 DEG = math.pi / 180
 

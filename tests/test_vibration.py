@@ -13,7 +13,7 @@ from scipy import signal, stats
 
 from imu_emulator import scene_from_dict
 from imu_emulator.errors import SceneError
-from imu_emulator.simulation import Simulation
+from imu_emulator.runtime.simulation import Simulation
 
 G0 = 9.80665
 

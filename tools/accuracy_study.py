@@ -9,10 +9,10 @@ writes accuracy.md (the table, the goal figures and the recommendation), accurac
 Rows:
 - source "symbolic": the expressions themselves (exact derivatives), output at 1 kHz.
 - source "sampled": the motion sampled at 50/100/200/1000 Hz (positions, and Euler angles with yaw wrapped to
-  (-pi, pi] where the attitude is not tangent), then each derivative method of imu_emulator.derivatives,
+  (-pi, pi] where the attitude is not tangent), then each derivative method of imu_emulator.numerics.derivatives,
   resampled to 1 kHz output by the simulation itself.
 - source "attitude-rate": gyro only, at the input sample times, from the sampled Euler angles by the three
-  methods of imu_emulator.attitude_rates (Euler-rate formula, the original's dR/dt R^T rotated to the body,
+  methods of imu_emulator.motion.attitude_rates (Euler-rate formula, the original's dR/dt R^T rotated to the body,
   rotation increments), for the motion that has Euler angles.
 
 Errors are norms of the error vector per sample; "interior" is the middle 90 % of the run, "ends" the first
@@ -37,12 +37,12 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from imu_emulator import kernel as kernel_module  # noqa: E402
+from imu_emulator.codegen import kernel as kernel_module  # noqa: E402
 from imu_emulator import scene_from_dict  # noqa: E402
-from imu_emulator.attitude_rates import dcm_rate, euler_rate, increment_rate  # noqa: E402
-from imu_emulator.derivatives import wrap_angles  # noqa: E402
-from imu_emulator.scene import DEFAULT_DERIVATIVE  # noqa: E402
-from imu_emulator.simulation import Simulation  # noqa: E402
+from imu_emulator.motion.attitude_rates import dcm_rate, euler_rate, increment_rate  # noqa: E402
+from imu_emulator.numerics.derivatives import wrap_angles  # noqa: E402
+from imu_emulator.scene.model import DEFAULT_DERIVATIVE  # noqa: E402
+from imu_emulator.runtime.simulation import Simulation  # noqa: E402
 from reference import imu_functions, t as T  # noqa: E402
 
 G0 = 9.80665
@@ -334,7 +334,7 @@ def write_markdown(rows, path, command, elapsed):
            "last 5 %. Set-up = scene parsing + kernel generation/compilation into an empty cache + fitting; "
            "ns/sample = one `Simulation.block` over the run after warm-up (sampled rows include evaluating "
            "the fitted derivatives). `attitude-rate` rows: gyro only, at the input times, from sampled Euler "
-           "angles (imu_emulator.attitude_rates). Plot: [accuracy.png](accuracy.png); data: "
+           "angles (imu_emulator.motion.attitude_rates). Plot: [accuracy.png](accuracy.png); data: "
            "[accuracy.csv](accuracy.csv).", "",
            f"Default derivative method for sampled input in this tree: `{DEFAULT_DERIVATIVE}`.", "",
            "## Goal figures", ""]

@@ -16,8 +16,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from imu_emulator import presets, scene_from_dict  # noqa: E402
-from imu_emulator.simulation import Simulation  # noqa: E402
+from imu_emulator import scene_from_dict  # noqa: E402
+from imu_emulator.scene import presets
+from imu_emulator.runtime.simulation import Simulation  # noqa: E402
 
 RATE_HZ = 100.0
 FLOOR = 0.664

@@ -35,7 +35,7 @@ def worker(tree: str, seconds: float) -> None:
     """Load `tree`'s package, build the variants, then answer "VARIANT MODE" lines with "cpu_ns wall_ns n"."""
     sys.path.insert(0, tree)
     import imu_emulator   # noqa: F401  (first, so bench_effects' own path insert cannot shadow it)
-    from imu_emulator.simulation import Simulation
+    from imu_emulator.runtime.simulation import Simulation
     if not imu_emulator.__file__.startswith(tree):
         raise SystemExit(f"error: imported {imu_emulator.__file__}, not the tree {tree}")
     sys.path.insert(1, str(ROOT / "tools"))

@@ -1,4 +1,4 @@
-"""Accuracy and run time of `imu-emulator align` (imu_emulator.alignment) on data the emulator makes exactly.
+"""Accuracy and run time of `imu-emulator align` (imu_emulator.analysis.alignment) on data the emulator makes exactly.
 
     .venv/bin/python tools/bench_align.py [--seeds 20] [--cases a,e,w] [--plot docs/alignment/alignment.png]
 
@@ -37,8 +37,8 @@ from scipy.spatial.transform import Rotation
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from imu_emulator import ImuEmulatorError, scene_from_dict  # noqa: E402
-from imu_emulator.alignment import AlignOptions, align  # noqa: E402
-from imu_emulator.imulog import ImuLog  # noqa: E402
+from imu_emulator.analysis.alignment import AlignOptions, align  # noqa: E402
+from imu_emulator.analysis.imulog import ImuLog  # noqa: E402
 
 MOUNT_B_DEG = (10.0, -25.0, 137.0)
 LEVER_B_M = (0.12, -0.05, 0.30)
@@ -150,7 +150,7 @@ def two_logs(scene_dict: dict, offset_s: float = TIME_OFFSET_S, rate_b_hz: float
     fragment merged (case d: a sample clock for B alone, as the IMUs of one scene share one clock): same motion,
     other sample instants. drift_ppm relabels B's stamps by drift_ppm·1e-6·(τ − t_ref_s): an exact drift for the
     exact-data tests (the clock effect's own drift, which also moves the sample instants, is case d)."""
-    from imu_emulator.simulation import Simulation
+    from imu_emulator.runtime.simulation import Simulation
     scene_dict = copy.deepcopy(scene_dict)
     scene_dict["imu"][1]["time_offset_s"] = offset_s
     out = Simulation(scene_from_dict(scene_dict), attitude=False).run()

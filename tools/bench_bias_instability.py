@@ -23,9 +23,9 @@ sys.path.insert(0, str(ROOT / "tools"))
 
 from bench_effects import FULL, circle, interleave, report  # noqa: E402
 
-from imu_emulator import kernel  # noqa: E402
+from imu_emulator.codegen import kernel  # noqa: E402
 from imu_emulator.effects import bias_instability  # noqa: E402
-from imu_emulator.simulation import Simulation  # noqa: E402
+from imu_emulator.runtime.simulation import Simulation  # noqa: E402
 
 BLOCK = 65536
 

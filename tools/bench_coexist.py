@@ -37,7 +37,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "tests"))
 from bench_stream import SCENE, read_until_exit  # noqa: E402  (tools/ is on the path: this script's folder)
 from test_stream_support import candump_frames, dronecan_rawimu  # noqa: E402  (the tests' receiver: dronecan reassembles)
-from imu_emulator.realtime import LatenessStats  # noqa: E402
+from imu_emulator.live.realtime import LatenessStats  # noqa: E402
 MODES = ("auto", "spin", "fifo", "off")
 BUSY = "while True: pass"
 

@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from imu_emulator import scene_from_dict  # noqa: E402
-from imu_emulator.simulation import Simulation  # noqa: E402
+from imu_emulator.runtime.simulation import Simulation  # noqa: E402
 
 BLOCK = 65536
 GYRO = {"noise_density": "0.007 deg/s/sqrt(Hz)", "bias_instability": "10 deg/h", "random_walk": "0.5 deg/h/sqrt(h)",
@@ -98,7 +98,7 @@ def rows(cpu: dict, wall: dict, width: int):
 
 
 def normal_cost(rounds: int) -> list[float]:
-    from imu_emulator.counter_rng import normals
+    from imu_emulator.numerics.counter_rng import normals
     key = np.uint64(12345)
     normals(key, 0, 10)
     n = 5_000_000

@@ -4,7 +4,7 @@
     .venv/bin/python tools/bench_encode.py --per-sample [--formats ...]
 
 --per-sample: one sample at a time as devices encode (a view of row i of a block, firmware_protocols.devices.base
-.single), the encoders' functions run as machine code (machine_code.lazy) and through numba's dispatcher,
+.single), the encoders' functions run as machine code (imu_emulator.native.lazy) and through numba's dispatcher,
 interleaved in one process: thread CPU and wall time per sample, min/median of 7 rounds of 1000 samples each.
 
 Prints figures; asserts nothing. Samples are random but in range, with every optional field given.
@@ -44,7 +44,7 @@ def count(result) -> tuple[int, str]:
 def per_sample(names: list[str], rounds: int = 7, per_round: int = 1000) -> None:
     import statistics
     from firmware_protocols.devices.base import single
-    from machine_code import lazy
+    from imu_emulator.native import lazy
     block = make_samples(per_round, np.random.default_rng(1))
     print(f"{'format':24s} {'path':13s} {'CPU µs/sample':>20s} {'wall µs/sample':>20s}   (min/median)")
     for name in names:

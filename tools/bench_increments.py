@@ -1,4 +1,4 @@
-"""Cost of the integrated outputs (dtheta, dvel; imu_emulator.increments) per sample, by number of
+"""Cost of the integrated outputs (dtheta, dvel; imu_emulator.codegen.increments) per sample, by number of
 Gauss-Legendre nodes, on the circle scene at 1 kHz with a lever arm (tangent attitude), bare and with the full
 error model of tools/bench_effects.py.
 
@@ -22,8 +22,8 @@ sys.path.insert(0, str(ROOT / "tools"))
 
 from bench_effects import BLOCK, FULL, circle, time_run  # noqa: E402
 
-from imu_emulator.increments import DEFAULT_NODES  # noqa: E402
-from imu_emulator.simulation import Simulation  # noqa: E402
+from imu_emulator.codegen.increments import DEFAULT_NODES  # noqa: E402
+from imu_emulator.runtime.simulation import Simulation  # noqa: E402
 
 
 def main() -> None:

@@ -14,10 +14,10 @@ import time
 
 import numpy as np
 
-from imu_emulator.csv_text import RowWriter
-from imu_emulator.output import _csv_text, _pyarrow_csv_rows
-from imu_emulator.scene import load_scene
-from imu_emulator.simulation import Simulation
+from imu_emulator.output.csv_text import RowWriter
+from imu_emulator.output.writer import _csv_text, _pyarrow_csv_rows
+from imu_emulator.scene.model import load_scene
+from imu_emulator.runtime.simulation import Simulation
 
 
 def percent_17g_rows(block, imu_names, truth, increments=False) -> str:

@@ -109,7 +109,7 @@ def drift(directory: Path, seconds: float) -> tuple[float, float]:
 
 BASELINE = """
 import gc, json, sys, time
-from imu_emulator.realtime import LatenessStats, Pacer, enable_realtime
+from imu_emulator.live.realtime import LatenessStats, Pacer, enable_realtime
 rate, seconds = float(sys.argv[1]), float(sys.argv[2])
 rt = enable_realtime()
 gc.freeze(); gc.disable()

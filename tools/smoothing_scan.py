@@ -13,7 +13,7 @@ rounding of its input values (2.7e-10 m RMS, a uniform error over one ulp), whic
 point afterwards can remove (SampledSeries already fits relative to the first sample); what is left is how well
 a smoother separates 2.7e-10 m of white noise from a 5 m, 1 Hz circle. Printed: FITPACK with s = c n sigma^2
 over c, least-squares splines of degree 5 to 11 on fixed uniform knots over their spacing, and what the rule
-of imu_emulator/rounding_smoothing.py (used by spline5c and smooth) chooses.
+of imu_emulator/numerics/smoothing.py (used by spline5c and smooth) chooses.
 With --timing, the cost of fitting `smooth`: one column of 15 k, 60 k and 240 k samples (100 Hz, 1 cm noise),
 wall time and the CPU time of the fitting thread (FITPACK is single-threaded; on a shared machine the wall time
 is mostly waiting).
@@ -31,7 +31,7 @@ import numpy as np
 from scipy.interpolate import UnivariateSpline
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from imu_emulator.derivatives import SampledSeries  # noqa: E402
+from imu_emulator.numerics.derivatives import SampledSeries  # noqa: E402
 
 W_CIRCLE, W_WEAVE = 2 * np.pi * 0.2, 2 * np.pi * 0.5
 SCAN = (0.25, 0.5, 0.8, 1.0, 1.2, 1.5, 2, 3, 5, 10, 30)
@@ -83,7 +83,7 @@ def ecef_case(offset, method):
 def ecef_floor_scan():
     from scipy.interpolate import make_interp_spline, make_lsq_spline
 
-    from imu_emulator.rounding_smoothing import DEGREE, choose_lsq_fit
+    from imu_emulator.numerics.smoothing import DEGREE, choose_lsq_fit
     t = np.arange(5001) * 1e-3
     w = 2 * np.pi
     truth = -5 * w * w * np.cos(w * t)

@@ -1,5 +1,5 @@
 """`imu-emulator align`: relative orientation, time offset (and drift) and lever arm of two IMUs, from their
-records (imu_emulator.alignment)."""
+records (imu_emulator.analysis.alignment)."""
 from __future__ import annotations
 
 import json
@@ -31,8 +31,8 @@ def register(subparsers) -> None:
 
 
 def cmd_align(args) -> int:
-    from imu_emulator.alignment import AlignOptions, align
-    from imu_emulator.imulog import pick, read_logs
+    from imu_emulator.analysis.alignment import AlignOptions, align
+    from imu_emulator.analysis.imulog import pick, read_logs
 
     if args.max_offset_s is not None and not (math.isfinite(args.max_offset_s) and args.max_offset_s > 0):
         raise ImuEmulatorError(f"--max-offset-s: expected a positive number of seconds, got {args.max_offset_s}")
@@ -52,7 +52,7 @@ def cmd_align(args) -> int:
     result = align(a, b, AlignOptions(lever_arm=args.lever_arm, drift=args.drift, max_offset_s=args.max_offset_s))
     print(report(result, a.label, b.label))
     if args.json is not None:     # after the report: results a bad path cannot keep are shown all the same
-        from imu_emulator.outfile import AtomicOutput
+        from imu_emulator.output.atomic import AtomicOutput
         with AtomicOutput(args.json) as out:
             out.write(json.dumps(result.to_json(), indent=2) + "\n")
     return 0

@@ -33,9 +33,9 @@ def register(subparsers) -> None:
 
 
 def cmd_batch(args) -> int:
-    from imu_emulator import batch
+    from imu_emulator.analysis import batch
     from imu_emulator.commands.shared import load_scene_with_warnings
-    from imu_emulator.progress import bar
+    from imu_emulator.runtime.progress import bar
 
     scene = load_scene_with_warnings(args.scene)
     seed = scene.seed if args.seed is None else args.seed

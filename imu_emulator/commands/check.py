@@ -18,9 +18,9 @@ def _megabytes(n_bytes: float) -> str:
 
 
 def output_sizes(scene, truth: bool, increments: bool = False) -> dict[str, int]:
-    """Bytes of `generate`'s output per format (imu_emulator.run_size.output_bytes: NPZ within its headers, CSV
+    """Bytes of `generate`'s output per format (imu_emulator.output.size.output_bytes: NPZ within its headers, CSV
     an estimate, Parquet and MCAP uncompressed bounds), and "CSV bound", the CSV at its longest."""
-    from imu_emulator.run_size import csv_bytes, output_bytes
+    from imu_emulator.output.size import csv_bytes, output_bytes
     sizes = {fmt: output_bytes(scene, fmt, truth, increments and fmt != "MCAP")
              for fmt in ("NPZ", "CSV", "Parquet", "MCAP")}
     return {**sizes, "CSV bound": csv_bytes(scene, truth, increments)}
@@ -48,17 +48,17 @@ def imu_parameter_lines(imu, effect_names, records) -> list[str]:
 
 
 def _describe_part(part) -> str:
-    from imu_emulator.scene import Expressions
+    from imu_emulator.scene.model import Expressions
     if isinstance(part, Expressions):
         return ", ".join(part.texts)
     return f"{len(part.t)} samples from {part.source}, derivatives by {part.derivative}"
 
 
 def cmd_check(args) -> int:
-    from imu_emulator import kernel
+    from imu_emulator.codegen import kernel
     from imu_emulator.effects import EFFECTS
-    from imu_emulator.scene import load_scene
-    from imu_emulator.streaming import build_streams, link_budget, streams_from_tables
+    from imu_emulator.scene.model import load_scene
+    from imu_emulator.live.streaming import build_streams, link_budget, streams_from_tables
 
     scene = load_scene(args.scene)
     streams = build_streams(streams_from_tables(scene.streams, scene.imu_names), scene.imu_names, scene.rate_hz)
@@ -68,8 +68,8 @@ def cmd_check(args) -> int:
     gravity = f"(0, 0, {'+' if scene.frame == 'ENU' else '-'}g)"
     print(f"  frame      {scene.frame} (body {body}; at rest and level f = {gravity}, g = {scene.gravity_mps2!r} m/s²)")
     print("  attitude   z-y-x: R = Rz(yaw)·Ry(pitch)·Rx(roll) maps body to navigation; gyros give body-frame rate")
-    from imu_emulator import earth_truth
-    from imu_emulator.earth_motion import model_on
+    from imu_emulator.motion import earth_truth
+    from imu_emulator.motion.earth import model_on
     if model_on(scene):
         for line in earth_truth.conventions(scene)[:2] + earth_truth.conventions(scene)[4:5]:
             print(f"  earth      {line}")

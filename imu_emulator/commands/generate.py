@@ -8,7 +8,7 @@ import threading
 from pathlib import Path
 
 from imu_emulator.commands.shared import add_increments_option, load_scene_with_warnings, number
-from imu_emulator.progress import CompileStatus, Progress
+from imu_emulator.runtime.progress import CompileStatus, Progress
 
 
 def register(subparsers) -> None:
@@ -27,7 +27,7 @@ def register(subparsers) -> None:
 
 
 def cmd_generate(args) -> int:
-    from imu_emulator.output import check_path
+    from imu_emulator.output.writer import check_path
 
     check_path(args.output)
     scene = load_scene_with_warnings(args.scene)
@@ -43,25 +43,25 @@ def _parquet_metadata(output, scene) -> dict | None:
     start 0.1-0.2 s, which other formats need not pay (issue 15)."""
     if Path(output).suffix.lower() != ".parquet":
         return None
-    from imu_emulator.output_parquet import run_metadata
+    from imu_emulator.output.parquet import run_metadata
     return run_metadata(scene)
 
 
 def _generate(args, scene, stopped) -> int:
-    from imu_emulator.output import open_writer
-    from imu_emulator.run_size import check_output
-    from imu_emulator.samples import counts_text
-    from imu_emulator.simulation import Simulation
+    from imu_emulator.output.writer import open_writer
+    from imu_emulator.output.size import check_output
+    from imu_emulator.runtime.samples import counts_text
+    from imu_emulator.runtime.simulation import Simulation
 
     # The output file is created before the kernel compiles: an unwritable path fails at once. It appears
     # at its path only when every block is written (a failed run leaves nothing behind).
-    from imu_emulator.kernel import EffectPlan
+    from imu_emulator.codegen.kernel import EffectPlan
     bias_truth = EffectPlan(scene).bias_truth    # the realized-bias columns, known before compiling
-    from imu_emulator.earth_motion import model_on
+    from imu_emulator.motion.earth import model_on
     from imu_emulator.effects.noise import variances
     conventions = None
     if model_on(scene):        # earth_truth (frames, rotations) only for scenes on the Earth
-        from imu_emulator.earth_truth import conventions as earth_conventions
+        from imu_emulator.motion.earth_truth import conventions as earth_conventions
         conventions = earth_conventions(scene)
     with open_writer(args.output, scene.imu_names, args.truth, bias_truth=bias_truth,
                      temperature="temperature" in scene.effects, increments=bool(args.increments),

@@ -19,7 +19,7 @@ def _figure(table: dict, keys) -> str:
 
 
 def cmd_models(args) -> int:
-    from imu_emulator import presets
+    from imu_emulator.scene import presets
     for name in presets.names():
         info = presets.describe(name)
         print(f"{name:18s} {info['part']}")

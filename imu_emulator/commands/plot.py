@@ -22,7 +22,7 @@ def cmd_plot(args) -> int:
         import matplotlib  # noqa: F401
     except ImportError:
         raise ImuEmulatorError("plot: needs matplotlib; install the `plot` extra (pip install 'imu-emulator[plot]')") from None
-    from imu_emulator import plotting
+    from imu_emulator.analysis import plotting
 
     source = Path(args.source)
     output = Path(args.output) if args.output else source.with_suffix(".png")
@@ -33,9 +33,9 @@ def cmd_plot(args) -> int:
     if not source.exists():
         raise ImuEmulatorError(f"{source}: no such file")
     if source.suffix.lower() == ".toml":
-        from imu_emulator.progress import CompileStatus
-        from imu_emulator.scene import load_scene
-        from imu_emulator.simulation import Simulation
+        from imu_emulator.runtime.progress import CompileStatus
+        from imu_emulator.scene.model import load_scene
+        from imu_emulator.runtime.simulation import Simulation
         scene = load_scene(source)
         with CompileStatus(scene, attitude=False, truth=True):
             sim = Simulation(scene, attitude=False, truth=True)

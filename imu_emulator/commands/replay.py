@@ -47,7 +47,7 @@ def build_scene_table(log: Path, overrides: dict, recorded_rate_hz: float | None
 
 
 def build_scene(log: Path, overrides: dict, recorded_rate_hz: float | None):
-    from imu_emulator.scene import from_dict
+    from imu_emulator.scene.model import from_dict
     return from_dict(build_scene_table(log, overrides, recorded_rate_hz), base_dir=log.parent, path=str(log))
 
 
@@ -57,7 +57,7 @@ def _parts(log: Path, overrides: dict, recorded_rate_hz: float | None) -> list[d
     left."""
     import numpy as np
 
-    from imu_emulator import logs
+    from imu_emulator.scene import logs
     from imu_emulator.errors import DataError
     probe = build_scene_table(log, overrides, recorded_rate_hz)
     table, head = probe["trajectory"], probe["scene"]
@@ -102,11 +102,11 @@ def _read_overrides(path: str | None) -> dict:
 def cmd_replay(args) -> int:
     import numpy as np
 
-    from imu_emulator import logs
+    from imu_emulator.scene import logs
     from imu_emulator.errors import ImuEmulatorError
-    from imu_emulator.fidelity import compare
-    from imu_emulator.output import check_path, open_writer
-    from imu_emulator.simulation import Simulation
+    from imu_emulator.analysis.fidelity import compare
+    from imu_emulator.output.writer import check_path, open_writer
+    from imu_emulator.runtime.simulation import Simulation
 
     log = Path(args.log)
     if not log.exists():

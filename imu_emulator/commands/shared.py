@@ -10,7 +10,7 @@ import sys
 def load_scene_with_warnings(path):
     """The scene, its warnings printed to stderr. Always printed, --quiet or not: each warning says that
     something the scene file asks for does not reach the output."""
-    from imu_emulator.scene import load_scene
+    from imu_emulator.scene.model import load_scene
     scene = load_scene(path)
     for warning in scene.warnings:
         print(f"warning: {warning}", file=sys.stderr, flush=True)
@@ -36,8 +36,8 @@ def number(low: float, high: float, integer: bool = False, zero: bool = False):
 
 
 def add_increments_option(parser) -> None:
-    """--increments [NODES]: the integrated outputs dtheta, dvel (imu_emulator.increments); 0 when not given."""
-    from imu_emulator.increments import DEFAULT_NODES, MAX_NODES
+    """--increments [NODES]: the integrated outputs dtheta, dvel (imu_emulator.codegen.increments); 0 when not given."""
+    from imu_emulator.codegen.increments import DEFAULT_NODES, MAX_NODES
     parser.add_argument("--increments", nargs="?", type=number(1, MAX_NODES, integer=True), const=DEFAULT_NODES,
                         default=0, metavar="NODES", help="add the integrated outputs dtheta and dvel over each "
                         f"sample interval (Gauss-Legendre quadrature with NODES nodes, default {DEFAULT_NODES})")

@@ -52,7 +52,7 @@ def register(subparsers) -> None:
     p.set_defaults(func=cmd_stream)
 
 def _option_value(key: str, text: str):
-    from imu_emulator.streaming import StreamError    # here: importing streaming costs every command start-up
+    from imu_emulator.live.streaming import StreamError    # here: importing streaming costs every command start-up
     lowered = text.lower()
     if lowered in ("true", "false"):
         return lowered == "true"
@@ -70,7 +70,7 @@ def _option_value(key: str, text: str):
 
 
 def _parse_options(pairs) -> dict:
-    from imu_emulator.streaming import StreamError
+    from imu_emulator.live.streaming import StreamError
     options = {}
     for pair in pairs:
         key, sep, value = pair.partition("=")
@@ -81,7 +81,7 @@ def _parse_options(pairs) -> dict:
 
 
 def cmd_stream(args) -> int:
-    from imu_emulator.outfile import AtomicOutput
+    from imu_emulator.output.atomic import AtomicOutput
 
     # Created now, written when the stream ends: an unwritable path fails before anything streams.
     stats = AtomicOutput(args.stats_json) if args.stats_json else None
@@ -94,12 +94,12 @@ def cmd_stream(args) -> int:
 
 
 def _stream(args, stats) -> None:
-    from imu_emulator.progress import CompileStatus
-    from imu_emulator.simulation import Simulation
-    from imu_emulator.increments import DEFAULT_NODES
-    from imu_emulator.streaming import (RunOptions, StreamConfig, StreamError, needs_increments, needs_truth,
+    from imu_emulator.runtime.progress import CompileStatus
+    from imu_emulator.runtime.simulation import Simulation
+    from imu_emulator.codegen.increments import DEFAULT_NODES
+    from imu_emulator.live.streaming import (RunOptions, StreamConfig, StreamError, needs_increments, needs_truth,
                                         run_streams, streams_from_tables)
-    from imu_emulator.transport import TargetOptions
+    from imu_emulator.live.transport import TargetOptions
 
     scene = load_scene_with_warnings(args.scene)
     if args.duration is not None and round(args.duration * scene.rate_hz) < 1:

@@ -1,8 +1,8 @@
-"""What the Earth effects share: the geometry comes from the motion (imu_emulator.earth_motion, run whenever
+"""What the Earth effects share: the geometry comes from the motion (imu_emulator.motion.earth, run whenever
 the Earth model is on), the effects add NED vectors to the navigation stage's level-axes variables here."""
 from __future__ import annotations
 
-from imu_emulator.earth_motion import EARTH_EFFECTS, level, model_on, position_frame  # noqa: F401 (API)
+from imu_emulator.motion.earth import EARTH_EFFECTS, level, model_on, position_frame  # noqa: F401 (API)
 
 
 def add(scene, target: str, n: str, e: str, d: str) -> list[str]:
@@ -12,6 +12,6 @@ def add(scene, target: str, n: str, e: str, d: str) -> list[str]:
 
 def add_rate(scene, rate, derivative) -> list[str]:
     """Lines adding a rate of the navigation frame (a NED triple) to wn.. and the rate of change of its
-    components to dwn.. (the lever arm's angular acceleration needs it: imu_emulator.earth_motion
+    components to dwn.. (the lever arm's angular acceleration needs it: imu_emulator.motion.earth
     .inertial_rate_lines)."""
     return add(scene, "wn", *rate) + add(scene, "dwn", *derivative)

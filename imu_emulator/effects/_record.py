@@ -58,7 +58,7 @@ AXES = "xyz"
 @dataclass(frozen=True)
 class Param:
     """One parameter: `key` in `table` ("imu", "imu.gyro", "imu.accel"); plain numbers are in `unit`, strings
-    carry their own units (imu_emulator.units). `aliases` are other keys of the same dimension that datasheets
+    carry their own units (imu_emulator.scene.units). `aliases` are other keys of the same dimension that datasheets
     use for the same figure (e.g. arw for a gyro's noise density); at most one of them may be given."""
     key: str
     table: str
@@ -126,7 +126,7 @@ class EmitContext:
     @property
     def alpha(self) -> tuple[str, str, str]:
         """The inertial angular acceleration d/dt gw.. in body axes, for the body stage: the body's alx.., or
-        gal.. when the navigation stage adds its frame's rate (imu_emulator.earth_motion.inertial_rate_lines)."""
+        gal.. when the navigation stage adds its frame's rate (imu_emulator.motion.earth.inertial_rate_lines)."""
         return ("galx", "galy", "galz") if self.plan.nav_rate else ("alx", "aly", "alz")
 
     def value(self, path: str):

@@ -35,7 +35,7 @@ def offsets(scene, seed: int, k0: int, s0: int, n: int):
     """clk for samples k0 .. k0+n-1 (run samples s0 ..), as the kernel computes it (for sampled motion)."""
     import numpy as np
 
-    from imu_emulator.counter_rng import normals, stream_key
+    from imu_emulator.numerics.counter_rng import normals, stream_key
     ppm, jitter = settings(scene)
     out = (k0 + np.arange(n, dtype=np.float64)) * (ppm * 1e-6)
     if jitter:

@@ -1,7 +1,7 @@
 """Coriolis and transport rate: f gains 2 omega_ie x v; the gyros sense omega_en, the turning of the local
 level frame as it follows the vehicle over the curved Earth (Groves 2nd ed. §5.4)."""
-from imu_emulator import wgs84
-from imu_emulator.earth_motion import TRANSPORT_RATE, rho_lines
+from imu_emulator.geo import wgs84
+from imu_emulator.motion.earth import TRANSPORT_RATE, rho_lines
 from imu_emulator.effects import _earth
 from imu_emulator.effects._record import Effect, Stage
 
@@ -13,7 +13,7 @@ def emit(ctx) -> list[str]:
     coriolis = _earth.add(scene, "fn", f"{w2} * e_sl * e_ve", f"-{w2} * (e_sl * e_vn + e_cl * e_vd)",
                           f"{w2} * e_cl * e_ve")
     # omega_en^n = (v_E / (R_E + h), -v_N / (R_N + h), -v_E tan L / (R_E + h)) and its derivative
-    # (imu_emulator.earth_motion.rho_lines); tan L: the NED frame itself is undefined at the poles
+    # (imu_emulator.motion.earth.rho_lines); tan L: the NED frame itself is undefined at the poles
     return coriolis + rho_lines() + _earth.add_rate(scene, *TRANSPORT_RATE)
 
 

@@ -1,5 +1,5 @@
 """Earth rate: the gyros sense the Earth's rotation, omega_ie^n = omega_ie (cos L, 0, -sin L) in local NED."""
-from imu_emulator.earth_motion import EARTH_RATE, earth_rate_lines
+from imu_emulator.motion.earth import EARTH_RATE, earth_rate_lines
 from imu_emulator.effects import _earth
 from imu_emulator.effects._record import Effect, Stage
 

@@ -1,5 +1,5 @@
 """Gravity: accelerometers measure specific force f = a - g (at rest, level, ENU: f = (0, 0, +g))."""
-from imu_emulator import wgs84
+from imu_emulator.geo import wgs84
 from imu_emulator.effects import _earth
 from imu_emulator.effects._record import Effect, Stage
 
@@ -10,10 +10,10 @@ def emit(ctx) -> list[str]:
         # g = (0, 0, -g0) in ENU, (0, 0, +g0) in NED; g0 is [scene] gravity_mps2
         sign = "+" if scene.frame == "ENU" else "-"
         return [f"fnz = fnz {sign} {float(scene.gravity_mps2)!r}"]
-    lines = []     # the Earth geometry (e_*) comes with the motion (imu_emulator.earth_motion)
+    lines = []     # the Earth geometry (e_*) comes with the motion (imu_emulator.motion.earth)
     if scene.gravity_model == "wgs84":
         # normal gravity (Somigliana, TR8350.2 eq. 4-3) along the ellipsoid normal, and its north component
-        # off the ellipsoid (imu_emulator.wgs84.normal_gravity_north: -8.1e-9 h sin 2L m/s^2)
+        # off the ellipsoid (imu_emulator.geo.wgs84.normal_gravity_north: -8.1e-9 h sin 2L m/s^2)
         k, f, m, a = (repr(x) for x in (wgs84.K_SOMIGLIANA, wgs84.F, wgs84.M_RATIO, wgs84.A))
         lines += [
             "e_s2 = e_sl * e_sl",

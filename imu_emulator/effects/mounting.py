@@ -6,7 +6,7 @@ from imu_emulator.effects._record import Effect, Param, Stage
 
 def mounting_matrix(rpy_deg) -> np.ndarray:
     """M maps sensor coordinates to body coordinates (sensor frame = body frame rotated by M)."""
-    from imu_emulator.rotations import euler_to_matrix
+    from imu_emulator.geo.rotations import euler_to_matrix
     return euler_to_matrix(np.radians(rpy_deg))
 
 

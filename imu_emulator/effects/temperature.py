@@ -11,7 +11,7 @@ from imu_emulator.errors import SceneError
 
 
 def _tree(values: dict):
-    from imu_emulator import expressions
+    from imu_emulator.numerics import expressions
     return expressions.check(values["imu.temperature_c"], "imu.temperature_c", set())
 
 
@@ -19,14 +19,14 @@ def profile(values: dict, t):
     """The temperature (°C) of an IMU at the times t (numpy), as the kernel computes it."""
     import numpy as np
 
-    from imu_emulator import expressions
+    from imu_emulator.numerics import expressions
     temperature = expressions.evaluate_array(_tree(values), {}, t)
     rise, tau = values["imu.warmup_rise_c"], values["imu.warmup_tau_s"]
     return temperature + rise * -np.expm1(-np.asarray(t) / tau) if rise else np.array(temperature)
 
 
 def emit(ctx) -> list[str]:
-    from imu_emulator import expressions
+    from imu_emulator.numerics import expressions
     values = ctx.imu.values
     temperature = ctx.var("T")
     lines = [f"{temperature} = {expressions.to_code(_tree(values), {})}"]

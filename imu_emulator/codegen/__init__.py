@@ -1,0 +1,1 @@
+"""Kernel source for exactly the effects a scene names: template, plan, generator, increments."""

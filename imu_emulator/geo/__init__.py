@@ -1,0 +1,1 @@
+"""Pure geometry: WGS-84, navigation frames, geodesy, rotations."""

@@ -1,0 +1,1 @@
+"""Live streaming: stream configuration, link budgets, producer, pacer, transports."""

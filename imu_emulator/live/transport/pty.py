@@ -1,0 +1,162 @@
+"""A virtual serial port: the emulator holds the master, firmware under test opens the slave path."""
+from __future__ import annotations
+
+import os
+import select
+import termios
+import time
+import tty
+
+from imu_emulator.errors import TargetError
+from imu_emulator.live.transport.base import TargetOptions, Transport, output_queue
+from imu_emulator.live.transport.fdwriter import FdPacketWriter, read_available
+
+_OPEN_FLAGS = os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK
+
+
+class PtyPair:
+    """os.openpty with the slave in raw mode (the default line discipline echoes and rewrites binary
+    data; the setting stays with the pty when our fd closes). We do not hold the slave open: the master then
+    reports POLLHUP while no reader has it open, so nothing is written for nobody, and a reader that opens
+    the path late gets current samples rather than a buffer of old ones. The master is non-blocking so a
+    reader that stops cannot stop us."""
+
+    def __init__(self, link: str | None = None):
+        self.master, slave = os.openpty()
+        tty.setraw(slave)
+        self.path = os.ttyname(slave)
+        os.close(slave)
+        os.set_blocking(self.master, False)
+        self._hangup = select.poll()
+        self._hangup.register(self.master, 0)       # POLLHUP is always reported
+        self.link = link
+        if link:
+            try:
+                if os.path.islink(link):
+                    os.unlink(link)
+                os.symlink(self.path, link)
+            except OSError as exc:
+                self.close()
+                raise TargetError(f"pty: cannot create link {link}: {exc.strerror}") from None
+
+    def reader_present(self) -> bool:
+        """True while some process has the slave open."""
+        return not self._hangup.poll(0)
+
+    def discard_unread(self) -> None:
+        """Throw away what a reader that went away left unread, and what waits to reach its queue, so the
+        next reader starts with fresh packets."""
+        try:
+            termios.tcflush(self.master, termios.TCOFLUSH)
+            slave = os.open(self.path, _OPEN_FLAGS)
+        except OSError:
+            return
+        try:
+            termios.tcflush(slave, termios.TCIFLUSH)
+        except OSError:
+            pass
+        finally:
+            os.close(slave)
+
+    def close(self) -> None:
+        if self.link and os.path.islink(self.link) and os.readlink(self.link) == self.path:
+            os.unlink(self.link)
+        try:
+            os.close(self.master)
+        except OSError:
+            pass
+
+
+# Closing the master discards what the reader has not read yet: at the end of a run we wait for it, until it
+# has taken nothing for this long (so a run with nobody reading ends at once, or nearly).
+_DRAIN_IDLE_S = 0.2
+_SETTLE_S = 0.02
+
+
+class PtyTransport(Transport):
+    """Packets go out only while a reader has the port open; the others are dropped and counted (with
+    --speed 0, sending waits for a reader instead). What the reader writes (a driver's commands) comes back
+    from `recv`; the streaming loop reads it whether or not a device answers, so the reader's writes never
+    block."""
+
+    _READER_WAIT_S = 0.01
+
+    def __init__(self, options: TargetOptions):
+        self.pty = PtyPair(options.link)
+        self.writer = FdPacketWriter(self.pty.master, pace_baud=options.pace_baud, blocking=options.blocking)
+        self._reader = False
+
+    def _reader_present(self) -> bool:
+        present = self.pty.reader_present()
+        while not present and self.writer.blocking:
+            time.sleep(self._READER_WAIT_S)
+            present = self.pty.reader_present()
+        if present != self._reader:
+            self._reader = present
+            # A packet half written when the reader left must not start the next reader's stream.
+            self.writer.discard_pending()
+            if not present:
+                self.pty.discard_unread()
+        return present
+
+    def send(self, payload: bytes) -> bool:
+        if not self._reader_present():
+            self.writer.refusals["no-reader"] += 1
+            return False
+        return self.writer.send(payload)
+
+    def recv(self) -> bytes:
+        return read_available(self.pty.master)
+
+    def fileno(self) -> int:
+        return self.pty.master
+
+    def finish(self) -> None:
+        """Wait for a reader to take what was sent. Only the slave side tells (FIONREAD: the line discipline's
+        buffer, so at most 4095 however much more waits behind it; 0 when the reader took everything), so we
+        open it for the while: during the run that would count as a reader."""
+        if not self.pty.reader_present():
+            return
+        try:
+            slave = os.open(self.pty.path, _OPEN_FLAGS)
+        except OSError:
+            return
+        try:
+            # The last writes reach the line discipline through a kernel work queue, so an empty reading right
+            # after them proves nothing: empty must hold for _SETTLE_S.
+            last, changed = output_queue(slave, termios.FIONREAD), time.monotonic()
+            while True:
+                time.sleep(0.002)
+                now, queued = time.monotonic(), output_queue(slave, termios.FIONREAD)
+                if queued != last:
+                    last, changed = queued, now
+                if now - changed >= (_DRAIN_IDLE_S if queued else _SETTLE_S):
+                    break
+        finally:
+            os.close(slave)
+        self.unread_at_close = last or 0
+
+    def link_report(self) -> dict:
+        report = super().link_report()
+        if getattr(self, "unread_at_close", 0):
+            report["unread_at_close_bytes"] = self.unread_at_close   # lost when the master closes
+        return report
+
+    @property
+    def send_errors(self):
+        # Nothing is lost after a pty accepts bytes (a full buffer refuses the write instead): refusals
+        # are the whole story.
+        return self.writer.refusals
+
+    def set_baud(self, baud: int) -> bool:
+        """A pty has no baud rate; with --pace-baud the pacing follows the new rate, as the UART would."""
+        if not self.writer.paced:
+            return False
+        self.writer.set_pace_baud(baud)
+        return True
+
+    def describe(self) -> str:
+        return self.pty.path + (f" (link {self.pty.link})" if self.pty.link else "")
+
+    def close(self) -> None:
+        self.pty.close()

@@ -1,0 +1,1 @@
+"""Output files: one writer per file format, atomic creation, size estimates."""

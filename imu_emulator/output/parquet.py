@@ -1,0 +1,94 @@
+"""Samples as Parquet (`-o run.parquet`), block by block: each block is one row group, so memory does not grow
+with the run. Columns: t_ns (int64, ns on the scene's time base), imu (dictionary-encoded name), ax ay az (m/s^2),
+gx gy gz (rad/s), then as in CSV the increments (--increments), temp_c, truth, realized-bias and (a scene on the
+Earth, with --truth) Earth truth columns. The footer's key "imu_emulator" holds JSON: the scene's hash and seed,
+the versions that wrote it, whatever the caller adds (a batch's draws) and, with Earth truth, "conventions" (the
+lines a CSV starts with).
+"""
+from __future__ import annotations
+
+import json
+import platform
+from functools import lru_cache
+from importlib import metadata as importlib_metadata
+from pathlib import Path
+
+from imu_emulator.output.atomic import AtomicOutput, FinishOnExit, output_error
+from imu_emulator.output.writer import block_columns
+from imu_emulator.runtime.samples import SampleBlock
+
+METADATA_KEY = b"imu_emulator"
+
+
+@lru_cache(maxsize=1)
+def versions() -> dict[str, str]:
+    """The versions whose code shaped the samples (read once per process: a batch writes many files)."""
+    found = {"python": platform.python_version()}
+    for package in ("imu-emulator", "numpy", "numba", "pyarrow"):
+        try:
+            found[package] = importlib_metadata.version(package)
+        except importlib_metadata.PackageNotFoundError:
+            found[package] = "unknown"
+    return found
+
+
+def run_metadata(scene, **extra) -> dict:
+    """What a Parquet file records about the run that made it."""
+    from imu_emulator.codegen.kernel import scene_digest
+    return {"scene_sha256": scene_digest(scene), "scene_path": scene.path, "seed": scene.seed,
+            "rate_hz": scene.rate_hz, "t0_s": scene.t0_s, "n_samples": scene.n_samples,
+            "imu_names": list(scene.imu_names), "versions": dict(versions()), **extra}
+
+
+def read_metadata(path: str | Path) -> dict:
+    """The "imu_emulator" footer entry of a Parquet file written here ({} when it has none)."""
+    import pyarrow.parquet as pq
+    raw = pq.read_schema(path).metadata or {}
+    return json.loads(raw[METADATA_KEY]) if METADATA_KEY in raw else {}
+
+
+class ParquetWriter(FinishOnExit):
+    """Receives blocks in order and writes each as a row group; the file appears at its path on close()."""
+
+    def __init__(self, path: Path, imu_names, truth: bool, bias_truth: bool = False, temperature: bool = False,
+                 increments: bool = False, metadata: dict | None = None, conventions: list[str] | None = None):
+        self.path = Path(path)
+        self.imu_names = list(imu_names)
+        earth = bool(truth and conventions)
+        self.options = dict(truth=truth, bias_truth=truth and bias_truth, temperature=temperature,
+                            increments=increments, earth=earth)
+        metadata = dict(metadata or {}, **({"conventions": list(conventions)} if earth else {}))
+        self.metadata = {METADATA_KEY: json.dumps(metadata, sort_keys=True).encode()}
+        self._out = AtomicOutput(self.path, "wb")
+        self._writer = None     # opened on the first block, when the schema is known
+
+    def write(self, block: SampleBlock) -> None:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+        table = pa.table(block_columns(block, self.imu_names, time_ns=True, **self.options))
+        try:
+            if self._writer is None:
+                self._writer = pq.ParquetWriter(self._out.file, table.schema.with_metadata(self.metadata))
+            self._writer.write_table(table)
+        except OSError as exc:
+            raise output_error(self.path, exc) from None
+
+    def close(self) -> None:
+        try:
+            if self._writer is not None:
+                self._writer.close()
+        except OSError as exc:
+            self._out.discard()
+            raise output_error(self.path, exc) from None
+        except BaseException:
+            self._out.discard()
+            raise
+        self._out.close()
+
+    def discard(self) -> None:
+        try:
+            if self._writer is not None:
+                self._writer.close()
+        except Exception:
+            pass        # the contents are being thrown away
+        self._out.discard()

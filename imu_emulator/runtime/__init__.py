@@ -1,0 +1,1 @@
+"""Compile, cache and load kernels; Simulation fills sample blocks; the blocks themselves."""

@@ -1,0 +1,99 @@
+"""The scene's Earth keys: [scene] origin, gravity_model, and what the ECEF frame and the Earth effects need."""
+from __future__ import annotations
+
+from typing import Mapping
+
+from imu_emulator.errors import SceneError
+from imu_emulator.scene.model import GRAVITY_MODELS, _choice, _no_unknown, _number, _table
+
+#: [attitude] reference: what roll, pitch, yaw (or a file's attitude) are relative to
+REFERENCES = ("local_level", "ECEF", "ECI")
+
+ORIGIN_KEYS = ("lat_deg", "lon_deg", "height_m")
+GEODETIC_KEYS = ORIGIN_KEYS     # a geodetic trajectory's [trajectory] keys
+MAX_ORIGIN_HEIGHT_M = 1e7      # beyond geostationary orbit is not a place to put a tangent frame
+
+
+def _origin(head: Mapping):
+    if "origin" not in head:
+        return None
+    table = _table(head, "origin", "scene.")
+    _no_unknown(table, set(ORIGIN_KEYS), "scene.origin")
+    lat = _number(table, "lat_deg", "scene.origin", required=True, bound=90.0, unit=" deg")
+    lon = _number(table, "lon_deg", "scene.origin", required=True, bound=360.0, unit=" deg")
+    height = _number(table, "height_m", "scene.origin", default=0.0, bound=MAX_ORIGIN_HEIGHT_M, unit=" m")
+    return (lat, lon, height)
+
+
+def earth_keys(head: Mapping, frame: str, effects: frozenset[str], attitude_mode: str, shape: bool,
+               trajectory, warnings: list[str]):
+    """(origin or None, gravity model), validated against the frame and the effects named."""
+    from imu_emulator.motion.earth import EARTH_EFFECTS
+    origin = _origin(head)
+    model = _choice(head, "gravity_model", "scene", GRAVITY_MODELS, "constant")
+    earth = [name for name in EARTH_EFFECTS if name in effects]
+    if model == "wgs84":
+        if "gravity" not in effects:
+            warnings.append("scene.gravity_model is ignored because effects.gravity is not true")
+        else:
+            earth.append("gravity")
+            if "gravity_mps2" in head:
+                warnings.append("scene.gravity_mps2 is ignored: gravity_model = \"wgs84\" computes gravity")
+    geodetic = getattr(trajectory, "keys", None) == GEODETIC_KEYS or getattr(trajectory, "geodetic", False)
+    if geodetic:
+        if frame == "ECI":
+            raise SceneError("trajectory.lat_deg: a geodetic trajectory is fixed to the Earth; use frame = \"NED\", "
+                             "\"ENU\" (the attitude's level axes) or \"ECEF\"")
+        if origin is not None:
+            warnings.append("scene.origin is ignored: the trajectory is geodetic")
+        return None, model
+    if frame in ("ECEF", "ECI"):
+        if shape:
+            raise SceneError(f"trajectory.shape: shapes are built in a local frame; with frame = \"{frame}\" give "
+                             f"x, y, z expressions{' or a file' if frame == 'ECEF' else ''} in {frame} metres")
+        if frame == "ECI":
+            missing = [name for name in EARTH_EFFECTS if name not in effects]
+            if missing:
+                raise SceneError(f"effects.{missing[0]}: frame = \"ECI\" needs it (an inertial trajectory seen "
+                                 "from the rotating Earth: name effects.earth_rate and effects.coriolis)")
+        if origin is not None:
+            warnings.append(f"scene.origin is ignored with frame = \"{frame}\" (positions are {frame} already)")
+            origin = None
+    if frame in ("ENU", "NED") and earth and origin is None:
+        raise SceneError(f"scene.origin: effects.{earth[0]} needs the point where the {frame} frame is tangent to "
+                         "the Earth (origin = { lat_deg = ..., lon_deg = ..., height_m = ... })")
+    return origin, model
+
+
+def sampled_geodetic(track, derivative: str, noise: float):
+    """A track's lat_deg, lon_deg, height_m columns as ECEF samples (WGS-84, imu_emulator.geo.frames): the
+    derivatives are fitted in ECEF, where the motion is smooth across the antimeridian and the poles."""
+    import numpy as np
+
+    from imu_emulator.geo import frames
+    from imu_emulator.scene.model import SampledData
+    lat, height = track.position[:, 0], track.position[:, 2]
+    for column, values, bound in (("lat_deg", lat, 90.0), ("height_m", height, MAX_ORIGIN_HEIGHT_M)):
+        bad = np.abs(values) > bound
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise SceneError(f"trajectory.file: {track.source.name}: {track.row_label(i)}, column '{column}': "
+                             f"{float(values[i])!r} is out of range (|value| <= {bound:g})")
+    ecef = frames.geodetic_to_ecef(lat, track.position[:, 1], height)
+    return SampledData(t=track.t, values=np.ascontiguousarray(ecef), derivative=derivative,
+                       source=str(track.source), noise=noise, geodetic=True)
+
+
+def attitude_reference(att_table: Mapping, frame: str, effects, trajectory, gravity_model: str) -> str:
+    """[attitude] reference, validated: another frame than local level needs the Earth model (the attitude is
+    converted to local level at the current position, imu_emulator.motion.earth.reference_lines)."""
+    from types import SimpleNamespace
+
+    from imu_emulator.motion.earth import model_on
+    reference = _choice(att_table, "reference", "attitude", REFERENCES, "local_level")
+    if reference != "local_level":
+        scene = SimpleNamespace(frame=frame, effects=effects, trajectory=trajectory, gravity_model=gravity_model)
+        if not model_on(scene):
+            raise SceneError(f"attitude.reference: \"{reference}\" needs the Earth model (frame = \"ECEF\" or "
+                             "\"ECI\", a geodetic trajectory, or effects.earth_rate / coriolis with an origin)")
+    return reference
