@@ -59,7 +59,8 @@ def attach_device(name: str, device: Callable, device_options: dict | None = Non
 def _load_all() -> None:
     global _loaded
     if not _loaded:
-        for package, modules in (("firmware_protocols", _MODULES), ("firmware_protocols.devices", _DEVICE_MODULES)):
+        for package, modules in (("firmware_protocols.wire_formats", _MODULES),
+                                 ("firmware_protocols.devices", _DEVICE_MODULES)):
             for module in modules:
                 try:
                     importlib.import_module(f"{package}.{module}")
