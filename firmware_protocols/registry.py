@@ -9,7 +9,7 @@ import importlib
 from dataclasses import dataclass, field, replace
 from typing import Callable
 
-_MODULES = ("mavlink", "vectornav", "xsens", "microstrain", "dronecan", "j1939", "bosch")
+_MODULES = ("mavlink", "vectornav_binary", "vectornav_ascii", "xsens", "microstrain", "dronecan", "j1939", "bosch")
 # Devices register themselves onto their format's entry (attach_device); imported after the formats.
 _DEVICE_MODULES = ("mavlink", "vectornav", "xsens", "microstrain", "dronecan", "j1939")
 
