@@ -75,7 +75,7 @@ def utc_rows(time_ns: np.ndarray, settings: dict) -> np.ndarray:
 
 def gnss_pvt_rows(time_ns: np.ndarray, position_llh: np.ndarray, velocity_ned: np.ndarray,
                   settings: dict) -> np.ndarray:
-    """(n, 35) Xsens GnssPvtData in wire units (see firmware_protocols.xsens for the layout)."""
+    """(n, 35) Xsens GnssPvtData in wire units (see firmware_protocols.wire_formats.xsens for the layout)."""
     n = len(time_ns)
     year, month, day, hour, minute, second, nano = _calendar(time_ns)
     gps_ms = (np.asarray(time_ns, dtype=np.int64) // 1_000_000

@@ -1,7 +1,10 @@
 """One table naming every wire format, so the CLI can list them and the streaming code can compute
 link budgets without knowing any format's details.
 
-Each format module calls `register(FormatInfo(...))` at import; `_load_all` imports them once.
+Each module of firmware_protocols.wire_formats calls `register(FormatInfo(...))` at import, then each module of
+firmware_protocols.devices attaches its device to its formats (`attach_device`). `_load_all` finds and imports
+them once, on the first question: the lists are found, not kept, so a module dropped into either folder is picked
+up and one that fails to import is an error naming it.
 """
 from __future__ import annotations
 
@@ -9,9 +12,10 @@ import importlib
 from dataclasses import dataclass, field, replace
 from typing import Callable
 
-_MODULES = ("mavlink", "vectornav", "xsens", "microstrain", "dronecan", "j1939", "bosch")
-# Devices register themselves onto their format's entry (attach_device); imported after the formats.
-_DEVICE_MODULES = ("mavlink", "vectornav", "xsens", "microstrain", "dronecan", "j1939")
+# Scanned in this order (devices attach to formats already registered). In each, modules whose names start with
+# "_" and `base` (the package's interface) are helpers, not formats or devices.
+_PACKAGES = ("firmware_protocols.wire_formats", "firmware_protocols.devices")
+_NOT_SCANNED = ("base",)
 
 
 @dataclass(frozen=True)
@@ -59,14 +63,33 @@ def attach_device(name: str, device: Callable, device_options: dict | None = Non
 def _load_all() -> None:
     global _loaded
     if not _loaded:
-        for package, modules in (("firmware_protocols", _MODULES), ("firmware_protocols.devices", _DEVICE_MODULES)):
-            for module in modules:
-                try:
-                    importlib.import_module(f"{package}.{module}")
-                except ModuleNotFoundError as exc:
-                    if exc.name != f"{package}.{module}":
-                        raise
+        for package in _PACKAGES:
+            for name in _module_names(package):
+                _import(name)
         _loaded = True
+
+
+def _module_names(package: str) -> list[str]:
+    """The full names of the modules `_load_all` imports from `package`, in name order."""
+    import pkgutil      # here, not at the top: `import firmware_protocols` alone needs no scan
+    path = importlib.import_module(package).__path__
+    return [f"{package}.{info.name}" for info in pkgutil.iter_modules(path)
+            if not info.name.startswith("_") and info.name not in _NOT_SCANNED]
+
+
+def _import(name: str) -> None:
+    """Import one format or device module; any failure is an ImportError whose one-line message names it."""
+    try:
+        importlib.import_module(name)
+    except ModuleNotFoundError as exc:
+        missing = exc.name or str(exc)
+        if missing.split(".")[0] in ("firmware_protocols", "imu_emulator"):
+            raise ImportError(f"{name} imports {missing}, which does not exist") from exc
+        raise ImportError(f"{name} needs the package {missing.split('.')[0]!r}, which is not installed") from exc
+    except Exception as exc:
+        detail = str(exc).strip().splitlines()
+        why = f"{type(exc).__name__}: {detail[0]}" if detail else type(exc).__name__
+        raise ImportError(f"{name} failed to import: {why}") from exc
 
 
 def formats() -> dict[str, FormatInfo]:

@@ -1,6 +1,6 @@
 """Bosch MM7.10 TX1/TX2/TX3, checked with a decoder written here from the spec (wire-formats.md) and Bosch's
 own ROS driver layout (off_highway_mm7p10 receiver.cpp), with a bit-by-bit CRC-8/SAE-J1850 (the CRC
-algorithm itself is UNVERIFIED for this sensor, see firmware_protocols/bosch.py)."""
+algorithm itself is UNVERIFIED for this sensor, see firmware_protocols/wire_formats/bosch.py)."""
 import math
 
 import numpy as np
@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from firmware_protocols import registry
 from firmware_protocols.base import EncodeError, Samples, can_bits_worst_case, frame_bytes
-from firmware_protocols.bosch import BoschMM7Decoder, BoschMM7Encoder
+from firmware_protocols.wire_formats.bosch import BoschMM7Decoder, BoschMM7Encoder
 
 SETTINGS = settings(derandomize=True, deadline=None, max_examples=60,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])

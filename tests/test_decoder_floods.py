@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import firmware_protocols as fp
-from firmware_protocols.bosch import crc8_sae_j1850
+from firmware_protocols.wire_formats.bosch import crc8_sae_j1850
 
 SERIAL = [name for name, info in fp.formats().items() if info.kind == "serial"]
 CAN = [name for name, info in fp.formats().items() if info.kind == "can"]

@@ -12,8 +12,8 @@ from hypothesis import strategies as st
 
 from firmware_protocols import registry
 from firmware_protocols.base import EncodeError, Samples, can_bits_worst_case, frame_bytes
-from firmware_protocols.dronecan import (DroneCanDecoder, MagneticFieldStrength2Encoder, RawImuEncoder,
-                                         SolutionEncoder, _f16_from_f32_bits)
+from firmware_protocols.wire_formats.dronecan import (DroneCanDecoder, MagneticFieldStrength2Encoder, RawImuEncoder,
+                                                      SolutionEncoder, _f16_from_f32_bits)
 
 SETTINGS = settings(derandomize=True, deadline=None, max_examples=40,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])

@@ -177,7 +177,7 @@ def test_formats_without_increment_fields_do_not_compile_them():
 
 def test_vectornav_refuses_delta_fields_without_increments():
     from firmware_protocols.base import EncodeError, Samples
-    from firmware_protocols.vectornav import BinaryEncoder
+    from firmware_protocols.wire_formats.vectornav_binary import BinaryEncoder
     with pytest.raises(EncodeError, match=r"imu\.deltatheta.*no delta_theta"):
         BinaryEncoder("imu:deltatheta").encode(Samples.single(0, [0, 0, 9.8], [0, 0, 0]))
 

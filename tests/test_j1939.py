@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from firmware_protocols import registry
 from firmware_protocols.base import EncodeError, Samples, can_bits_worst_case, frame_bytes
-from firmware_protocols.j1939 import AxisMap, J1939Decoder, J1939Encoder
+from firmware_protocols.wire_formats.j1939 import AxisMap, J1939Decoder, J1939Encoder
 
 SETTINGS = settings(derandomize=True, deadline=None, max_examples=60,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])

@@ -14,7 +14,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 from firmware_protocols import registry
 from firmware_protocols.base import EncodeError, Samples
 from firmware_protocols.crc import crc16_mcrf4xx_bytes
-from firmware_protocols.mavlink import MavlinkDecoder, MavlinkEncoder, SigningLink
+from firmware_protocols.wire_formats.mavlink import MavlinkDecoder, MavlinkEncoder, SigningLink
 
 REPRO = settings(derandomize=True, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from firmware_protocols import registry
 from firmware_protocols.base import EncodeError, Samples
-from firmware_protocols.microstrain import FIELDS, MipDecoder, MipEncoder
+from firmware_protocols.wire_formats.microstrain import FIELDS, MipDecoder, MipEncoder
 from stream_fuzz import damaged_stream, feed_in_chunks
 
 SETTINGS = settings(derandomize=True, deadline=None, max_examples=60,

@@ -13,8 +13,8 @@ from hypothesis import strategies as st
 from firmware_protocols import registry
 from firmware_protocols.base import EncodeError, Samples
 from firmware_protocols.devices.vectornav import VectorNavDevice
-from firmware_protocols.vectornav import (AsciiDecoder, AsciiEncoder, BinaryDecoder, BinaryEncoder, _BY_NAME,
-                                          parse_fields)
+from firmware_protocols.wire_formats.vectornav_ascii import AsciiDecoder, AsciiEncoder
+from firmware_protocols.wire_formats.vectornav_binary import _BY_NAME, BinaryDecoder, BinaryEncoder, parse_fields
 
 SETTINGS = settings(derandomize=True, deadline=None, max_examples=60,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])

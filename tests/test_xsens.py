@@ -1,5 +1,5 @@
 """Xsens MTData2: the recorded MTi-300 packet from the wire-formats spec, and our packets read back by a
-decoder written here from the spec (struct, big-endian), independent of firmware_protocols.xsens."""
+decoder written here from the spec (struct, big-endian), independent of firmware_protocols.wire_formats.xsens."""
 import itertools
 import math
 import struct
@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from firmware_protocols import registry
 from firmware_protocols.base import EncodeError, Samples
-from firmware_protocols.xsens import ITEMS, XsensDecoder, XsensEncoder
+from firmware_protocols.wire_formats.xsens import ITEMS, XsensDecoder, XsensEncoder
 from stream_fuzz import damaged_stream, feed_in_chunks
 
 SETTINGS = settings(derandomize=True, deadline=None, max_examples=60,

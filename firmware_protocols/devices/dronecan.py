@@ -29,7 +29,7 @@ import numpy as np
 from firmware_protocols.base import CLASSIC_FRAME_DTYPE, Samples
 from firmware_protocols.crc import crc16_ccitt_bytes
 from firmware_protocols.devices.base import Device, Periodic, single
-from firmware_protocols.dronecan import can_id_for
+from firmware_protocols.wire_formats.dronecan import can_id_for
 from firmware_protocols.registry import attach_device, get
 
 NODE_STATUS_ID, NODE_STATUS_SIGNATURE = 341, 0x0F0868D0C1A7C6F1

@@ -24,7 +24,7 @@ import numpy as np
 
 from firmware_protocols.base import CLASSIC_FRAME_DTYPE, Samples
 from firmware_protocols.devices.base import Device, single
-from firmware_protocols.j1939 import PGN_ACCS, PGN_ARI, J1939Encoder, j1939_id
+from firmware_protocols.wire_formats.j1939 import PGN_ACCS, PGN_ARI, J1939Encoder, j1939_id
 from firmware_protocols.registry import attach_device
 
 PGN_ADDRESS_CLAIMED, PGN_REQUEST, PGN_ACKNOWLEDGEMENT = 0xEE00, 0xEA00, 0xE800

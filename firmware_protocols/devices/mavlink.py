@@ -42,8 +42,8 @@ import numpy as np
 from firmware_protocols.base import Samples
 from firmware_protocols.crc import crc16_mcrf4xx_bytes
 from firmware_protocols.devices.base import Device, Divider, Periodic, single
-from firmware_protocols.mavlink import (EPOCH_2015_NS, HEADER_LEN, INCOMPAT_SIGNED, MESSAGES, P_COMPID, P_SEQ,
-                                        P_SYSID, SIGNATURE_LEN, STX_V1, STX_V2, MavlinkEncoder)
+from firmware_protocols.wire_formats.mavlink import (EPOCH_2015_NS, HEADER_LEN, INCOMPAT_SIGNED, MESSAGES, P_COMPID,
+                                                     P_SEQ, P_SYSID, SIGNATURE_LEN, STX_V1, STX_V2, MavlinkEncoder)
 from firmware_protocols.registry import attach_device
 
 HEARTBEAT, COMMAND_LONG, COMMAND_ACK, MESSAGE_INTERVAL = 0, 76, 77, 244

@@ -35,8 +35,9 @@ import struct
 
 from firmware_protocols.base import Samples
 from firmware_protocols.devices.base import Device, SinceLastOutput, single
-from firmware_protocols.microstrain import (DATA_SETS, DEFAULT_FIELDS, FILTER_SET, FILTER_STATE_FULL_NAV, GNSS_SET,
-                                           SENSOR_DATA_SET, MipEncoder, fletcher16, mip_checksum_ok, mip_length)
+from firmware_protocols.wire_formats.microstrain import (DATA_SETS, DEFAULT_FIELDS, FILTER_SET, FILTER_STATE_FULL_NAV,
+                                                         GNSS_SET, SENSOR_DATA_SET, MipEncoder, fletcher16,
+                                                         mip_checksum_ok, mip_length)
 from firmware_protocols.packing import FrameScanner
 from firmware_protocols.registry import attach_device
 

@@ -47,9 +47,12 @@ from firmware_protocols import attitude
 from firmware_protocols.base import Samples
 from firmware_protocols.devices.base import Device, LinkRequest, SinceLastOutput, single
 from firmware_protocols.registry import attach_device
-from firmware_protocols.vectornav import (_FIELDS, DEFAULT_FIELDS, DEFAULT_MODEL, AsciiEncoder, BinaryEncoder,
-                                          _layout_from_selection, parse_fields, sentence, verify_line)
+from firmware_protocols.vectornav_common import sentence, verify_line
+from firmware_protocols.wire_formats.vectornav_ascii import AsciiEncoder
+from firmware_protocols.wire_formats.vectornav_binary import (_FIELDS, DEFAULT_FIELDS, BinaryEncoder,
+                                                              _layout_from_selection, parse_fields)
 
+DEFAULT_MODEL = "VN-100T-CR"
 ERR_CHECKSUM, ERR_COMMAND, ERR_FEW, ERR_MANY, ERR_PARAMETER, ERR_REGISTER = 3, 4, 5, 6, 7, 8
 ASCII_TYPES = {0: None, 1: "VNYPR", 14: "VNYMR", 19: "VNIMU"}
 ASCII_RATES = (1, 2, 4, 5, 10, 20, 25, 40, 50, 100, 200)

@@ -9,7 +9,7 @@ XRV_INVALIDMSG 4, XRV_INVALIDPARAM 33; the Error message carries the code in its
 the message ids of the issue: WakeUp 0x3E -> 0x3F, ReqDID 0x00 -> DeviceID 0x01 (u32), ReqProductCode
 0x1C -> 0x1D (ASCII), ReqFWRev 0x12 -> 0x13 (major, minor, revision), Reset 0x40 -> 0x41.
 
-Messages are `FA FF <MID> <LEN> <data> <checksum>` (extended length as in firmware_protocols.xsens); the
+Messages are `FA FF <MID> <LEN> <data> <checksum>` (extended length as in firmware_protocols.wire_formats.xsens); the
 byte sum from FF through the checksum is 0.
 
 - Modes: the device starts in measurement mode streaming the configured items (ArduPilot accepts a
@@ -46,8 +46,8 @@ from firmware_protocols.base import Samples
 from firmware_protocols.devices.base import Device, SinceLastOutput, single
 from firmware_protocols.registry import attach_device
 from firmware_protocols.packing import FrameScanner
-from firmware_protocols.xsens import (BUS_MASTER, DEFAULT_ITEMS, EXTENDED_LENGTH, FRAMES, ITEMS, PRECISIONS,
-                                      PREAMBLE, XsensEncoder, xbus_checksum_ok, xbus_length)
+from firmware_protocols.wire_formats.xsens import (BUS_MASTER, DEFAULT_ITEMS, EXTENDED_LENGTH, FRAMES, ITEMS,
+                                                   PRECISIONS, PREAMBLE, XsensEncoder, xbus_checksum_ok, xbus_length)
 
 WAKEUP, GOTO_CONFIG, GOTO_MEASUREMENT, REQ_DID, REQ_PRODUCT_CODE, REQ_FW_REV = 0x3E, 0x30, 0x10, 0x00, 0x1C, 0x12
 SET_OUTPUT_CONFIGURATION, SET_ALIGNMENT_ROTATION, RESET, ERROR = 0xC0, 0xEC, 0x40, 0x42

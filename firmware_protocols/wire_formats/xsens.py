@@ -71,7 +71,7 @@ saturate to the nearest representable value and are counted in `encoder.saturate
 +-3.4e38; for float64 nothing finite saturates except after unit scaling overflows).
 
 The batch packer and the frame scanner are format-neutral and live in firmware_protocols.packing, shared
-with firmware_protocols.microstrain (MIP).
+with firmware_protocols.wire_formats.microstrain (MIP).
 """
 from __future__ import annotations
 
