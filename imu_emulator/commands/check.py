@@ -58,7 +58,9 @@ def cmd_check(args) -> int:
     from imu_emulator.codegen import kernel
     from imu_emulator.effects import EFFECTS
     from imu_emulator.scene.model import load_scene
-    from imu_emulator.live.streaming import build_streams, link_budget, streams_from_tables
+    from imu_emulator.live.budget import link_budget
+    from imu_emulator.live.config import streams_from_tables
+    from imu_emulator.live.stream import build_streams
 
     scene = load_scene(args.scene)
     streams = build_streams(streams_from_tables(scene.streams, scene.imu_names), scene.imu_names, scene.rate_hz)

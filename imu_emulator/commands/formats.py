@@ -35,7 +35,7 @@ def _show(value) -> str:
 
 def cmd_formats(args) -> int:
     import firmware_protocols
-    from imu_emulator.live.streaming import StreamError
+    from imu_emulator.live.config import StreamError
     known = firmware_protocols.formats()
     if args.details:
         if args.details not in known:
