@@ -8,10 +8,7 @@ import firmware_protocols
 from firmware_protocols import attitude
 from imu_emulator.geo.geodesy import device_navigation
 from imu_emulator.live.config import StreamConfig, StreamError
-from imu_emulator.live.transport import check_carries, link_capacity, open_target, parse_target
-
-# Targets that cannot talk back: a device there would only change what is streamed, so none is made.
-_ONE_WAY_TARGETS = ("file",)
+from imu_emulator.live.transport import TARGET_KINDS, check_carries, link_capacity, open_target, parse_target
 
 
 class Stream:
@@ -27,7 +24,7 @@ class Stream:
         self.navigation = None     # (frame, gravity, origin, model, positions' frame) for navigation
         self.frame = "NED"          # the scene's navigation frame: attitude goes out NED-referenced (run_streams)
         try:
-            if config.device and info.device is not None and self.spec.kind not in _ONE_WAY_TARGETS:
+            if config.device and info.device is not None and TARGET_KINDS[self.spec.kind].talks_back:
                 # The device encodes too: budgets read its bytes_per_sample / frames_per_sample.
                 self.device = self.encoder = info.device(rate_hz, **config.options)
             else:
