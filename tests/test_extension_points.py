@@ -43,12 +43,15 @@ def _package(tmp_path, monkeypatch, name: str, modules: dict[str, str], copy_of=
     return importlib.import_module(name)
 
 
+_TEST_PACKAGES = ("extra_kinds", "broken_kinds", "extra_commands", "extra_commands2", "broken_commands")
+
+
 @pytest.fixture(autouse=True)
 def _forget_test_packages():
     before = set(sys.modules)
     yield
     for name in set(sys.modules) - before:
-        if name.split(".")[0] in ("extra_kinds", "broken_kinds", "extra_commands", "broken_commands"):
+        if name.split(".")[0] in _TEST_PACKAGES:
             del sys.modules[name]
 
 
@@ -93,3 +96,51 @@ def test_a_transport_module_that_fails_to_import_when_opened_is_an_error_naming_
     with pytest.raises(ImportError, match=r"target kind 'loop' \(extra_kinds\.loop\) cannot import its transport: "
                                           r".*no_such_transport_module"):
         open_target(parse_target("loop:x"), "serial")
+
+
+_COMMAND = '''
+ORDER = {order}
+
+
+def register(subparsers):
+    p = subparsers.add_parser("{name}", help="a test's command")
+    p.set_defaults(func=lambda args: 0)
+'''
+
+
+def test_every_command_module_is_registered_in_its_declared_order():
+    from imu_emulator import commands
+    from imu_emulator.cli import build_parser
+    modules = {m.name for m in pkgutil.iter_modules(commands.__path__)}
+    assert {module.__name__.rpartition(".")[2] for module in commands.COMMANDS} == modules - {"shared"}
+    orders = [module.ORDER for module in commands.COMMANDS]
+    assert orders == sorted(orders)
+    names = [module.__name__.rpartition(".")[2] for module in commands.COMMANDS]
+    assert "{" + ",".join(names) + "}" in build_parser().format_usage()
+
+
+def test_a_command_added_to_the_folder_is_found(tmp_path, monkeypatch):
+    from imu_emulator import commands
+    from imu_emulator.commands import find_commands
+    package = _package(tmp_path, monkeypatch, "extra_commands",
+                       {"hello": _COMMAND.format(order=35, name="hello"), "helper": "VALUE = 1\n"})
+    found = [module.__name__ for module in find_commands(package)]
+    assert found == ["extra_commands.hello"]        # a module without register() is a helper
+    package = _package(tmp_path, monkeypatch, "extra_commands2", {"hello": _COMMAND.format(order=35, name="hello")},
+                       copy_of=commands)
+    names = [module.__name__.rpartition(".")[2] for module in find_commands(package)]
+    assert names[:4] == ["generate", "batch", "replay", "hello"]      # ORDER 35: between replay (30) and stream (40)
+
+
+@pytest.mark.parametrize("modules, message", [
+    ({"bad": "import no_such_module_anywhere\n"}, r"command module broken_commands\.bad failed to import: "
+                                                  r".*no_such_module_anywhere"),
+    ({"bad": "def register(subparsers):\n    pass\n"}, r"broken_commands\.bad must define ORDER"),
+    ({"one": _COMMAND.format(order=5, name="one"), "two": _COMMAND.format(order=5, name="two")},
+     r"broken_commands\.one and broken_commands\.two both declare ORDER = 5"),
+])
+def test_a_command_module_that_fails_is_an_error_naming_it(tmp_path, monkeypatch, modules, message):
+    from imu_emulator.commands import find_commands
+    package = _package(tmp_path, monkeypatch, "broken_commands", modules)
+    with pytest.raises(ImportError, match=message):
+        find_commands(package)

@@ -4,6 +4,9 @@ from __future__ import annotations
 import numpy as np
 import sys
 
+ORDER = 50     # place in `imu-emulator --help`
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser("check", help="validate a scene and describe it without running it",
                               description="Validate a scene file; print its frame and conventions, IMUs and effects, "

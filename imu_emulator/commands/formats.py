@@ -4,6 +4,9 @@ defaults read from the encoder's signature."""
 from __future__ import annotations
 
 
+ORDER = 70     # place in `imu-emulator --help`
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser("formats", help="list wire formats (--details: their options)")
     p.add_argument("--details", nargs="?", const="", metavar="NAME",

@@ -13,6 +13,9 @@ _MAX_RATE = 100_000_000
 _MAX_DURATION_S = 1e9
 
 
+ORDER = 40     # place in `imu-emulator --help`
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "stream", help="stream a scene live to a pty, serial port, CAN bus, UDP or a capture file",

@@ -2,6 +2,9 @@
 from __future__ import annotations
 
 
+ORDER = 80     # place in `imu-emulator --help`
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser("targets", help="list stream target kinds")
     p.set_defaults(func=cmd_targets)
