@@ -119,7 +119,7 @@ def test_device_off_streams_blindly(tmp_path):
 
 def test_stream_table_device_key():
     from imu_emulator.errors import SceneError
-    from imu_emulator.live.streaming import streams_from_tables
+    from imu_emulator.live.config import streams_from_tables
     tables = [{"format": "mavlink-highres", "to": "pty", "device": False}, {"format": "j1939", "to": "file:x.log"}]
     configs = streams_from_tables(tables, ("imu0",))
     assert [c.device for c in configs] == [False, True]

@@ -159,7 +159,7 @@ def test_mip_delta_theta_and_delta_velocity(tmp_path):
 
 
 def test_formats_without_increment_fields_do_not_compile_them():
-    from imu_emulator.live.streaming import StreamConfig, TargetOptions, needs_increments
+    from imu_emulator.live.config import StreamConfig, TargetOptions, needs_increments
     options = TargetOptions()
 
     def config(fmt, device=False, **kw):

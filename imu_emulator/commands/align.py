@@ -9,6 +9,9 @@ from pathlib import Path
 from imu_emulator.errors import ImuEmulatorError
 
 
+ORDER = 90     # place in `imu-emulator --help`
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "align", help="relative orientation and time offset of two IMUs from their data",

@@ -8,6 +8,9 @@ import time
 from imu_emulator.commands.shared import number
 
 
+ORDER = 20     # place in `imu-emulator --help`
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser("batch", help="Monte Carlo: N realizations of a scene (seeds, drawn parameters) on "
                               "Dask, one Parquet file each and a summary table")

@@ -4,6 +4,9 @@ from __future__ import annotations
 import numpy as np
 import sys
 
+ORDER = 50     # place in `imu-emulator --help`
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser("check", help="validate a scene and describe it without running it",
                               description="Validate a scene file; print its frame and conventions, IMUs and effects, "
@@ -58,7 +61,9 @@ def cmd_check(args) -> int:
     from imu_emulator.codegen import kernel
     from imu_emulator.effects import EFFECTS
     from imu_emulator.scene.model import load_scene
-    from imu_emulator.live.streaming import build_streams, link_budget, streams_from_tables
+    from imu_emulator.live.budget import link_budget
+    from imu_emulator.live.config import streams_from_tables
+    from imu_emulator.live.stream import build_streams
 
     scene = load_scene(args.scene)
     streams = build_streams(streams_from_tables(scene.streams, scene.imu_names), scene.imu_names, scene.rate_hz)

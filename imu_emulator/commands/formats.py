@@ -4,6 +4,9 @@ defaults read from the encoder's signature."""
 from __future__ import annotations
 
 
+ORDER = 70     # place in `imu-emulator --help`
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser("formats", help="list wire formats (--details: their options)")
     p.add_argument("--details", nargs="?", const="", metavar="NAME",
@@ -35,7 +38,7 @@ def _show(value) -> str:
 
 def cmd_formats(args) -> int:
     import firmware_protocols
-    from imu_emulator.live.streaming import StreamError
+    from imu_emulator.live.config import StreamError
     known = firmware_protocols.formats()
     if args.details:
         if args.details not in known:

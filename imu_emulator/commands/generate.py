@@ -11,6 +11,9 @@ from imu_emulator.commands.shared import add_increments_option, load_scene_with_
 from imu_emulator.runtime.progress import CompileStatus, Progress
 
 
+ORDER = 10     # place in `imu-emulator --help`
+
+
 def register(subparsers) -> None:
     gen = subparsers.add_parser("generate", help="write the samples of a scene to Parquet, CSV, NPZ or MCAP")
     gen.add_argument("scene", help="scene file (TOML)")

@@ -7,6 +7,9 @@ import sys
 from imu_emulator.commands.shared import add_increments_option
 
 
+ORDER = 100     # place in `imu-emulator --help`
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser("kernel", help="print the generated kernel source of a scene, or the effects table")
     p.add_argument("scene", nargs="?", help="scene file (TOML)")

@@ -5,6 +5,9 @@ FIGURES = (("gyro", "noise_density", "arw"), ("gyro", "bias_instability"), ("gyr
            ("accel", "noise_density", "vrw"), ("accel", "bias_instability"), ("accel", "range"))
 
 
+ORDER = 110     # place in `imu-emulator --help`
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser("models", help="list the sensor presets (model = NAME in [[imu]]) and their figures")
     p.add_argument("--sources", action="store_true", help="also print each preset's datasheet citation")

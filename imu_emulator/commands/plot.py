@@ -5,6 +5,9 @@ import sys
 from pathlib import Path
 
 
+ORDER = 60     # place in `imu-emulator --help`
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser("plot", help="draw the trajectory with the body along it and each IMU's signals (PNG)",
                               description="Draw the trajectory in 3-D with the body as triangles along it, the "

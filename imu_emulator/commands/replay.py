@@ -11,6 +11,9 @@ AXES = "xyz"
 MIN_PART_SAMPLES = 20       # a part between gaps shorter than this is left out (and named)
 
 
+ORDER = 30     # place in `imu-emulator --help`
+
+
 def register(subparsers) -> None:
     rep = subparsers.add_parser("replay", help="replay a flight log (.ulg, .bin, .mcap) and compare with its own IMU")
     rep.add_argument("log", help="flight log: PX4 ULog .ulg, ArduPilot DataFlash .bin, ROS 2 bag .mcap")

@@ -13,6 +13,9 @@ _MAX_RATE = 100_000_000
 _MAX_DURATION_S = 1e9
 
 
+ORDER = 40     # place in `imu-emulator --help`
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "stream", help="stream a scene live to a pty, serial port, CAN bus, UDP or a capture file",
@@ -52,7 +55,7 @@ def register(subparsers) -> None:
     p.set_defaults(func=cmd_stream)
 
 def _option_value(key: str, text: str):
-    from imu_emulator.live.streaming import StreamError    # here: importing streaming costs every command start-up
+    from imu_emulator.live.config import StreamError    # here: importing live costs every command start-up
     lowered = text.lower()
     if lowered in ("true", "false"):
         return lowered == "true"
@@ -70,7 +73,7 @@ def _option_value(key: str, text: str):
 
 
 def _parse_options(pairs) -> dict:
-    from imu_emulator.live.streaming import StreamError
+    from imu_emulator.live.config import StreamError
     options = {}
     for pair in pairs:
         key, sep, value = pair.partition("=")
@@ -97,8 +100,9 @@ def _stream(args, stats) -> None:
     from imu_emulator.runtime.progress import CompileStatus
     from imu_emulator.runtime.simulation import Simulation
     from imu_emulator.codegen.increments import DEFAULT_NODES
-    from imu_emulator.live.streaming import (RunOptions, StreamConfig, StreamError, needs_increments, needs_truth,
-                                        run_streams, streams_from_tables)
+    from imu_emulator.live.config import (RunOptions, StreamConfig, StreamError, needs_increments, needs_truth,
+                                          streams_from_tables)
+    from imu_emulator.live.streamer import run_streams
     from imu_emulator.live.transport import TargetOptions
 
     scene = load_scene_with_warnings(args.scene)

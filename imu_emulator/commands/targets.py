@@ -2,6 +2,9 @@
 from __future__ import annotations
 
 
+ORDER = 80     # place in `imu-emulator --help`
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser("targets", help="list stream target kinds")
     p.set_defaults(func=cmd_targets)
@@ -9,6 +12,6 @@ def register(subparsers) -> None:
 
 def cmd_targets(args) -> int:
     from imu_emulator.live.transport import TARGET_KINDS     # here: every command's start-up imports this module
-    for syntax, text, carries in TARGET_KINDS.values():
-        print(f"{syntax:34} {carries + ' formats':15} {text}")
+    for kind in TARGET_KINDS.values():
+        print(f"{kind.syntax:34} {kind.carries + ' formats':15} {kind.help}")
     return 0

@@ -171,7 +171,7 @@ class Pacer:
         self.serve_margin_ns = _SERVE_MARGIN_NS
         self.serve_cost_ns = 0       # the dearest answer's thread CPU time so far
         # When the descriptors were last looked at: at high rates the whole period may be spin and margin,
-        # and the caller then polls them itself after a send (see streaming).
+        # and the caller then polls them itself after a send (see streamer).
         self.watched_ns = 0
 
     def _normal_priority(self) -> None:

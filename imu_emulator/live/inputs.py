@@ -1,0 +1,72 @@
+"""The links' incoming side while streaming: a driver's commands go to the stream's device and its replies out
+between two deadlines; input on a link without a device is read and counted."""
+from __future__ import annotations
+
+import select
+import time
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from imu_emulator.live.stream import Stream
+
+
+class Inputs:
+    """The links' incoming side: which descriptors to watch, and what to do with what arrives. Bytes or
+    frames go to the stream's device and its replies out at once; a link without a device has its input
+    read and counted (so the writer never blocks) and otherwise ignored."""
+
+    def __init__(self, streams: list[Stream], note):
+        self.note = note
+        self.by_fd = {}
+        self.unwatched = []
+        for stream in streams:
+            fd = stream.transport.fileno()
+            if fd is None:
+                self.unwatched.append(stream)
+            else:
+                self.by_fd.setdefault(fd, []).append(stream)
+        self.fds = list(self.by_fd)
+        # Unwatched links that can talk are polled at each deadline; one-way ones not at all.
+        self.unwatched = [s for s in self.unwatched if s.device is not None]
+
+    def ready(self, fds) -> bool:
+        """Serve the streams on these descriptors; whether any of them had input."""
+        found = False
+        for fd in fds:
+            for stream in self.by_fd[fd]:
+                found = self.serve(stream) or found
+        return found
+
+    def poll_unwatched(self) -> None:
+        for stream in self.unwatched:
+            self.serve(stream)
+
+    def poll_all(self) -> None:
+        if self.fds:
+            ready, _, _ = select.select(self.fds, (), (), 0)
+            self.ready(ready)
+        self.poll_unwatched()
+
+    def serve(self, stream: Stream) -> bool:
+        data = stream.transport.recv()
+        if not len(data):
+            return False
+        device = stream.device
+        if device is None:
+            stream.ignored_input += len(data)
+            return True
+        transport = stream.transport
+        for reply in device.receive(data, time.monotonic_ns()):
+            item = reply if stream.info.kind == "serial" else transport.prepare(reply, 0)
+            if transport.send(item):
+                stream.replies_sent += 1
+            else:
+                stream.replies_dropped += 1
+        for request in device.take_link_requests():
+            if request.baud:
+                followed = transport.set_baud(request.baud)
+                self.note(f"{stream.config.format}: baud rate {request.baud} "
+                          + ("followed" if followed else "acknowledged (this link has no baud rate to follow)"))
+        for text in device.take_notes():
+            self.note(f"{stream.config.format}: {text}")
+        return True

@@ -1,0 +1,183 @@
+"""One stream: its encoder (or device), its transport and its counters; a block of the simulation becomes the
+wire payloads of each sample here."""
+from __future__ import annotations
+
+import numpy as np
+
+import firmware_protocols
+from firmware_protocols import attitude
+from imu_emulator.geo.geodesy import device_navigation
+from imu_emulator.live.config import StreamConfig, StreamError
+from imu_emulator.live.transport import TARGET_KINDS, check_carries, link_capacity, open_target, parse_target
+
+
+class Stream:
+    def __init__(self, config: StreamConfig, imu_index: int, info, rate_hz: float):
+        self.config = config
+        self.imu_index = imu_index
+        self.info = info
+        self.period_s = 1.0 / rate_hz
+        self.spec = parse_target(config.target)   # malformed specs fail before anything is opened
+        check_carries(self.spec, info.kind)
+        self.capacity = link_capacity(self.spec, info.kind, config.target_options)
+        self.device = None
+        self.navigation = None     # (frame, gravity, origin, model, positions' frame) for navigation
+        self.frame = "NED"          # the scene's navigation frame: attitude goes out NED-referenced (run_streams)
+        try:
+            if config.device and info.device is not None and TARGET_KINDS[self.spec.kind].talks_back:
+                # The device encodes too: budgets read its bytes_per_sample / frames_per_sample.
+                self.device = self.encoder = info.device(rate_hz, **config.options)
+            else:
+                self.encoder = firmware_protocols.create_encoder(config.format, **config.options)
+        except TypeError as exc:
+            known = {**self.info.options, **(self.info.device_options if self.device or config.device else {})}
+            raise StreamError(f"{config.format}: bad option ({exc}); known options: "
+                              f"{', '.join(known) or 'none'}") from None
+        except ValueError as exc:
+            raise StreamError(f"{config.format}: {exc}") from None
+        self.transport = None
+        self.sent = 0
+        self.dropped = 0
+        self.saturated = 0
+        self.idle = 0               # samples for which the device had nothing to send (paused, divided)
+        self.replies_sent = 0
+        self.replies_dropped = 0
+        self.ignored_input = 0      # bytes or frames that arrived on a link without a device
+        self.queue_max = None       # most bytes seen waiting in the link's queue (sampled twice a second)
+        self.link = {}              # what the link itself reported, read just before closing it
+        self._before = None         # (next k, attitude, increment) of the last sample: see _attitude_change
+        self.exact_gyro = False     # the gyro senses the true attitude's rate exactly (run_streams)
+
+    def open(self) -> None:
+        self.transport = open_target(self.spec, self.info.kind, self.config.target_options)
+
+    def samples(self, block, time_ns: np.ndarray):
+        from firmware_protocols import Samples
+        i = self.imu_index
+        time_ns = time_ns + block.imu_offset_ns(i)      # the IMU's own clock ([[imu]] time_offset_s)
+        # the simulated temperature (temperature effect) for formats that carry one
+        temperature = None if block.temperature_c is None else block.temperature_c[i]
+        # Wire formats reference attitude to NED (Samples.quat is sensor -> NED): an ENU scene's is converted.
+        # (ECEF and ECI scenes give attitude relative to local NED already)
+        quat = attitude.to_ned(block.quat[i], "ENU" if self.frame == "ENU" else "NED")
+        increments = {}
+        if block.dtheta is not None:   # over one sample period, by the sensor's own (nominal) clock
+            increments = {"delta_theta": block.dtheta[i], "delta_velocity": block.dvel[i],
+                          "delta_time_s": np.full(len(time_ns), self.period_s),
+                          "attitude_change": self._attitude_change(block, quat)}
+        if self.device is None:
+            return Samples(time_ns, block.accel[i], block.gyro[i], quat=quat, temperature_c=temperature,
+                           **increments)
+        # imported here: rotations pulls in numba, which every command would pay for at start-up otherwise
+        from imu_emulator.geo.rotations import quat_to_euler, quat_to_matrix
+        # A device may be asked for any field its format knows at any moment: give it all we have.
+        nav = {}
+        if self.navigation is not None and block.truth is not None:
+            specific_force = np.einsum("nij,nj->ni", quat_to_matrix(block.quat[i]), block.accel[i])
+            nav = device_navigation(block.truth["position"], block.truth["velocity"], specific_force,
+                                    *self.navigation)
+        return Samples(time_ns, block.accel[i], block.gyro[i], quat=quat, euler=quat_to_euler(quat),
+                       temperature_c=temperature, **nav, **increments)
+
+    def _attitude_change(self, block, quat: np.ndarray) -> np.ndarray:
+        """Each interval's attitude change from the true attitudes at its ends (attitude.attitude_change); the
+        last sample of the previous block is kept for the next block's first interval. The stream's first
+        sample, and the first after a loop restarts the scene, has no attitude before it: its change is the
+        rotation by its increment."""
+        dtheta = block.dtheta[self.imu_index]
+        if self._before is not None and self._before[0] == block.k0:
+            quat_first, dtheta_first = self._before[1], self._before[2]
+        else:
+            dtheta_first = dtheta[:1]
+            quat_first = attitude.multiply(quat[:1], attitude.conjugate(attitude.from_rotation_vector(dtheta_first)))
+        self._before = (block.k0 + len(block), quat[-1:].copy(), dtheta[-1:].copy())
+        return attitude.attitude_change(quat, np.concatenate((quat_first, quat[:-1])), dtheta,
+                                        np.concatenate((dtheta_first, dtheta[:-1])), not self.exact_gyro)
+
+    def encode(self, block, time_ns: np.ndarray) -> tuple[list, int]:
+        """Per-sample prepared payloads for one block, and the saturation count after it. A device stream
+        gets the raw samples: its device encodes each one at its deadline, with the configuration then."""
+        if self.device is not None:
+            return self.samples(block, time_ns), 0
+        encoded = self.encoder.encode(self.samples(block, time_ns))
+        if self.info.kind == "serial":
+            items = _Packets(bytes(encoded.data), encoded.offsets.tolist())
+        else:
+            prepare = self.transport.prepare
+            bounds = np.searchsorted(encoded["sample"], np.arange(len(time_ns) + 1)).tolist()
+            items = [prepare(encoded[bounds[j]:bounds[j + 1]], time_ns[j]) for j in range(len(time_ns))]
+        return items, _saturation_total(self.encoder)
+
+    def sample_queue(self) -> None:
+        queued = self.transport.queued()
+        if queued is not None:
+            self.queue_max = max(queued, self.queue_max or 0)
+
+    def close(self) -> None:
+        if self.transport is not None:
+            self.transport.finish()
+            self.sample_queue()
+            self.link = self.transport.link_report()
+            if self.queue_max is not None:
+                self.link["queue_max_bytes"] = self.queue_max
+            self.transport.close()
+            self.transport = None
+
+    def device_item(self, samples, i: int):
+        """What the device sends for sample i now, prepared for the transport; None when nothing is due."""
+        out = self.device.output(samples, i)
+        if not len(out):
+            return None
+        if self.info.kind == "serial":
+            return out
+        return self.transport.prepare(out, int(samples.time_ns[i]))
+
+    def summary(self) -> dict:
+        out = {"imu": self.config.imu, "format": self.config.format, "target": self.config.target,
+               "sent": self.sent, "dropped": self.dropped, "saturated": self.saturated}
+        if self.device is not None:
+            out["device"] = {**self.device.stats.as_dict(), "replies_sent": self.replies_sent,
+                             "replies_dropped": self.replies_dropped, "idle": self.idle}
+        if self.ignored_input:
+            out["ignored_input"] = self.ignored_input
+        out["link"] = self.link
+        return out
+
+
+def _saturation_total(encoder) -> int:
+    return encoder.saturated.total
+
+
+def build_streams(configs: list[StreamConfig], imu_names, rate_hz: float) -> list[Stream]:
+    streams = []
+    for config in configs:
+        if config.imu not in imu_names:
+            raise StreamError(f"--imu: no IMU named {config.imu!r} (scene has: {', '.join(imu_names)})")
+        try:
+            info = firmware_protocols.get(config.format)
+        except KeyError as exc:
+            raise StreamError(exc.args[0]) from None
+        streams.append(Stream(config, list(imu_names).index(config.imu), info, rate_hz))
+    return streams
+
+
+class _Packets:
+    """One block's serial packets as one buffer: crossing the pipe as a single bytes object costs the
+    sender a fraction of what a list of small ones would, and slicing happens only when sending."""
+
+    __slots__ = ("data", "offsets")
+
+    def __init__(self, data: bytes, offsets: list):
+        self.data, self.offsets = data, offsets
+
+    def __len__(self) -> int:
+        return len(self.offsets) - 1
+
+    def __getitem__(self, j: int) -> bytes:
+        return self.data[self.offsets[j]:self.offsets[j + 1]]
+
+    def __getstate__(self):
+        return self.data, self.offsets
+
+    def __setstate__(self, state):
+        self.data, self.offsets = state

@@ -1,0 +1,311 @@
+"""Live streaming: scene blocks -> Samples -> wire format encoder or device -> transport, at wall-clock rate.
+
+A producer process computes blocks ahead of time into a pipe (bounded by its buffer). For a stream without a
+device it also encodes them, and the send loop only waits for each sample's deadline and hands prepared
+packets to the transport. A stream with a device (a format whose real part answers its driver, and
+`--device on`, the default) gets raw samples instead: the send loop asks the device for sample k's output
+shortly before k's deadline, so a configuration command takes effect at the next sample. Encoding in the
+sender rather than sending changes to the producer down a control channel was chosen because the producer
+runs up to a pipe's worth of blocks ahead (tens of ms to seconds): a control channel would have to discard
+and re-encode that queue and roll back sequence numbers, while one sample's encode costs a few microseconds
+(tools/bench_device.py prints the figure).
+
+While waiting for a deadline the loop watches every transport's descriptor (select): bytes a driver writes
+are fed to the device at once and its replies go out between two deadlines, without moving the sample
+clock. Input on a link without a device is read and counted as ignored, so the writer never blocks.
+Several streams (one IMU, one format, one target each) share one clock and one simulation.
+"""
+from __future__ import annotations
+
+import gc
+import json
+import math
+import signal
+import sys
+import threading
+import time
+
+import firmware_protocols
+from imu_emulator.errors import ImuEmulatorError, TargetError
+from imu_emulator.live.budget import link_budget_problem, link_text
+from imu_emulator.live.config import RunOptions, StreamConfig, StreamError
+from imu_emulator.live.inputs import Inputs
+from imu_emulator.live.producer import Producer, ProducerFailure, reap
+from imu_emulator.live.realtime import LatenessStats, Pacer, drop_realtime, enable_realtime
+from imu_emulator.live.stream import Stream, build_streams
+from imu_emulator.output.atomic import AtomicOutput
+from imu_emulator.runtime.samples import counts_text
+
+# The first deadline lies this far after the producer starts, so the first block is ready in time.
+_LEAD_NS = 30_000_000
+_STATUS_INTERVAL_NS = 500_000_000
+# With a pacer, links are looked at after a send when the waits have had no room to (high rates).
+_INPUT_STARVED_NS = 1_000_000
+# Without a pacer (--speed 0) the links are looked at every this many samples.
+_UNPACED_POLL_EVERY = 64
+
+
+class _Stop(Exception):
+    pass
+
+
+class Streamer:
+    def __init__(self, sim, rate_hz: float, t0_s: float, streams: list[Stream], options: RunOptions):
+        self.sim = sim
+        self.rate_hz = rate_hz
+        self.t0_s = t0_s
+        self.streams = streams
+        self.options = options
+        self.scene_samples = int(sim.n_samples)
+        limits = [n for n in (options.count,
+                              None if options.duration_s is None else int(round(options.duration_s * rate_hz)),
+                              None if options.loop else self.scene_samples) if n is not None]
+        self.total = min(limits) if limits else None
+        self.stats = LatenessStats(1e9 / rate_hz)
+        self.samples_done = 0
+        self.effect_counts: dict = {}    # the simulation's counters (range saturation), apart from the wire's
+        self._time_offset_ns = 0
+        self._first_ns = 0
+        self._last_ns = 0
+        self.scheduling = None
+        self.pacer = None
+        self._sender_cpu_ns = 0
+
+    # - sender -
+    def run(self) -> dict:
+        """Stream until the limit, the scene's end or SIGINT/SIGTERM/SIGHUP; returns the summary dict.
+        A link or the producer failing mid-run still reports what was sent before the error is raised."""
+        stats_out = self.options.stats_json
+        if isinstance(stats_out, str):
+            stats_out = AtomicOutput(stats_out)
+        # A closed terminal (SIGHUP) ends the run like SIGTERM: ports closed, links removed, summary shown.
+        old_handlers = {sig: signal.signal(sig, _raise_stop) for sig in (signal.SIGTERM, signal.SIGHUP)} \
+            if threading.current_thread() is threading.main_thread() else {}
+        failure = None
+        try:
+            self._check_budgets()
+            for stream in self.streams:
+                stream.open()
+            self._warm_up()
+            # Announced once warm: a driver that opens the port at once finds a device that answers.
+            for stream in self.streams:
+                print(f"{stream.config.imu} {stream.config.format} -> {stream.transport.describe()}", flush=True)
+            paced = self.options.speed > 0
+            start = time.monotonic_ns() + _LEAD_NS
+            if self.options.epoch_time:
+                # Sample k's time = the wall clock at its ideal deadline.
+                self._time_offset_ns = time.time_ns() + (start - time.monotonic_ns()) - int(round(self.t0_s * 1e9))
+            producer, blocks = Producer(self.sim, self.rate_hz, self.streams, self.total, self.options.loop,
+                                         self._time_offset_ns).start()
+            # RT only for paced runs: speed 0 never sleeps, and a busy SCHED_FIFO loop starves the machine.
+            rt = self.scheduling = enable_realtime(self.options.realtime if paced else "off")
+            self._note(f"scheduling: {rt.describe()}")
+            try:
+                period_ns = 1e9 / (self.rate_hz * self.options.speed) if paced else 0.0
+                # The cyclic collector walking the heap (numba, sympy) stalls for milliseconds about once a
+                # second; the send loop makes no reference cycles, so refcounting alone frees its garbage.
+                gc.freeze()
+                gc.disable()
+                self.pacer = Pacer(rt.fifo, period_ns, spin=rt.spin) if paced else None
+                cpu_before = time.thread_time_ns()
+                try:
+                    self._send_loop(blocks, self.pacer, start)
+                finally:
+                    self._sender_cpu_ns = time.thread_time_ns() - cpu_before
+            except (KeyboardInterrupt, _Stop):
+                pass
+            except ImuEmulatorError as exc:
+                failure = exc
+            finally:
+                gc.enable()
+                gc.unfreeze()
+                drop_realtime()
+                blocks.close()
+                reap(producer)
+        except (KeyboardInterrupt, _Stop):
+            pass            # stopped before the first sample: the summary says nothing was sent
+        except BaseException:
+            if stats_out is not None:
+                stats_out.discard()
+            raise
+        finally:
+            for sig, handler in old_handlers.items():
+                signal.signal(sig, handler)
+            failure = _close_all(self.streams) or failure
+        summary = self.summary()
+        stats_failure = None
+        if stats_out is not None:
+            try:
+                stats_out.write(json.dumps(summary, indent=1))
+                stats_out.close()
+            except ImuEmulatorError as exc:
+                stats_failure = exc
+        if not self.options.quiet or stats_failure:     # figures a JSON file could not keep are shown
+            self._print_summary(summary)
+        if failure and stats_failure:
+            raise StreamError(f"{failure}; and {stats_failure}")
+        if failure or stats_failure:
+            raise failure or stats_failure
+        return summary
+
+    def _print_summary(self, summary: dict) -> None:
+        print(self._status_text("done"), file=sys.stderr, flush=True)
+        for s in summary["streams"]:
+            print(f"  {s['imu']} {s['format']} -> {s['target']}: sent {s['sent']}, dropped {s['dropped']}, "
+                  f"saturated {s['saturated']}", file=sys.stderr, flush=True)
+            if "device" in s:
+                d = s["device"]
+                print(f"    device: {d['commands']} commands answered, {d['errors']} error replies, "
+                      f"{d['replies_sent']} replies sent, {d['replies_dropped']} dropped, {d['ignored_bytes']} "
+                      f"input bytes ignored, {d['idle']} samples with nothing due", file=sys.stderr, flush=True)
+            if s.get("ignored_input"):
+                print(f"    input ignored (no device): {s['ignored_input']}", file=sys.stderr, flush=True)
+            print(f"    link: {link_text(s['link'])}", file=sys.stderr, flush=True)
+
+    def _check_budgets(self) -> None:
+        if self.options.speed == 0:
+            return
+        for stream in self.streams:
+            problem = link_budget_problem(stream, self.rate_hz * self.options.speed)
+            if problem and not self.options.allow_overload:
+                raise TargetError(problem)
+            if problem:
+                self._note("overload: " + problem.split(";")[0])
+
+    def _warm_up(self) -> None:
+        """Compile kernels and encoders now rather than inside the first deadlines (throwaway encoders and
+        devices keep the real ones' sequence numbers and counters at zero; a throwaway simulation keeps the real one's
+        noise state at the run's start)."""
+        block = self.sim.fresh().block(0, 1)
+        for stream in self.streams:
+            samples = stream.samples(block, block.time_ns())
+            if stream.device is not None:
+                stream.info.device(self.rate_hz, **stream.config.options).output(samples, 0)
+            else:
+                firmware_protocols.create_encoder(stream.config.format, **stream.config.options).encode(samples)
+
+    def _send_loop(self, blocks, pacer: Pacer | None, start: int) -> None:
+        period = 1e9 / (self.rate_hz * self.options.speed) if pacer else 0.0
+        streams = self.streams
+        transports = [s.transport for s in streams]
+        devices = [s.device for s in streams]
+        inputs = Inputs(streams, self._note)
+        stats = self.stats
+        next_status = start + _STATUS_INTERVAL_NS
+        show_status = not self.options.quiet
+        done = 0
+        items = None
+        while True:
+            block = blocks.recv()
+            if block is None:
+                break
+            if isinstance(block, ProducerFailure):
+                block.raise_()
+            items = block.items
+            for i in range(len(block)):
+                j = block.j0 + i
+                if pacer:
+                    deadline = start + int(j * period)
+                    # Commands are answered while waiting; the devices encode with the configuration in
+                    # force just before the deadline, then the last stretch is spun.
+                    pacer.sleep_until(deadline - pacer.spin_ns, inputs.fds, inputs.ready)
+                    inputs.poll_unwatched()
+                elif j % _UNPACED_POLL_EVERY == 0:
+                    inputs.poll_all()
+                payloads = [p[i] if d is None else s.device_item(p, i)
+                            for s, d, p in zip(streams, devices, items)]
+                if pacer:
+                    now = pacer.wait_until(deadline)
+                    stats.add(now - deadline)
+                for stream, transport, payload in zip(streams, transports, payloads):
+                    if payload is None:
+                        stream.idle += 1
+                    elif transport.send(payload):
+                        stream.sent += 1
+                    else:
+                        stream.dropped += 1
+                if pacer and inputs.fds and deadline - pacer.watched_ns > _INPUT_STARVED_NS:
+                    # No slack left to watch the links while waiting (high rates): look right after the send.
+                    inputs.poll_all()
+                    pacer.watched_ns = deadline
+                done += 1
+                self.samples_done = done
+                if done == 1:
+                    self._first_ns = time.monotonic_ns()
+                if not pacer or j % 64 == 0:
+                    now = time.monotonic_ns()
+                    if now >= next_status:
+                        next_status = now + _STATUS_INTERVAL_NS
+                        for stream in streams:
+                            stream.sample_queue()
+                        if show_status:
+                            print(self._status_text("streaming"), end="\r" if sys.stderr.isatty() else "\n",
+                                  file=sys.stderr, flush=True)
+            for stream, saturated in zip(streams, block.saturated):
+                stream.saturated = saturated if stream.device is None else stream.device.saturated
+            self.effect_counts = block.counts
+            self._last_ns = time.monotonic_ns()
+
+    # - reporting -
+    def _note(self, text: str) -> None:
+        if not self.options.quiet:
+            print(text, file=sys.stderr, flush=True)
+
+    def summary(self) -> dict:
+        elapsed = ((self._last_ns or time.monotonic_ns()) - self._first_ns) / 1e9
+        return {"samples": self.samples_done, "rate_hz": self.rate_hz, "speed": self.options.speed,
+                "achieved_hz": (self.samples_done - 1) / elapsed if self.samples_done > 1 and elapsed > 0 else 0.0,
+                "scheduling": self.scheduling.mode if self.scheduling else None,
+                # CPU the send loop used per second of streaming: what the scheduling mode costs.
+                "sender_cpu_ratio": self._sender_cpu_ns / 1e9 / elapsed if elapsed > 0 else 0.0,
+                "lateness": self.stats.summary(),
+                "fifo_given_up": self.pacer.fifo_given_up if self.pacer else 0,
+                "dropped": sum(s.dropped for s in self.streams),
+                "saturated": sum(s.saturated for s in self.streams),
+                "effect_counts": self.effect_counts,
+                "streams": [s.summary() for s in self.streams]}
+
+    def _status_text(self, state: str) -> str:
+        s = self.summary()
+        late = s["lateness"]
+        return (f"{state}: {s['samples']} samples, {s['achieved_hz']:.1f} Hz, late p50 {late['p50_us']:.0f} us "
+                f"p99 {late['p99_us']:.0f} us max {late['max_us']:.0f} us, dropped {s['dropped']}, "
+                f"saturated {s['saturated']}" + (f"; {counts_text(self.effect_counts)}" if self.effect_counts else ""))
+
+
+def _raise_stop(signum, frame):
+    raise _Stop()
+
+
+def _close_all(streams) -> ImuEmulatorError | None:
+    """Close every stream even when one fails to (a pty's link must still go). The first failure is
+    returned when it is the user's (a full disk), raised when it is a bug."""
+    first = None
+    for stream in streams:
+        try:
+            stream.close()
+        except Exception as exc:
+            first = first or exc
+    if first is not None and not isinstance(first, ImuEmulatorError):
+        raise first
+    return first
+
+
+# Effects that leave the gyro's increment the integral of the true attitude's rate (they act on the
+# accelerometer, or on the rate outputs only, not on increments): with no other, a delta quaternion is the true
+# attitude change alone (attitude.attitude_change).
+_TRUE_RATE_EFFECTS = frozenset({"gravity", "lever_arm", "range", "resolution"})
+
+
+def run_streams(scene, sim, configs: list[StreamConfig], options: RunOptions) -> dict:
+    streams = build_streams(configs, tuple(sim.imu_names), float(scene.rate_hz))
+    for stream in streams:
+        stream.frame = scene.frame
+        stream.exact_gyro = scene.effects <= _TRUE_RATE_EFFECTS
+        if stream.device is not None and stream.info.device_navigation:
+            from imu_emulator.motion.earth import position_frame
+            stream.navigation = (scene.frame, float(scene.gravity_mps2), scene.origin, scene.gravity_model,
+                                 position_frame(scene))
+    if not math.isfinite(options.speed) or options.speed < 0:
+        raise StreamError(f"--speed: expected a number >= 0, got {options.speed}")
+    return Streamer(sim, float(scene.rate_hz), float(scene.t0_s), streams, options).run()
