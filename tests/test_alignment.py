@@ -214,13 +214,13 @@ def test_cli_plain_logs_at_different_rates_with_json(tmp_path, capsys):
 def test_cli_one_emulator_file_with_two_imus(tmp_path, capsys, suffix):
     # Same file for A and B: the emulator's CSV (an imu column) or NPZ (imu_names), IMUs picked by name.
     from imu_emulator import scene_from_dict
-    from imu_emulator.output.writer import Writer
+    from imu_emulator.output.formats import open_writer
     from imu_emulator.runtime.simulation import Simulation
     scene_dict = bench.three_axis_scene(seed=7, duration_s=8.0)
     scene_dict["imu"].insert(0, {"name": "other"})
     scene = scene_from_dict(scene_dict)
     path = tmp_path / f"run{suffix}"
-    writer = Writer(path, scene.imu_names, truth=False)
+    writer = open_writer(path, scene.imu_names, truth=False)
     writer.write(Simulation(scene, attitude=False).run())
     writer.close()
     code, out, err = run_cli(["align", str(path), str(path), "--imu-a", "a", "--imu-b", "b"], capsys)

@@ -27,7 +27,7 @@ def register(subparsers) -> None:
 
 
 def cmd_generate(args) -> int:
-    from imu_emulator.output.writer import check_path
+    from imu_emulator.output.formats import check_path
 
     check_path(args.output)
     scene = load_scene_with_warnings(args.scene)
@@ -43,13 +43,12 @@ def _parquet_metadata(output, scene) -> dict | None:
     start 0.1-0.2 s, which other formats need not pay (issue 15)."""
     if Path(output).suffix.lower() != ".parquet":
         return None
-    from imu_emulator.output.parquet import run_metadata
+    from imu_emulator.output.formats.parquet import run_metadata
     return run_metadata(scene)
 
 
 def _generate(args, scene, stopped) -> int:
-    from imu_emulator.output.writer import open_writer
-    from imu_emulator.output.size import check_output
+    from imu_emulator.output.formats import check_output, open_writer
     from imu_emulator.runtime.samples import counts_text
     from imu_emulator.runtime.simulation import Simulation
 
