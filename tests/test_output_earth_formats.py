@@ -217,6 +217,25 @@ def test_odometry_ecef_twist_in_other_frames(tmp_path, monkeypatch, frame, traje
     _twist_moves_the_pose(odom, np.arange(50) / 50.0)
 
 
+@pytest.mark.parametrize("suffix", sorted(FORMATS))
+def test_every_format_reads_back_the_schemas_columns(run, suffix):
+    """Every registered format's file of the Earth run, read back by its own reader (Format.read_columns, what
+    `plot` and `align` use), holds the schema's columns it declares (Format.carries: all of them, or what a
+    ROS bag holds as such) with the NPZ's values: bit for bit, time stamps to the ns."""
+    from imu_emulator.output.columns import Layout
+    record = FORMATS[suffix]
+    assert record.read_columns is not None, f"{record.name} cannot be read back"
+    layout = Layout(truth=True, bias_truth=True, temperature=True, increments=record.increments, earth=True)
+    names = ("t",) + record.carries(layout)
+    found = record.read_columns(run[suffix], names)
+    assert found is not None and set(found) == set(names)
+    with np.load(run[".npz"]) as npz:
+        want = _npz_columns(npz)
+    np.testing.assert_allclose(found["t"], want["t"], rtol=0, atol=1e-9)
+    for name in names[1:]:
+        assert _same_bits(found[name], want[name]), (record.name, name)
+
+
 def test_run_size_matches_the_files_written(run):
     """Every format's estimated_bytes with --truth and --increments (where it carries them) against its file of
     the Earth run, within the margin the format states (imu_emulator.output.base.Format.margin): NPZ to within

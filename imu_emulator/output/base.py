@@ -56,8 +56,13 @@ class Format:
     increments: bool = True                         # can carry --increments
     #: before the run, with the scene: refuse (RunSizeError) what would not fit; None: nothing to check
     check: Callable[..., None] | None = None
+    #: the schema's float64 columns (besides t) the file holds for a layout; None: all of them (Layout.names)
+    columns: Callable[[Layout], tuple[str, ...]] | None = None
     #: the float64 columns the file holds, read back by name: read_columns(path, names) -> {name: (rows,)}
-    #: (rows IMU-fastest, "t" in seconds), None when a name is missing; None: the format cannot be read back
+    #: (rows IMU-fastest, "t" in seconds, "imu" the names where the format can), None when a name is missing
     read_columns: Callable[[Path, tuple[str, ...]], dict | None] | None = None
     #: the conventions lines the file states (Earth scenes), [] when none
     read_conventions: Callable[[Path], list[str]] | None = None
+
+    def carries(self, layout: Layout) -> tuple[str, ...]:
+        return layout.names() if self.columns is None else self.columns(layout)

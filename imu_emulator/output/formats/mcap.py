@@ -258,5 +258,42 @@ def estimated_bytes(scene, truth: bool, increments: bool = False) -> int:
         n * (2 * _MCAP_RECORD + _ODOMETRY_ECEF_CDR + _NAVSATFIX_CDR) if earth else 0)
 
 
+def carried(layout) -> tuple[str, ...]:
+    """The schema's columns a bag holds as they are: each IMU's signals, the truth's position (the rest of the
+    truth is there in other frames or forms: a quaternion, the twist in the body frame)."""
+    from imu_emulator.output.columns import SAMPLES, TRUTH
+    return SAMPLES.names + (TRUTH.names[:3] if layout.truth else ())
+
+
+def read_columns(path: Path, names: tuple[str, ...]) -> dict | None:
+    """`carried` columns and "t" (the IMU messages' stamps, s) and "imu" (the topics' names), rows IMU-fastest."""
+    try:
+        from mcap.reader import make_reader
+        from mcap_ros2.decoder import DecoderFactory
+    except ImportError:
+        raise ImuEmulatorError("reading .mcap needs mcap-ros2-support: pip install 'imu-emulator[logs]'") from None
+    topics: dict[str, list] = {}
+    with open(path, "rb") as f:
+        for _, channel, _, ros_msg in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            topics.setdefault(channel.topic, []).append(ros_msg)
+    imus = [topic for topic in topics if topic.startswith("/imu/")]     # in the IMUs' order: written first-to-last
+    n = min((len(topics[topic]) for topic in imus), default=0)
+
+    def rows(per_imu):                  # (n_imu, n) -> (n * n_imu,), IMU fastest
+        return np.asarray(per_imu, dtype=np.float64).T.ravel()
+
+    columns = {"t": rows([[m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in topics[t][:n]] for t in imus]),
+               "imu": np.tile(np.array([t[len("/imu/"):] for t in imus], dtype=object), n)}
+    for prefix, field in (("a", "linear_acceleration"), ("g", "angular_velocity")):
+        for axis in "xyz":
+            columns[prefix + axis] = rows([[getattr(getattr(m, field), axis) for m in topics[t][:n]] for t in imus])
+    if "/truth/odometry" in topics:
+        position = [m.pose.pose.position for m in topics["/truth/odometry"][:n]]
+        for axis in "xyz":
+            columns["p" + axis] = np.repeat([getattr(p, axis) for p in position], len(imus)).astype(np.float64)
+    return {name: columns[name] for name in names} if set(names) <= set(columns) else None
+
+
 FORMAT = Format("MCAP", (".mcap",), open_bag, estimated_bytes, margin=(0.1, 1.0),
-                description="a ROS 2 bag's sensor_msgs/Imu", increments=False)
+                description="a ROS 2 bag's sensor_msgs/Imu", increments=False, columns=carried,
+                read_columns=read_columns)
