@@ -54,6 +54,11 @@ class Format:
     margin: tuple[float, float]
     description: str
     increments: bool = True                         # can carry --increments
+    #: the writer wants the sensor frame's attitude (block.quat): the simulation computes it only then
+    attitude: bool = False
+    #: what the file records about the run (scene hash, versions), from the scene; None: nothing. Called only
+    #: for this format: reading the packages' versions costs a warm start 0.1-0.2 s (issue 15)
+    run_metadata: Callable[..., dict] | None = None
     #: before the run, with the scene: refuse (RunSizeError) what would not fit; None: nothing to check
     check: Callable[..., None] | None = None
     #: the schema's float64 columns (besides t) the file holds for a layout; None: all of them (Layout.names)

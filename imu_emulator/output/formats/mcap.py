@@ -295,5 +295,5 @@ def read_columns(path: Path, names: tuple[str, ...]) -> dict | None:
 
 
 FORMAT = Format("MCAP", (".mcap",), open_bag, estimated_bytes, margin=(0.1, 1.0),
-                description="a ROS 2 bag's sensor_msgs/Imu", increments=False, columns=carried,
+                description="a ROS 2 bag's sensor_msgs/Imu", increments=False, attitude=True, columns=carried,
                 read_columns=read_columns)

@@ -123,4 +123,5 @@ def read_conventions(path: Path) -> list[str]:
 
 
 FORMAT = Format("Parquet", (".parquet",), ParquetWriter, estimated_bytes, margin=(0.1, 1.25),
-                description="a Parquet table", read_columns=read_columns, read_conventions=read_conventions)
+                description="a Parquet table", run_metadata=run_metadata, read_columns=read_columns,
+                read_conventions=read_conventions)
