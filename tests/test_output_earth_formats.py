@@ -1,6 +1,6 @@
 """Every output format carries the same run: CSV (read back by numpy), Parquet (pyarrow) and the ROS 2 bag
-(rosbags, an independent CDR reader) against the NPZ of the same Earth scene with --truth and --increments, and
-run_size's estimates against the files written."""
+(rosbags, an independent CDR reader) against the NPZ of the same Earth scene with --truth and --increments; every
+registered format's own reader and size estimate against the files written."""
 from __future__ import annotations
 
 import numpy as np
