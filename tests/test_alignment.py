@@ -210,17 +210,17 @@ def test_cli_plain_logs_at_different_rates_with_json(tmp_path, capsys):
     assert "roll 10.000000" in out and "pitch -25.000000" in out and "yaw 137.000000" in out
 
 
-@pytest.mark.parametrize("suffix", [".csv", ".npz"])
+@pytest.mark.parametrize("suffix", [".csv", ".npz", ".parquet"])
 def test_cli_one_emulator_file_with_two_imus(tmp_path, capsys, suffix):
     # Same file for A and B: the emulator's CSV (an imu column) or NPZ (imu_names), IMUs picked by name.
     from imu_emulator import scene_from_dict
-    from imu_emulator.output.writer import Writer
+    from imu_emulator.output.formats import open_writer
     from imu_emulator.runtime.simulation import Simulation
     scene_dict = bench.three_axis_scene(seed=7, duration_s=8.0)
     scene_dict["imu"].insert(0, {"name": "other"})
     scene = scene_from_dict(scene_dict)
     path = tmp_path / f"run{suffix}"
-    writer = Writer(path, scene.imu_names, truth=False)
+    writer = open_writer(path, scene.imu_names, truth=False)
     writer.write(Simulation(scene, attitude=False).run())
     writer.close()
     code, out, err = run_cli(["align", str(path), str(path), "--imu-a", "a", "--imu-b", "b"], capsys)
@@ -228,6 +228,29 @@ def test_cli_one_emulator_file_with_two_imus(tmp_path, capsys, suffix):
     assert "roll 10.000000" in out and "yaw 137.000000" in out and "time offset t_B - t_A: 0.000000" in out
     code, _, err = run_cli(["align", str(path), str(path)], capsys)
     assert code == 2 and err.count("\n") == 1 and "--imu-a" in err
+
+
+def test_cli_parquet_and_csv_of_one_run_align_alike(tmp_path, capsys):
+    """`generate` to .parquet (the large-run format, the only one `batch` writes) and to .csv: `align` reads
+    both through the same column schema and reports the same result (Parquet's time stamps are integer ns, the
+    CSV's the shortest text of the seconds: equal to well below the reported digits)."""
+    import tomli_w
+    scene_dict = bench.three_axis_scene(seed=7, duration_s=8.0)
+    scene = tmp_path / "s.toml"
+    scene.write_text(tomli_w.dumps(scene_dict))
+    results = {}
+    for suffix in (".csv", ".parquet"):
+        path = tmp_path / f"run{suffix}"
+        assert main(["generate", str(scene), "-o", str(path), "--quiet"]) == 0
+        code, out, err = run_cli(["align", str(path), str(path), "--imu-a", "a", "--imu-b", "b", "--lever-arm",
+                                  "--json", str(tmp_path / f"{suffix}.json")], capsys)
+        assert code == 0, err
+        results[suffix] = json.loads((tmp_path / f"{suffix}.json").read_text())
+    csv, parquet = results[".csv"], results[".parquet"]
+    assert csv.keys() == parquet.keys()
+    for key in ("quaternion_wxyz", "euler_deg", "time_offset_s", "lever_arm_m"):
+        np.testing.assert_allclose(parquet[key], csv[key], rtol=1e-9, atol=1e-12, err_msg=key)
+    assert parquet["observable"] == csv["observable"]
 
 
 def bad_input_cases(tmp_path, a: ImuLog, b: ImuLog):

@@ -16,7 +16,7 @@ import pytest
 
 from imu_emulator.analysis import batch
 from imu_emulator.cli import main
-from imu_emulator.output.parquet import read_metadata
+from imu_emulator.output.formats.parquet import read_metadata
 
 SCENE = """
 [scene]

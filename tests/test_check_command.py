@@ -70,7 +70,7 @@ def test_check_describes_what_generate_then_does(tmp_path, capsys, cache):
     sizes = output_sizes(load_scene(scene), truth=False)
     data = np.load(tmp_path / "o.npz")
     payload = sum(data[k].nbytes for k in data.files)
-    from imu_emulator.output.size import NPZ_ARRAY_OVERHEAD
+    from imu_emulator.output.formats.npz import NPZ_ARRAY_OVERHEAD
     assert payload < os.path.getsize(tmp_path / "o.npz") <= sizes["NPZ"] <= payload + NPZ_ARRAY_OVERHEAD * len(data.files)
     assert os.path.getsize(tmp_path / "o.csv") <= sizes["CSV bound"]
 

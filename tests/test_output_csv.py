@@ -5,7 +5,8 @@ import io
 import numpy as np
 
 from imu_emulator.cli import main
-from imu_emulator.output.writer import CSV_COLUMNS, TRUTH_COLUMNS, csv_rows
+from imu_emulator.output.columns import LEADING_COLUMNS as CSV_COLUMNS, TRUTH_COLUMNS
+from imu_emulator.output.formats.csv import csv_rows
 from imu_emulator.runtime.samples import SampleBlock
 from imu_emulator.runtime.simulation import TRUTH_KEYS
 
@@ -75,7 +76,8 @@ def test_every_column_group_and_clock_offsets_read_back_exactly():
     """Per-IMU groups (increments, temperature, realized biases), shared ones (truth, Earth truth) and per-IMU
     time stamps ([[imu]] time_offset_s) land in the right row and column, each number Python's float() of it."""
     from imu_emulator.motion.earth_truth import KEYS
-    from imu_emulator.output.writer import BIAS_COLUMNS, INCREMENT_COLUMNS, csv_segments
+    from imu_emulator.output.columns import BIAS_COLUMNS, INCREMENT_COLUMNS
+    from imu_emulator.output.formats.csv import csv_segments
     rng = np.random.default_rng(5)
     n, n_imu = 300, 3
     block = _block(n, n_imu, rng)

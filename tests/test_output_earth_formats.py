@@ -1,12 +1,13 @@
 """Every output format carries the same run: CSV (read back by numpy), Parquet (pyarrow) and the ROS 2 bag
-(rosbags, an independent CDR reader) against the NPZ of the same Earth scene with --truth and --increments, and
-run_size's estimates against the files written."""
+(rosbags, an independent CDR reader) against the NPZ of the same Earth scene with --truth and --increments; every
+registered format's own reader and size estimate against the files written."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 from imu_emulator.cli import main
+from imu_emulator.output.formats import FORMATS
 
 # Two IMUs (the second with a time offset and a name that needs CSV quoting), every group of columns: increments,
 # temperature, truth, realized biases and the Earth truth.
@@ -48,7 +49,7 @@ temperature = true
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
-    """The same scene written as NPZ, CSV, Parquet and MCAP; {suffix: path}."""
+    """The same scene written in every output format (NPZ, CSV, Parquet, MCAP, ...); {suffix: path}."""
     import os
     tmp = tmp_path_factory.mktemp("earth_formats")
     old = os.environ.get("IMU_EMULATOR_CACHE")
@@ -57,9 +58,9 @@ def run(tmp_path_factory):
     scene.write_text(SCENE)
     paths = {}
     try:
-        for suffix, options in ((".npz", ["--increments"]), (".csv", ["--increments"]),
-                                (".parquet", ["--increments"]), (".mcap", [])):
+        for suffix, record in FORMATS.items():      # every registered format, with what it can carry
             paths[suffix] = tmp / f"o{suffix}"
+            options = ["--increments"] if record.increments else []
             assert main(["generate", str(scene), "-o", str(paths[suffix]), "--quiet", "--truth", *options]) == 0
     finally:
         if old is None:
@@ -73,7 +74,7 @@ def run(tmp_path_factory):
 def _npz_columns(npz) -> dict[str, np.ndarray]:
     """The NPZ's arrays as rows of (sample, IMU), IMU fastest, under the CSV's column names."""
     from imu_emulator.motion.earth_truth import COLUMNS
-    from imu_emulator.output.writer import BIAS_COLUMNS, INCREMENT_COLUMNS, TRUTH_COLUMNS
+    from imu_emulator.output.columns import BIAS_COLUMNS, INCREMENT_COLUMNS, TRUTH_COLUMNS
     n_imu = len(npz["imu_names"])
 
     def per_imu(a):                              # (n_imu, n, k) -> (n * n_imu, k)
@@ -134,7 +135,7 @@ def test_parquet_equals_npz_column_by_column_in_an_earth_scene(run):
     t_ns = table.column("t_ns").to_numpy().reshape(-1, len(names))
     np.testing.assert_allclose(t_ns * 1e-9, want["t"].reshape(-1, len(names)), rtol=0, atol=1e-12)
     assert np.array_equal(t_ns[:, 1] - t_ns[:, 0], np.full(len(t_ns), offsets_ns[1] - offsets_ns[0]))
-    from imu_emulator.output.parquet import read_metadata
+    from imu_emulator.output.formats.parquet import read_metadata
     assert any("f = a - g" in line for line in read_metadata(run[".parquet"])["conventions"])
 
 
@@ -216,34 +217,55 @@ def test_odometry_ecef_twist_in_other_frames(tmp_path, monkeypatch, frame, traje
     _twist_moves_the_pose(odom, np.arange(50) / 50.0)
 
 
+@pytest.mark.parametrize("suffix", sorted(FORMATS))
+def test_every_format_reads_back_the_schemas_columns(run, suffix):
+    """Every registered format's file of the Earth run, read back by its own reader (Format.read_columns, what
+    `plot` and `align` use), holds the schema's columns it declares (Format.carries: all of them, or what a
+    ROS bag holds as such) with the NPZ's values: bit for bit, time stamps to the ns."""
+    from imu_emulator.output.columns import Layout
+    record = FORMATS[suffix]
+    assert record.read_columns is not None, f"{record.name} cannot be read back"
+    layout = Layout(truth=True, bias_truth=True, temperature=True, increments=record.increments, earth=True)
+    names = ("t",) + record.carries(layout)
+    found = record.read_columns(run[suffix], names)
+    assert found is not None and set(found) == set(names)
+    with np.load(run[".npz"]) as npz:
+        want = _npz_columns(npz)
+    np.testing.assert_allclose(found["t"], want["t"], rtol=0, atol=1e-9)
+    for name in names[1:]:
+        assert _same_bits(found[name], want[name]), (record.name, name)
+
+
 def test_run_size_matches_the_files_written(run):
-    """run_size.output_bytes with --truth and --increments (MCAP: --truth) against the files of the Earth run:
-    NPZ to within 1 % (its arrays exactly, plus per-array headers); CSV within CSV_ESTIMATE_MARGIN of the
-    estimate and under the bound; Parquet and MCAP under their uncompressed bounds (Parquet: plus 25 % for the
-    dictionary pages a short file keeps beside its values)."""
+    """Every format's estimated_bytes with --truth and --increments (where it carries them) against its file of
+    the Earth run, within the margin the format states (imu_emulator.output.base.Format.margin): NPZ to within
+    1 % (its arrays exactly, plus per-array headers); CSV within CSV_ESTIMATE_MARGIN of the estimate and under
+    the bound; Parquet and MCAP under their uncompressed bounds (Parquet: plus 25 % for the dictionary pages a
+    short file keeps beside its values)."""
     import os
 
-    from imu_emulator.output.size import CSV_ESTIMATE_MARGIN, csv_bytes, output_bytes
+    from imu_emulator.output.formats.csv import CSV_ESTIMATE_MARGIN, csv_bytes
     from imu_emulator.scene.model import load_scene
     scene = load_scene(run["scene"])
-    size = {suffix: os.path.getsize(run[suffix]) for suffix in (".npz", ".csv", ".parquet", ".mcap")}
-    assert abs(size[".npz"] / output_bytes(scene, "NPZ", True, True) - 1) < 0.01
+    size = {suffix: os.path.getsize(run[suffix]) for suffix in FORMATS}
+    for suffix, record in FORMATS.items():
+        low, high = record.margin
+        ratio = size[suffix] / record.estimated_bytes(scene, True, record.increments)
+        assert low <= ratio <= high, (record.name, ratio, record.margin)
     # the CSV's '#' convention lines are not rows
     rows = size[".csv"] - sum(len(line) + 1 for line in run[".csv"].read_text().splitlines()[:7])
-    assert abs(rows / output_bytes(scene, "CSV", True, True) - 1) < CSV_ESTIMATE_MARGIN
+    assert abs(rows / FORMATS[".csv"].estimated_bytes(scene, True, True) - 1) < CSV_ESTIMATE_MARGIN
     assert size[".csv"] <= csv_bytes(scene, True, True)
-    assert size[".parquet"] <= 1.25 * output_bytes(scene, "Parquet", True, True)
-    assert size[".mcap"] <= output_bytes(scene, "MCAP", True)
     # and each group of columns counts: without truth and increments every estimate is smaller
-    for fmt in ("NPZ", "CSV", "Parquet", "MCAP"):
-        assert output_bytes(scene, fmt, False, False) < output_bytes(scene, fmt, True, fmt != "MCAP")
+    for record in FORMATS.values():
+        assert record.estimated_bytes(scene, False, False) < record.estimated_bytes(scene, True, record.increments)
 
 
 def test_simulate_memory_check_counts_every_array(run, monkeypatch):
     """simulate()'s memory check (run_size.check_memory) counts exactly the arrays Simulation.run allocates,
     increments, temperature, realized biases and Earth truth included: with the available memory one byte
     short of their nbytes it refuses, with exactly that it runs."""
-    from imu_emulator.output import size as run_size
+    from imu_emulator.runtime import memory as run_size
     from imu_emulator.scene.model import load_scene
     from imu_emulator.runtime.simulation import simulate
     scene = load_scene(run["scene"])

@@ -11,7 +11,7 @@ import pytest
 
 from imu_emulator.cli import main
 from imu_emulator.runtime.progress import bar
-from imu_emulator.output.size import memory_bytes
+from imu_emulator.runtime.memory import memory_bytes
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 

@@ -102,6 +102,28 @@ def test_plot_of_a_truth_output_overlays_each_imus_realized_bias(tmp_path):
         assert len(fig.axes) == 1 + 4 * len(data.imu_names)   # each signal axes has its bias twin
 
 
+def test_plot_of_a_parquet_output_equals_that_of_its_csv(tmp_path):
+    """`plot` reads Parquet (the large-run format, the only one `batch` writes) through the same column schema
+    as the CSV: signals, trajectory, attitude and realized biases of the same run agree; time stamps to the ns
+    Parquet stores them in."""
+    scene = tmp_path / "biased.toml"
+    scene.write_text(
+        (ROOT / "examples" / "two_imus.toml").read_text().replace("[effects]", "[effects]\nbias = true\n")
+        + '\n[imu.gyro]\nbias = ["0.1 deg/s", 0, "-0.2 deg/s"]\n')
+    data = {}
+    for name in ("run.csv", "run.parquet"):
+        assert main(["generate", str(scene), "-o", str(tmp_path / name), "--quiet", "--truth"]) == 0
+        assert main(["plot", str(tmp_path / name), "-o", str(tmp_path / (name + ".png"))]) == 0
+        _assert_png(tmp_path / (name + ".png"))
+        data[name] = plotting.from_output(str(tmp_path / name))
+    csv, parquet = data["run.csv"], data["run.parquet"]
+    assert parquet.imu_names == csv.imu_names == ["imu0", "imu1"] and parquet.frame == csv.frame
+    np.testing.assert_allclose(parquet.t, csv.t, rtol=0, atol=1e-9)
+    for field in ("accel", "gyro", "position", "euler", "accel_bias", "gyro_bias"):
+        assert getattr(parquet, field) is not None, field
+        np.testing.assert_array_equal(getattr(parquet, field), getattr(csv, field), err_msg=field)
+
+
 def test_plot_of_an_output_draws_the_frame_its_conventions_state_and_says_when_none_is_stated(tmp_path):
     """examples/earth_turn.toml (NED, 1000 m up: pz = -1000) written with --truth states its frame in its
     conventions: down is drawn down (the z axis inverted, as for the scene itself). A flat scene's output states

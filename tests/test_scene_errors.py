@@ -331,7 +331,8 @@ def test_csv_beyond_the_free_disk_is_refused_with_the_figure(tmp_path):
 
 
 def test_npz_beyond_memory_is_refused_and_allow_large_overrides_only_a_csv(tmp_path):
-    from imu_emulator.output.size import RunSizeError, check_output
+    from imu_emulator.output.formats import check_output
+    from imu_emulator.runtime.memory import RunSizeError
     scene = load_scene(_write(tmp_path, HUGE))
     check_output(scene, tmp_path / "out.csv", truth=True, allow_large=True)
     with pytest.raises(RunSizeError, match="in memory.*write a .csv"):
@@ -339,7 +340,7 @@ def test_npz_beyond_memory_is_refused_and_allow_large_overrides_only_a_csv(tmp_p
 
 
 def test_simulate_refuses_a_run_beyond_memory_before_allocating(tmp_path):
-    from imu_emulator.output.size import RunSizeError
+    from imu_emulator.runtime.memory import RunSizeError
     with pytest.raises(RunSizeError, match=r"simulate: 1000000000000 samples x 1 IMU\(s\) take"):
         imu.simulate(load_scene(_write(tmp_path, HUGE)))
 

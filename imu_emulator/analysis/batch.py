@@ -89,7 +89,7 @@ KERNEL_LOADS: dict[str, float] = {}
 
 def realize(task: Task) -> dict:
     """Compute one realization (or find it done) and return its summary row. Runs on a worker."""
-    from imu_emulator.output.parquet import read_metadata
+    from imu_emulator.output.formats.parquet import read_metadata
     cpu_start = time.thread_time()
     path = run_file(Path(task.out), task.index)
     identity = {"index": task.index, "seed": task.seed, "batch_seed": task.root_seed, "drawn": task.drawn()}
@@ -111,8 +111,8 @@ def realize(task: Task) -> dict:
 
 def _write(task: Task, path: Path, identity: dict) -> float | None:
     from imu_emulator.codegen.kernel import is_loaded, scene_key
-    from imu_emulator.output.writer import open_writer
-    from imu_emulator.output.parquet import run_metadata
+    from imu_emulator.output.formats import open_writer
+    from imu_emulator.output.formats.parquet import run_metadata
     from imu_emulator.runtime.simulation import Simulation
     scene = task.build()
     key = scene_key(scene, attitude=False, truth=task.truth)

@@ -5,11 +5,14 @@ order, names matched after stripping spaces and ignoring case. The emulator's CS
 row per IMU per sample) and, with --truth or --increments, their columns (an Earth scene's too); all are understood. Any other column is an
 error: a column we silently ignored (a "gx_dps", a second clock) is one the user believed we used.
 
+Parquet: what `imu-emulator generate -o run.parquet` (and `batch`) writes: t_ns, imu and the same columns as
+the CSV (imu_emulator.output.columns), read through the Parquet format's reader.
+
 NPZ: what `imu-emulator generate -o run.npz` writes (t, imu_names, accel and gyro shaped (imu, n, 3), and t_imu
 (imu, n) when an IMU has its own time_offset_s), or a plain record with t (n,), accel (n, 3), gyro (n, 3).
 
 Every record gets the same checks as a track file: finite values, strictly increasing time stamps, errors
-that name the file, the row (CSV line as an editor shows it, or 0-based NPZ index) and the column.
+that name the file, the row (CSV line as an editor shows it, or 0-based NPZ index or Parquet row) and the column.
 """
 from __future__ import annotations
 
@@ -20,10 +23,10 @@ import numpy as np
 
 from imu_emulator.numerics.derivatives import validate_samples
 from imu_emulator.errors import DataError
-from imu_emulator.output.writer import BIAS_COLUMNS, INCREMENT_COLUMNS, TRUTH_COLUMNS
+from imu_emulator.output.columns import IMU, LEADING_COLUMNS, all_names
 from imu_emulator.scene.trackfile import _parse_table, read_csv_rows, read_npz_arrays
 
-SAMPLE_COLUMNS = ("t", "ax", "ay", "az", "gx", "gy", "gz")
+SAMPLE_COLUMNS = tuple(name for name in LEADING_COLUMNS if name != IMU.name)      # t, ax .. gz
 VALUE_COLUMNS = SAMPLE_COLUMNS[1:]
 
 
@@ -43,10 +46,11 @@ def read_logs(path) -> dict[str | None, ImuLog]:
     """Every IMU record in the file, keyed by IMU name (None for a plain log, which names none)."""
     path = Path(path)
     suffix = path.suffix.lower()
-    if suffix not in (".csv", ".npz"):
-        raise DataError(f"{path.name}: unsupported file type '{path.suffix}' (expected .csv or .npz)")
+    readers = {".csv": _read_csv, ".npz": _read_npz, ".parquet": _read_parquet}
+    if suffix not in readers:
+        raise DataError(f"{path.name}: unsupported file type '{path.suffix}' (expected {', '.join(readers)})")
     try:
-        return _read_csv(path) if suffix == ".csv" else _read_npz(path)
+        return readers[suffix](path)
     except OSError as exc:
         raise DataError(f"{path.name}: cannot read: {exc.strerror or exc}") from None
 
@@ -79,9 +83,7 @@ def _read_csv(path: Path) -> dict[str | None, ImuLog]:
         raise DataError(f"{where}: row {header_line}: missing column{'s' if len(missing) > 1 else ''} "
                         f"{', '.join(missing)} (the header has {', '.join(names)}; need "
                         f"{', '.join(SAMPLE_COLUMNS)})")
-    from imu_emulator.motion.earth_truth import COLUMNS as EARTH_COLUMNS    # an Earth scene's --truth output
-    known = (set(SAMPLE_COLUMNS) | {"imu", "temp_c"} | set(TRUTH_COLUMNS) | set(BIAS_COLUMNS)
-             | set(INCREMENT_COLUMNS) | {name for names in EARTH_COLUMNS.values() for name in names})
+    known = all_names()      # any column of the emulator's output (imu_emulator.output.columns)
     for name in names:
         if name not in known:
             raise DataError(f"{where}: row {header_line}: unexpected column '{name}' (expected "
@@ -146,3 +148,23 @@ def _read_npz(path: Path) -> dict[str | None, ImuLog]:
                         f"shaped {(len(names), n)}")
     return {name: _checked(f"{where}[{name}]", t if stamps is None else stamps[m], accel[m], gyro[m], row_label)
             for m, name in enumerate(names)}
+
+
+def _read_parquet(path: Path) -> dict[str | None, ImuLog]:
+    from imu_emulator.output.formats import FORMATS
+    where = path.name
+    try:
+        columns = FORMATS[".parquet"].read_columns(path, (*SAMPLE_COLUMNS, IMU.name))
+    except ValueError as exc:        # pyarrow's ArrowInvalid: not a Parquet file
+        raise DataError(f"{where}: cannot read as Parquet: {exc}") from None
+    if columns is None:
+        raise DataError(f"{where}: missing columns: need t_ns, imu, {', '.join(VALUE_COLUMNS)} (as `generate` "
+                        "writes them)")
+    imu = columns[IMU.name]
+    values = np.column_stack([columns[c] for c in VALUE_COLUMNS])
+    logs = {}
+    for name in dict.fromkeys(imu):          # in the file's order
+        rows = np.flatnonzero(imu == name)
+        logs[str(name)] = _checked(f"{where}[{name}]", columns["t"][rows], values[rows, :3], values[rows, 3:],
+                                   lambda i, rows=rows: f"row {int(rows[i])}")
+    return logs

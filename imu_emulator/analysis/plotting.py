@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from imu_emulator.errors import ImuEmulatorError
+from imu_emulator.output.columns import BIAS, TRUTH
 
 _MAX_LINE_POINTS = 20_000     # plotted per curve; more only blurs the line and slows the PNG
 _TRIANGLES = 12
@@ -53,8 +54,9 @@ def from_simulation(sim) -> PlotData:
 
 
 def from_output(path: str) -> PlotData:
-    """An NPZ or CSV written by `generate` (with --truth for the trajectory), or a plain IMU log (imu_emulator.analysis.imulog
-    reads and checks the signals; the trajectory comes from the truth columns when present)."""
+    """A Parquet, NPZ or CSV written by `generate` (with --truth for the trajectory), or a plain IMU log
+    (imu_emulator.analysis.imulog reads and checks the signals; the trajectory comes from the truth columns when
+    present)."""
     from imu_emulator.analysis.imulog import read_logs
     logs = read_logs(path)
     records = list(logs.values())
@@ -69,57 +71,41 @@ def from_output(path: str) -> PlotData:
                     gyro_bias=None if gyro_bias is None else gyro_bias[:, :n])
 
 
-def _read_columns(path: Path, npz_keys: tuple[str, ...], csv_columns: tuple[str, ...]):
-    """The NPZ arrays `npz_keys`, or the CSV columns `csv_columns` as one (rows, columns) array, of a `generate`
-    output; None when it lacks any of them."""
-    if path.suffix.lower() == ".npz":
-        with np.load(path) as data:
-            return [data[k] for k in npz_keys] if all(k in data for k in npz_keys) else None
-    with open(path) as f:
-        skip = 1     # Earth scenes' outputs start with '#' lines stating their conventions
-        line = f.readline()
-        while line.startswith("#"):
-            skip += 1
-            line = f.readline()
-        header = [name.strip().lower() for name in line.split(",")]
-    if not set(csv_columns) <= set(header):
-        return None
-    return np.loadtxt(path, delimiter=",", skiprows=skip, usecols=[header.index(c) for c in csv_columns], ndmin=2)
+def _read_columns(path: Path, names: tuple[str, ...]):
+    """The columns `names` of a `generate` output as one (rows, columns) array, rows IMU-fastest, read by the
+    output's format (imu_emulator.output.formats); None when it lacks any of them."""
+    from imu_emulator.output.formats import format_of
+    record = format_of(path)
+    found = record.read_columns(path, names) if record is not None and record.read_columns else None
+    return None if found is None else np.column_stack([found[name] for name in names])
 
 
 def _stated_frame(path: Path) -> str:
-    """The frame the file's conventions state for px py pz (NPZ "conventions", CSV '#' lines: written for Earth
-    scenes, imu_emulator.motion.earth_truth), else UNSTATED: a flat scene's output does not say whether z is up."""
-    if path.suffix.lower() == ".npz":
-        with np.load(path) as data:
-            lines = [str(line) for line in data["conventions"]] if "conventions" in data else []
-    else:
-        with open(path) as f:
-            lines = []
-            line = f.readline()
-            while line.startswith("#"):
-                lines.append(line[1:].strip())
-                line = f.readline()
+    """The frame the file's conventions state for px py pz (CSV '#' lines, NPZ "conventions", Parquet's footer:
+    written for Earth scenes, imu_emulator.motion.earth_truth), else UNSTATED: a flat scene's output does not
+    say whether z is up."""
+    from imu_emulator.output.formats import format_of
+    record = format_of(path)
+    lines = record.read_conventions(path) if record is not None and record.read_conventions else []
     stated = next((line for line in lines if line.startswith("frame:")), "")
     return next((frame for frame in ("ECEF", "ECI", "NED", "ENU") if frame in stated), UNSTATED)
 
 
 def _truth(path: Path, n_imu: int):
     """Position and roll, pitch, yaw of S from a `generate --truth` output, else (None, None)."""
-    found = _read_columns(path, ("position", "euler"), ("px", "py", "pz", "roll", "pitch", "yaw"))
-    if found is None or isinstance(found, list):
-        return tuple(found) if found else (None, None)
+    found = _read_columns(path, TRUTH.names[:3] + TRUTH.names[6:9])        # px py pz, roll pitch yaw
+    if found is None:
+        return None, None
     # rows run IMU-fastest (sample k of every IMU, then k+1): every n_imu-th row is one per sample
     return found[::n_imu, :3], found[::n_imu, 3:]
 
 
 def _bias_truth(path: Path, n_imu: int):
     """Each IMU's realized accelerometer and gyro bias (n_imu, n, 3) from a `generate --truth` output of a scene
-    with error effects (NPZ accel_bias / gyro_bias, CSV bax..bgz), else (None, None)."""
-    from imu_emulator.output.writer import BIAS_COLUMNS
-    found = _read_columns(path, ("accel_bias", "gyro_bias"), BIAS_COLUMNS)
-    if found is None or isinstance(found, list):
-        return tuple(found) if found else (None, None)
+    with error effects (the bias columns bax..bgz), else (None, None)."""
+    found = _read_columns(path, BIAS.names)
+    if found is None:
+        return None, None
     per_imu = found.reshape(-1, n_imu, 6).transpose(1, 0, 2)   # row k * n_imu + m: sample k of IMU m
     return per_imu[:, :, :3], per_imu[:, :, 3:]
 

@@ -18,8 +18,8 @@ def register(subparsers) -> None:
         description="Estimate the rotation C that maps B's measurements into A's frame (with A mounted like the "
                     "body, B's mounting_rpy_deg), B's clock minus A's clock, the gyro bias difference and, with "
                     "--lever-arm, B's position relative to A; with 1-sigma uncertainties and an observability "
-                    "verdict. Inputs: the emulator's CSV/NPZ outputs or plain logs with columns t,ax,ay,az,gx,gy,gz "
-                    "(s, m/s^2, rad/s), each on its own clock and at its own rate.")
+                    "verdict. Inputs: the emulator's Parquet/CSV/NPZ outputs or plain logs with columns "
+                    "t,ax,ay,az,gx,gy,gz (s, m/s^2, rad/s), each on its own clock and at its own rate.")
     p.add_argument("a", help="record of IMU A (the reference frame)")
     p.add_argument("b", help="record of IMU B (may be the same file as A)")
     p.add_argument("--imu-a", help="IMU name in A's file, when it holds several")

@@ -21,11 +21,13 @@ def _megabytes(n_bytes: float) -> str:
 
 
 def output_sizes(scene, truth: bool, increments: bool = False) -> dict[str, int]:
-    """Bytes of `generate`'s output per format (imu_emulator.output.size.output_bytes: NPZ within its headers, CSV
-    an estimate, Parquet and MCAP uncompressed bounds), and "CSV bound", the CSV at its longest."""
-    from imu_emulator.output.size import csv_bytes, output_bytes
-    sizes = {fmt: output_bytes(scene, fmt, truth, increments and fmt != "MCAP")
-             for fmt in ("NPZ", "CSV", "Parquet", "MCAP")}
+    """Bytes of `generate`'s output per format, by name (each format's estimated_bytes,
+    imu_emulator.output.formats: NPZ within its headers, CSV an estimate, Parquet and MCAP uncompressed bounds),
+    and "CSV bound", the CSV at its longest."""
+    from imu_emulator.output.formats import by_name
+    from imu_emulator.output.formats.csv import csv_bytes
+    sizes = {name: record.estimated_bytes(scene, truth, increments and record.increments)
+             for name, record in by_name().items()}
     return {**sizes, "CSV bound": csv_bytes(scene, truth, increments)}
 
 

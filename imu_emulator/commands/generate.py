@@ -5,7 +5,6 @@ import argparse
 import signal
 import sys
 import threading
-from pathlib import Path
 
 from imu_emulator.commands.shared import add_increments_option, load_scene_with_warnings, number
 from imu_emulator.runtime.progress import CompileStatus, Progress
@@ -30,7 +29,7 @@ def register(subparsers) -> None:
 
 
 def cmd_generate(args) -> int:
-    from imu_emulator.output.writer import check_path
+    from imu_emulator.output.formats import check_path
 
     check_path(args.output)
     scene = load_scene_with_warnings(args.scene)
@@ -41,18 +40,8 @@ def cmd_generate(args) -> int:
         restore()   # a caller in the same process (the Python API, tests) gets its own handlers back
 
 
-def _parquet_metadata(output, scene) -> dict | None:
-    """Only Parquet files record the run (scene hash, versions): reading the packages' versions costs a warm
-    start 0.1-0.2 s, which other formats need not pay (issue 15)."""
-    if Path(output).suffix.lower() != ".parquet":
-        return None
-    from imu_emulator.output.parquet import run_metadata
-    return run_metadata(scene)
-
-
 def _generate(args, scene, stopped) -> int:
-    from imu_emulator.output.writer import open_writer
-    from imu_emulator.output.size import check_output
+    from imu_emulator.output.formats import check_output, format_of, open_writer
     from imu_emulator.runtime.samples import counts_text
     from imu_emulator.runtime.simulation import Simulation
 
@@ -62,18 +51,18 @@ def _generate(args, scene, stopped) -> int:
     bias_truth = EffectPlan(scene).bias_truth    # the realized-bias columns, known before compiling
     from imu_emulator.motion.earth import model_on
     from imu_emulator.effects.noise import variances
+    record = format_of(args.output)
     conventions = None
     if model_on(scene):        # earth_truth (frames, rotations) only for scenes on the Earth
         from imu_emulator.motion.earth_truth import conventions as earth_conventions
         conventions = earth_conventions(scene)
     with open_writer(args.output, scene.imu_names, args.truth, bias_truth=bias_truth,
                      temperature="temperature" in scene.effects, increments=bool(args.increments),
-                     metadata=_parquet_metadata(args.output, scene), conventions=conventions,
+                     metadata=record.run_metadata(scene) if record.run_metadata else None, conventions=conventions,
                      covariances=variances(scene), frame=scene.frame,
                      attitude_reference=scene.attitude_reference, effects=scene.effects) as writer:
         check_output(scene, args.output, args.truth, args.allow_large, increments=bool(args.increments))
-        # a ROS Imu message has an orientation field: fill it from the sensor frame's attitude
-        attitude = args.output.lower().endswith(".mcap")
+        attitude = record.attitude    # a ROS Imu message has an orientation field: the sensor frame's attitude
         with CompileStatus(scene, attitude=attitude, truth=args.truth, quiet=args.quiet, increments=args.increments):
             sim = Simulation(scene, attitude=attitude, truth=args.truth, increments=args.increments)
         progress = Progress(args.quiet)

@@ -108,7 +108,7 @@ def cmd_replay(args) -> int:
     from imu_emulator.scene import logs
     from imu_emulator.errors import ImuEmulatorError
     from imu_emulator.analysis.fidelity import compare
-    from imu_emulator.output.writer import check_path, open_writer
+    from imu_emulator.output.formats import check_path, open_writer
     from imu_emulator.runtime.simulation import Simulation
 
     log = Path(args.log)

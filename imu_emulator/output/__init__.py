@@ -1,1 +1,2 @@
-"""Output files: one writer per file format, atomic creation, size estimates."""
+"""Output files: the column schema (columns), what a format is (base), one module per format (formats/, found
+by suffix), atomic creation (atomic), CSV's fast number text (csv_text)."""

@@ -14,7 +14,7 @@ import numpy as np
 from imu_emulator.errors import DataError
 from imu_emulator.codegen.increments import check_nodes
 from imu_emulator.codegen.kernel import EffectPlan, compile_kernel
-from imu_emulator.output.size import check_memory
+from imu_emulator.runtime.memory import check_memory
 from imu_emulator.runtime.samples import SampleBlock
 from imu_emulator.scene.model import SampledData, Scene
 

@@ -14,6 +14,9 @@ with frame_id "earth" (REP 105's name for ECEF) and child "base_link_frd": ECEF 
 forward-right-down body w.r.t. ECEF, and as twist (in the body, as nav_msgs asks) the Earth-referenced
 velocity and the body's rate w.r.t. the Earth, omega_eb.
 
+Size: the uncompressed bytes of the CDR messages, their records and index entries; the file is compressed
+(zstd) and comes out smaller, 0.1-0.7 of it.
+
 Orientation: the sensor frame's attitude (the emulator's truth, sensor -> navigation) when the simulation
 provides it, else orientation_covariance[0] = -1 ("no orientation estimate"), as the message asks.
 """
@@ -26,6 +29,7 @@ import numpy as np
 
 from imu_emulator.errors import ImuEmulatorError
 from imu_emulator.output.atomic import AtomicOutput, FinishOnExit, output_error
+from imu_emulator.output.base import Contents, Format
 from imu_emulator.runtime.samples import SampleBlock
 
 _SEP = "=" * 80
@@ -77,7 +81,7 @@ def ros_name(name: str) -> str:
 
 
 class McapWriter(FinishOnExit):
-    """Like output.Writer, the bag appears at its path only once it is complete."""
+    """Like every output writer (imu_emulator.output.base.Writer), the bag appears at its path only once it is complete."""
 
     def __init__(self, path: str | Path, imu_names, truth: bool, covariances: dict | None = None,
                  earth_frame: str | None = None, attitude_reference: str = "local_level", effects=()):
@@ -209,3 +213,87 @@ class McapWriter(FinishOnExit):
 
     def discard(self) -> None:
         self._out.discard()
+
+
+def open_bag(path: Path, contents: Contents) -> McapWriter:
+    """The bag of a run: no temperature, no increments (sensor_msgs/Imu has no field for them); the Earth truth
+    when the contents carry it, whose body rate needs the scene's attitude reference and effects."""
+    return McapWriter(path, contents.imu_names, contents.layout.truth, contents.covariances,
+                      earth_frame=contents.frame if contents.layout.earth else None,
+                      attitude_reference=contents.attitude_reference, effects=contents.effects)
+
+
+# A message record (opcode 1 + length 8 + channel 2 + sequence 4 + log and publish time 16) and its message
+# index entry (time 8 + offset 8); CDR: a 4-byte encapsulation header, strings as a uint32 length, the bytes
+# and a NUL, doubles aligned to 8 from the header's end.
+_MCAP_RECORD = 31 + 16
+
+
+def _cdr_string_end(at: int, text: str) -> int:
+    return at + 4 + len(text.encode()) + 1
+
+
+def _align8(at: int) -> int:
+    return -(-at // 8) * 8
+
+
+def _imu_cdr_bytes(name: str) -> int:
+    end = _cdr_string_end(8, ros_name(name))               # stamp, then frame_id
+    return 4 + _align8(end) + 8 * (4 + 9 + 3 + 9 + 3 + 9)
+
+
+_ODOMETRY_CDR = 4 + _align8(_cdr_string_end(_cdr_string_end(8, "world"), "base_link")) + 8 * (7 + 36 + 6 + 36)
+_ODOMETRY_ECEF_CDR = 4 + _align8(_cdr_string_end(_cdr_string_end(8, "earth"), "base_link_frd")) + 8 * (7 + 36 + 6 + 36)
+_NAVSATFIX_CDR = 4 + _align8(_cdr_string_end(8, "earth") + 1 + 2) + 8 * (3 + 9) + 1
+
+
+def estimated_bytes(scene, truth: bool, increments: bool = False) -> int:
+    """The messages of a run: one Imu per IMU per sample, with truth an Odometry, on the Earth a NavSatFix and
+    an ECEF Odometry per sample (increments are not written)."""
+    from imu_emulator.output.columns import scene_layout
+    n = scene.n_samples
+    earth = truth and scene_layout(scene, truth).earth
+    return n * sum(_MCAP_RECORD + _imu_cdr_bytes(name) for name in scene.imu_names) + (
+        n * (_MCAP_RECORD + _ODOMETRY_CDR) if truth else 0) + (
+        n * (2 * _MCAP_RECORD + _ODOMETRY_ECEF_CDR + _NAVSATFIX_CDR) if earth else 0)
+
+
+def carried(layout) -> tuple[str, ...]:
+    """The schema's columns a bag holds as they are: each IMU's signals, the truth's position (the rest of the
+    truth is there in other frames or forms: a quaternion, the twist in the body frame)."""
+    from imu_emulator.output.columns import SAMPLES, TRUTH
+    return SAMPLES.names + (TRUTH.names[:3] if layout.truth else ())
+
+
+def read_columns(path: Path, names: tuple[str, ...]) -> dict | None:
+    """`carried` columns and "t" (the IMU messages' stamps, s) and "imu" (the topics' names), rows IMU-fastest."""
+    try:
+        from mcap.reader import make_reader
+        from mcap_ros2.decoder import DecoderFactory
+    except ImportError:
+        raise ImuEmulatorError("reading .mcap needs mcap-ros2-support: pip install 'imu-emulator[logs]'") from None
+    topics: dict[str, list] = {}
+    with open(path, "rb") as f:
+        for _, channel, _, ros_msg in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            topics.setdefault(channel.topic, []).append(ros_msg)
+    imus = [topic for topic in topics if topic.startswith("/imu/")]     # in the IMUs' order: written first-to-last
+    n = min((len(topics[topic]) for topic in imus), default=0)
+
+    def rows(per_imu):                  # (n_imu, n) -> (n * n_imu,), IMU fastest
+        return np.asarray(per_imu, dtype=np.float64).T.ravel()
+
+    columns = {"t": rows([[m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in topics[t][:n]] for t in imus]),
+               "imu": np.tile(np.array([t[len("/imu/"):] for t in imus], dtype=object), n)}
+    for prefix, field in (("a", "linear_acceleration"), ("g", "angular_velocity")):
+        for axis in "xyz":
+            columns[prefix + axis] = rows([[getattr(getattr(m, field), axis) for m in topics[t][:n]] for t in imus])
+    if "/truth/odometry" in topics:
+        position = [m.pose.pose.position for m in topics["/truth/odometry"][:n]]
+        for axis in "xyz":
+            columns["p" + axis] = np.repeat([getattr(p, axis) for p in position], len(imus)).astype(np.float64)
+    return {name: columns[name] for name in names} if set(names) <= set(columns) else None
+
+
+FORMAT = Format("MCAP", (".mcap",), open_bag, estimated_bytes, margin=(0.1, 1.0),
+                description="a ROS 2 bag's sensor_msgs/Imu", increments=False, attitude=True, columns=carried,
+                read_columns=read_columns)

@@ -1,0 +1,158 @@
+"""The columns of `generate`'s outputs: one schema that every format's writer, the size estimates and the
+readers (`plot`, `align`) read, so that a column is named, ordered and counted in one place.
+
+A row is one IMU at one sample (sample k of every IMU before sample k + 1): the time stamp "t" (s on the
+scene's time base plus the IMU's [[imu]] time_offset_s; Parquet stores it as integer "t_ns"), the IMU's name
+"imu", then groups of float64 columns in a fixed order, each present when its option is on (`Layout`).
+A group is per IMU (each IMU's own values) or shared by the IMUs of a sample (the truth of the body).
+
+The Earth truth's columns belong to imu_emulator.motion.earth_truth (KEYS, COLUMNS: what `--truth` adds on
+the Earth); they are read from there, and only when a scene is on the Earth (earth_truth imports the frames).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Column:
+    name: str
+    unit: str
+    what: str           # the quantity and its frame
+
+
+@dataclass(frozen=True)
+class Group:
+    """Columns written together: three per key (x, y, z) of `keys`, read from SampleBlock's attribute of that
+    name or, for truth groups, from SampleBlock.truth; a per-IMU key is (n_imu, n, 3) (temperature (n_imu, n)),
+    a shared one (n, 3)."""
+    option: str         # the Layout field that turns it on
+    per_imu: bool
+    in_truth: bool
+    keys: tuple[str, ...]
+    columns: tuple[Column, ...]
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(column.name for column in self.columns)
+
+    def arrays(self, block) -> list[np.ndarray]:
+        """The group's values in a block: per IMU (n_imu, n, k), shared (n, k)."""
+        found = [block.truth[key] if self.in_truth else getattr(block, key) for key in self.keys]
+        return [a[:, :, None] if self.per_imu and a.ndim == 2 else a for a in found]
+
+
+def _xyz(prefix: str, unit: str, what: str, axes: str = "xyz") -> tuple[Column, ...]:
+    return tuple(Column(f"{prefix}{axis}", unit, f"{what}, {axis}") for axis in axes)
+
+
+TIME = Column("t", "s", "sample time on the scene's time base plus the IMU's time_offset_s")
+IMU = Column("imu", "", "the IMU's name")
+
+SAMPLES = Group("samples", True, False, ("accel", "gyro"),
+                _xyz("a", "m/s^2", "specific force in the sensor frame")
+                + _xyz("g", "rad/s", "angular rate in the sensor frame"))
+#: integrated outputs over (t_k-1, t_k] (imu_emulator.codegen.increments), after the gyro columns
+INCREMENTS = Group("increments", True, False, ("dtheta", "dvel"),
+                   _xyz("dtheta_", "rad", "integrated angular rate over the sample interval, sensor frame")
+                   + _xyz("dvel_", "m/s", "integrated specific force over the sample interval, sensor frame"))
+TEMPERATURE = Group("temperature", True, False, ("temperature_c",),
+                    (Column("temp_c", "degC", "the IMU's temperature"),))
+TRUTH = Group("truth", False, True, ("position", "velocity", "euler", "omega_body"),
+              _xyz("p", "m", "position of the reference point S in the navigation frame")
+              + _xyz("v", "m/s", "velocity of S in the navigation frame")
+              + (Column("roll", "rad", "body attitude w.r.t. the navigation frame, z-y-x"),
+                 Column("pitch", "rad", "body attitude w.r.t. the navigation frame, z-y-x"),
+                 Column("yaw", "rad", "body attitude w.r.t. the navigation frame, z-y-x"))
+              + _xyz("wb", "rad/s", "body rate in the body frame"))
+#: realized bias of each IMU (sensor errors on: an effect adds a bias)
+BIAS = Group("bias_truth", True, True, ("accel_bias", "gyro_bias"),
+             _xyz("ba", "m/s^2", "realized accelerometer bias, sensor frame")
+             + _xyz("bg", "rad/s", "realized gyro bias, sensor frame"))
+
+
+@lru_cache(maxsize=1)
+def earth_group() -> Group:
+    """The Earth truth (a scene on the Earth, --truth): imu_emulator.motion.earth_truth's keys and columns (its
+    docstring gives their units and frames)."""
+    from imu_emulator.motion.earth_truth import COLUMNS
+    return Group("earth", False, True, tuple(COLUMNS),
+                 tuple(Column(name, "", f"Earth truth {key}") for key, names in COLUMNS.items() for name in names))
+
+
+#: the column names of each group (the writers' and readers' spelling of today's constants)
+LEADING_COLUMNS = (TIME.name, IMU.name) + SAMPLES.names      # every row starts with these
+INCREMENT_COLUMNS = INCREMENTS.names
+TRUTH_COLUMNS = TRUTH.names
+BIAS_COLUMNS = BIAS.names
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Which groups an output carries: generate's options (--truth, --increments) and the scene's (temperature
+    effect, an effect adding a bias, on the Earth)."""
+    truth: bool = False
+    bias_truth: bool = False
+    temperature: bool = False
+    increments: bool = False
+    earth: bool = False
+
+    def __post_init__(self):    # the realized biases and the Earth truth are parts of the truth
+        object.__setattr__(self, "bias_truth", self.truth and self.bias_truth)
+        object.__setattr__(self, "earth", self.truth and self.earth)
+
+    def groups(self) -> list[Group]:
+        """The float64 groups after t and imu, in the order every format writes them."""
+        groups = [SAMPLES, INCREMENTS, TEMPERATURE, TRUTH, BIAS]
+        if self.earth:
+            groups.append(earth_group())
+        return [g for g in groups if g.option == "samples" or getattr(self, g.option)]
+
+    def names(self) -> tuple[str, ...]:
+        """The float64 columns after t and imu."""
+        return tuple(name for group in self.groups() for name in group.names)
+
+    def counts(self) -> tuple[int, int]:
+        """Numbers of a row besides its time: (per IMU, shared by the IMUs of a sample)."""
+        groups = self.groups()
+        return (sum(len(g.columns) for g in groups if g.per_imu), sum(len(g.columns) for g in groups if not g.per_imu))
+
+
+def scene_layout(scene, truth: bool, increments: bool = False) -> Layout:
+    """The layout of `generate`'s output of a scene (known before compiling: the size estimates use it)."""
+    from imu_emulator.codegen.kernel import EffectPlan
+    from imu_emulator.motion.earth import model_on
+    return Layout(truth=truth, bias_truth=truth and EffectPlan(scene).bias_truth,
+                  temperature="temperature" in scene.effects, increments=increments,
+                  earth=truth and model_on(scene))
+
+
+def all_names() -> set[str]:
+    """Every column any output may carry (a reader refuses others)."""
+    return set(LEADING_COLUMNS) | set(Layout(True, True, True, True, True).names())
+
+
+def block_columns(block, imu_names, layout: Layout, time_ns: bool = False) -> dict:
+    """The columns of one block, one row per IMU per sample (sample k of every IMU before sample k+1): "t" in
+    seconds (or "t_ns", integer nanoseconds), "imu" (a pyarrow dictionary of the names), then float64 columns."""
+    import pyarrow as pa
+
+    n_imu, n = len(imu_names), len(block)
+
+    def interleaved(per_imu):      # (n_imu, n, k) -> (n * n_imu, k), IMU index fastest
+        return np.ascontiguousarray(per_imu.transpose(1, 0, 2)).reshape(n * n_imu, -1)
+
+    stamps = (np.stack([block.time_ns(block.imu_offset_ns(m)) for m in range(n_imu)]) if time_ns
+              else block.imu_t_s())   # (n_imu, n): each IMU's own stamps ([[imu]] time_offset_s)
+    columns = {"t_ns" if time_ns else TIME.name: stamps.T.ravel(),
+               IMU.name: pa.DictionaryArray.from_arrays(np.tile(np.arange(n_imu, dtype=np.int32), n),
+                                                        pa.array(list(imu_names)))}
+    numeric = [interleaved(a) if group.per_imu else np.repeat(a, n_imu, axis=0)
+               for group in layout.groups() for a in group.arrays(block)]
+    values = np.hstack(numeric)
+    for i, name in enumerate(layout.names()):
+        columns[name] = values[:, i]
+    return columns

@@ -1,0 +1,139 @@
+"""Samples as NPZ (`-o run.npz`): numpy arrays of the whole run, collected in memory and saved on close: t (n,),
+imu_names, accel and gyro (imu, n, 3), quat when the simulation has the attitude, temperature_c (imu, n),
+dtheta and dvel (--increments), t_imu (imu, n) when an IMU has its own time_offset_s, the truth's keys
+(--truth; imu_emulator.runtime.simulation.TRUTH_KEYS, the realized biases, the Earth truth) and "conventions".
+
+Size: the arrays' bytes plus NPZ_ARRAY_OVERHEAD per array: exact to within that overhead. The whole run must
+fit in memory twice (the blocks, then the joined arrays): checked before the run.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from imu_emulator.output.atomic import AtomicOutput, FinishOnExit, output_error
+from imu_emulator.output.base import Contents, Format
+from imu_emulator.output.columns import TIME, Layout
+from imu_emulator.runtime.memory import check_fits
+from imu_emulator.runtime.samples import SampleBlock, concatenate
+
+NPZ_ARRAY_OVERHEAD = 272   # .npy header (128), the zip entry's local and central headers with zip64 extras and the
+                           # name twice: measured 247-251 a array with names of 1-18 characters
+
+
+class NpzWriter(FinishOnExit):
+    """Collects the blocks, joins and saves them on close(); the file appears at its path then."""
+
+    def __init__(self, path: Path, contents: Contents):
+        self.path = Path(path)
+        self.imu_names = list(contents.imu_names)
+        self.layout = contents.layout
+        self.conventions = list(contents.conventions)
+        self.blocks: list[SampleBlock] = []
+        self._out = AtomicOutput(self.path, "wb")
+
+    def write(self, block: SampleBlock) -> None:
+        self.blocks.append(block)
+
+    def close(self) -> None:
+        """Finish the file and put it at its path."""
+        try:
+            self._save()
+        except BaseException:
+            self._out.discard()
+            raise
+        self._out.close()
+
+    def discard(self) -> None:
+        """The run failed: remove what was written."""
+        self._out.discard()
+
+    def _save(self) -> None:
+        data = concatenate(self.blocks)
+        arrays = {"t": data.t_s, "imu_names": np.array(self.imu_names), "accel": data.accel, "gyro": data.gyro}
+        if data.quat is not None:
+            arrays["quat"] = data.quat
+        if data.temperature_c is not None:
+            arrays["temperature_c"] = data.temperature_c
+        if self.layout.increments:
+            arrays.update(dtheta=data.dtheta, dvel=data.dvel)
+        if data.time_offset_s is not None:      # [[imu]] time_offset_s: each IMU's own stamps, (imu, n)
+            arrays["t_imu"] = data.imu_t_s()
+        if self.layout.truth:
+            arrays.update(data.truth)
+        if self.conventions:
+            arrays["conventions"] = np.array(self.conventions)
+        try:
+            np.savez(self._out.file, **arrays)
+        except OSError as exc:
+            raise output_error(self.path, exc) from None
+
+
+def estimated_bytes(scene, truth: bool, increments: bool = False) -> int:
+    """NpzWriter's arrays: (count of numbers per sample, arrays) summed, as float64."""
+    from imu_emulator.motion.earth import model_on
+    from imu_emulator.codegen.kernel import EffectPlan
+    from imu_emulator.runtime.simulation import TRUTH_KEYS
+    n, n_imu = scene.n_samples, len(scene.imus)
+    parts = [(1, 1), (6 * n_imu, 2)]                                  # t; accel, gyro
+    if "temperature" in scene.effects:
+        parts.append((n_imu, 1))
+    if increments:
+        parts.append((6 * n_imu, 2))
+    if any(imu.time_offset_s for imu in scene.imus):
+        parts.append((n_imu, 1))                                      # t_imu
+    text = 4 * max(len(name) for name in scene.imu_names) * n_imu     # imu_names, a unicode array
+    if truth:
+        parts.append((3 * len(TRUTH_KEYS), len(TRUTH_KEYS)))
+        if EffectPlan(scene).bias_truth:
+            parts.append((6 * n_imu, 2))
+        if model_on(scene):
+            from imu_emulator.motion import earth_truth
+            parts.append((3 * len(earth_truth.KEYS), len(earth_truth.KEYS)))
+            lines = earth_truth.conventions(scene)
+            text += 4 * max(len(line) for line in lines) * len(lines)
+    arrays = 1 + sum(count for _, count in parts) + (truth and model_on(scene))
+    return 8 * n * sum(numbers for numbers, _ in parts) + text + NPZ_ARRAY_OVERHEAD * arrays
+
+
+def check_memory(scene, output: Path, truth: bool, allow_large: bool = False, increments: bool = False) -> None:
+    """An NPZ must fit in memory twice: the blocks, then the joined arrays."""
+    check_fits(2 * estimated_bytes(scene, truth, increments), scene.n_samples, len(scene.imus), str(output))
+
+
+def read_columns(path: Path, names: tuple[str, ...]) -> dict | None:
+    """The columns `names` of a `generate` NPZ (rows IMU-fastest, as CSV's), None when it lacks one."""
+    with np.load(path) as data:
+        n_imu = len(data["imu_names"]) if "imu_names" in data else 1
+
+        def rows(a, per_imu: bool):          # per IMU (n_imu, n[, k]) or shared (n[, k]) -> (n * n_imu, k)
+            if per_imu:
+                if "imu_names" not in data:
+                    a = a[None]                     # a plain log: one IMU, (n, k)
+                if a.ndim == 2:
+                    a = a[:, :, None]               # (n_imu, n): temperature_c, t_imu
+                return a.transpose(1, 0, 2).reshape(-1, a.shape[2])
+            return np.repeat(a.reshape(len(a), -1), n_imu, axis=0)
+
+        columns = {}
+        if TIME.name in names:
+            columns[TIME.name] = (rows(data["t_imu"], True) if "t_imu" in data else rows(data["t"], False))[:, 0]
+        for group in Layout(True, True, True, True, True).groups():
+            wanted = [name for name in group.names if name in names]
+            if not wanted:
+                continue
+            if not all(key in data for key in group.keys):
+                return None
+            values = np.hstack([rows(data[key], group.per_imu) for key in group.keys])
+            columns.update({name: values[:, i] for i, name in enumerate(group.names) if name in wanted})
+    return columns if set(names) <= set(columns) else None
+
+
+def read_conventions(path: Path) -> list[str]:
+    with np.load(path) as data:
+        return [str(line) for line in data["conventions"]] if "conventions" in data else []
+
+
+FORMAT = Format("NPZ", (".npz",), NpzWriter, estimated_bytes, margin=(0.99, 1.01), description="an NPZ file",
+                check=check_memory, read_columns=read_columns, read_conventions=read_conventions)
