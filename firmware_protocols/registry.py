@@ -8,9 +8,10 @@ up and one that fails to import is an error naming it.
 """
 from __future__ import annotations
 
-import importlib
 from dataclasses import dataclass, field, replace
 from typing import Callable
+
+from imu_emulator import extensions     # the one scan every extension point uses (a leaf)
 
 # Scanned in this order (devices attach to formats already registered). In each, modules whose names start with
 # "_" and `base` (the package's interface) are helpers, not formats or devices.
@@ -64,32 +65,8 @@ def _load_all() -> None:
     global _loaded
     if not _loaded:
         for package in _PACKAGES:
-            for name in _module_names(package):
-                _import(name)
+            extensions.modules(package, skip=_NOT_SCANNED)
         _loaded = True
-
-
-def _module_names(package: str) -> list[str]:
-    """The full names of the modules `_load_all` imports from `package`, in name order."""
-    import pkgutil      # here, not at the top: `import firmware_protocols` alone needs no scan
-    path = importlib.import_module(package).__path__
-    return [f"{package}.{info.name}" for info in pkgutil.iter_modules(path)
-            if not info.name.startswith("_") and info.name not in _NOT_SCANNED]
-
-
-def _import(name: str) -> None:
-    """Import one format or device module; any failure is an ImportError whose one-line message names it."""
-    try:
-        importlib.import_module(name)
-    except ModuleNotFoundError as exc:
-        missing = exc.name or str(exc)
-        if missing.split(".")[0] in ("firmware_protocols", "imu_emulator"):
-            raise ImportError(f"{name} imports {missing}, which does not exist") from exc
-        raise ImportError(f"{name} needs the package {missing.split('.')[0]!r}, which is not installed") from exc
-    except Exception as exc:
-        detail = str(exc).strip().splitlines()
-        why = f"{type(exc).__name__}: {detail[0]}" if detail else type(exc).__name__
-        raise ImportError(f"{name} failed to import: {why}") from exc
 
 
 def formats() -> dict[str, FormatInfo]:

@@ -4,26 +4,21 @@ place in `--help`. Heavy imports (numba, sympy, numpy) happen inside the command
 every command's start-up imports every module here."""
 from __future__ import annotations
 
-import importlib
-import pkgutil
 import sys
 from types import ModuleType
+
+from imu_emulator import extensions
 
 
 def find_commands(package) -> tuple[ModuleType, ...]:
     """The command modules of `package` in their declared order. A module that fails to import, a command
     without an integer ORDER, or two with the same, is an error naming the module(s)."""
     found = []
-    for info in pkgutil.iter_modules(package.__path__):
-        name = f"{package.__name__}.{info.name}"
-        try:
-            module = importlib.import_module(name)
-        except Exception as exc:
-            raise ImportError(f"command module {name} failed to import: {exc!r}") from exc
+    for module in extensions.modules(package):
         if not callable(getattr(module, "register", None)):
             continue
         if not isinstance(getattr(module, "ORDER", None), int):
-            raise ImportError(f"{name} must define ORDER = <int>, its place in --help")
+            raise ImportError(f"{module.__name__} must define ORDER = <int>, its place in --help")
         found.append(module)
     found.sort(key=lambda module: module.ORDER)
     for before, after in zip(found, found[1:]):

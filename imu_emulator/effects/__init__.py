@@ -4,23 +4,15 @@ The list is found, not kept: every module of this package not starting with "_" 
 """
 from __future__ import annotations
 
-import importlib
-import pkgutil
+import sys
 
+from imu_emulator import extensions
 from imu_emulator.effects._record import (AXES, FRAME_ORDERS, STAGE_CONTRACT, STAGE_TITLES, TRIADS, Effect,
                                           EmitContext, Param, Stage, triad_params)
 
 
 def _discover() -> dict[str, Effect]:
-    found = []
-    for info in pkgutil.iter_modules(__path__):
-        if info.name.startswith("_"):
-            continue
-        module = importlib.import_module(f"{__name__}.{info.name}")
-        effect = getattr(module, "EFFECT", None)
-        if not isinstance(effect, Effect) or effect.name != info.name:
-            raise ImportError(f"{module.__name__} must define EFFECT = Effect(name={info.name!r}, ...)")
-        found.append(effect)
+    found = extensions.declared(sys.modules[__name__], "EFFECT", Effect)
     found.sort(key=lambda e: (e.stage, e.order, e.name))
     return {e.name: e for e in found}
 

@@ -6,8 +6,8 @@ finds the kinds, parses specs and opens the right one.
 from __future__ import annotations
 
 import importlib
-import pkgutil
 
+from imu_emulator import extensions
 from imu_emulator.errors import TargetError
 from imu_emulator.live.transport import kinds
 from imu_emulator.live.transport.base import LinkCapacity, TargetOptions, Transport
@@ -17,19 +17,7 @@ from imu_emulator.live.transport.spec import TargetKind, TargetSpec
 def find_kinds(package) -> dict[str, TargetKind]:
     """name -> declaration of every module of `package` not starting with "_", in their declared order. The list
     is found, not kept; a module that fails to import, or declares no KIND of its own name, is an error naming it."""
-    found = []
-    for info in pkgutil.iter_modules(package.__path__):
-        if info.name.startswith("_"):
-            continue
-        name = f"{package.__name__}.{info.name}"
-        try:
-            module = importlib.import_module(name)
-        except Exception as exc:
-            raise ImportError(f"target kind module {name} failed to import: {exc!r}") from exc
-        kind = getattr(module, "KIND", None)
-        if not isinstance(kind, TargetKind) or kind.name != info.name:
-            raise ImportError(f"{name} must define KIND = TargetKind(name={info.name!r}, ...)")
-        found.append(kind)
+    found = extensions.declared(package, "KIND", TargetKind)
     found.sort(key=lambda k: (k.order, k.name))
     return {k.name: k for k in found}
 

@@ -6,10 +6,10 @@ modules import their heavy libraries (numba, pyarrow, mcap) inside functions: fi
 """
 from __future__ import annotations
 
-import importlib
-import pkgutil
+import sys
 from pathlib import Path
 
+from imu_emulator import extensions
 from imu_emulator.errors import ImuEmulatorError
 from imu_emulator.output.base import Contents, Format
 from imu_emulator.output.columns import Layout
@@ -17,19 +17,10 @@ from imu_emulator.output.columns import Layout
 
 def _discover() -> dict[str, Format]:
     found = {}
-    for info in sorted(pkgutil.iter_modules(__path__), key=lambda info: info.name):
-        if info.name.startswith("_"):
-            continue
-        try:
-            module = importlib.import_module(f"{__name__}.{info.name}")
-        except Exception as exc:
-            raise ImportError(f"output format module {__name__}.{info.name} failed to import: {exc!r}") from exc
-        record = getattr(module, "FORMAT", None)
-        if not isinstance(record, Format):
-            raise ImportError(f"{module.__name__} must define FORMAT = imu_emulator.output.base.Format(...)")
+    for record in extensions.declared(sys.modules[__name__], "FORMAT", Format, named=False):
         for suffix in record.suffixes:
             if suffix in found:
-                raise ImportError(f"{module.__name__}: suffix {suffix} is already {found[suffix].name}'s")
+                raise ImportError(f"{record.name} format: suffix {suffix} is already {found[suffix].name}'s")
             found[suffix] = record
     return found
 
