@@ -67,7 +67,7 @@ class Task:
         import dataclasses
 
         from imu_emulator.scene import variations
-        from imu_emulator.scene.model import from_dict
+        from imu_emulator.scene.load import from_dict
         if self.raw is None:
             return dataclasses.replace(self.scene, seed=self.seed)
         names = [imu.get("name", f"imu{i}") for i, imu in enumerate(_imu_tables(self.raw))]
@@ -176,11 +176,12 @@ class BatchResult:
 def load_source(scene):
     """(raw, base_dir, path, scene_object) from a scene file path, a scene dict or a validated Scene; the file
     or dict is validated here once, so a bad scene fails before any task is sent."""
-    from imu_emulator.scene.model import Scene, from_dict, load_scene
+    from imu_emulator.scene.load import from_dict, load_scene
+    from imu_emulator.scene.model import Scene
     if isinstance(scene, Scene):
         return None, ".", scene.path, scene
     if isinstance(scene, (str, Path)):
-        from imu_emulator.scene.model import tomllib
+        from imu_emulator.scene.load import tomllib
         validated = load_scene(scene)      # reads and checks the file, errors naming it
         raw = tomllib.loads(Path(scene).read_bytes().decode("utf-8"))
         return raw, str(Path(scene).parent), str(scene), validated

@@ -57,7 +57,7 @@ def _describe_part(part) -> str:
 def cmd_check(args) -> int:
     from imu_emulator.codegen import kernel
     from imu_emulator.effects import EFFECTS
-    from imu_emulator.scene.model import load_scene
+    from imu_emulator.scene.load import load_scene
     from imu_emulator.live.streaming import build_streams, link_budget, streams_from_tables
 
     scene = load_scene(args.scene)
