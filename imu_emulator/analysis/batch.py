@@ -123,7 +123,7 @@ def _write(task: Task, path: Path, identity: dict) -> float | None:
     if not loaded_before:
         load_s = KERNEL_LOADS[key] = time.perf_counter() - start
     from imu_emulator.motion import earth_truth
-    from imu_emulator.motion.earth import model_on
+    from imu_emulator.scene.earth import model_on
     conventions = earth_truth.conventions(scene) if task.truth and model_on(scene) else None   # Earth columns
     with open_writer(path, scene.imu_names, task.truth, bias_truth=sim.bias_truth,
                      temperature=sim.temperature, metadata=run_metadata(scene, batch={**identity, "truth": task.truth}),

@@ -69,7 +69,7 @@ def cmd_check(args) -> int:
     print(f"  frame      {scene.frame} (body {body}; at rest and level f = {gravity}, g = {scene.gravity_mps2!r} m/s²)")
     print("  attitude   z-y-x: R = Rz(yaw)·Ry(pitch)·Rx(roll) maps body to navigation; gyros give body-frame rate")
     from imu_emulator.motion import earth_truth
-    from imu_emulator.motion.earth import model_on
+    from imu_emulator.scene.earth import model_on
     if model_on(scene):
         for line in earth_truth.conventions(scene)[:2] + earth_truth.conventions(scene)[4:5]:
             print(f"  earth      {line}")

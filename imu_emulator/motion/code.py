@@ -304,7 +304,8 @@ def motion_code(scene: Scene, angles: bool) -> MotionCode:
         lines += sampled_translational_lines(order)
     attitude_lines: list[str] = []
     rotation_given = False
-    from imu_emulator.motion.earth import geometry_lines, model_on, tangent_level_lines
+    from imu_emulator.motion.earth import geometry_lines, tangent_level_lines
+    from imu_emulator.scene.earth import model_on
     earth = model_on(scene)
     if tangent and earth:
         # heading and pitch from the velocity in the local level frame at the current position

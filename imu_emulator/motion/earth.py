@@ -27,27 +27,15 @@ from __future__ import annotations
 import numpy as np
 
 from imu_emulator.geo import wgs84
+# EARTH_EFFECTS and model_on are not used here: imported for those that still ask this module (output.size, the
+# Earth effects); the scene answers whether it is on the Earth
+from imu_emulator.scene.earth import EARTH_EFFECTS, model_on, position_frame  # noqa: F401
 
-EARTH_EFFECTS = ("earth_rate", "coriolis")
 #: updates of the geodetic latitude after Bowring's start (tan L from the parametric latitude u, tan u =
 #: a z / (b p)): the start is within 1e-13 rad at 10 km, 1e-9 at 1000 km, 4e-7 at 40 000 km, and each update
 #: (tan L = z / (p (1 - e2 N / (N + h)))) squares the error times about e2, so two reach 1e-15 rad from the
 #: ground to beyond geostationary height (imu_emulator.geo.frames runs the same scheme; tests/test_frames.py)
 GEODETIC_UPDATES = 2
-
-
-def position_frame(scene) -> str:
-    """The frame of the kernel's px..pz: the scene's, except ECEF for ECI (rewritten) and geodetic
-    trajectories (converted to ECEF, below)."""
-    geodetic = (getattr(scene.trajectory, "keys", ("x", "y", "z")) != ("x", "y", "z")
-                or getattr(scene.trajectory, "geodetic", False))
-    return "ECEF" if geodetic or scene.frame in ("ECEF", "ECI") else scene.frame
-
-
-def model_on(scene) -> bool:
-    """Whether the navigation stage follows the Earth (see the module's docstring)."""
-    return (position_frame(scene) == "ECEF" or any(name in scene.effects for name in EARTH_EFFECTS)
-            or ("gravity" in scene.effects and scene.gravity_model == "wgs84"))
 
 
 def level(scene, n: str, e: str, d: str) -> tuple[str, str, str]:

@@ -1,4 +1,8 @@
-"""The scene's Earth keys: [scene] origin, gravity_model, and what the ECEF frame and the Earth effects need."""
+"""The scene's Earth keys: [scene] origin, gravity_model, and what the ECEF frame and the Earth effects need; and
+whether the scene is on the Earth (model_on), which the motion, the effects and the outputs ask.
+
+With the Earth model on, the motion computes the Earth's geometry and the navigation stage follows the Earth
+(imu_emulator.motion.earth)."""
 from __future__ import annotations
 
 from typing import Mapping
@@ -6,6 +10,9 @@ from typing import Mapping
 from imu_emulator.errors import SceneError
 from imu_emulator.scene.checks import choice, no_unknown, number, subtable
 
+#: effects that switch the Earth model on when named (so do the ECEF and ECI frames, geodetic trajectories and
+#: gravity_model = "wgs84" with effects.gravity)
+EARTH_EFFECTS = ("earth_rate", "coriolis")
 #: [scene] gravity_model: "constant" (gravity_mps2) or "wgs84" (normal gravity)
 GRAVITY_MODELS = ("constant", "wgs84")
 
@@ -15,6 +22,20 @@ REFERENCES = ("local_level", "ECEF", "ECI")
 ORIGIN_KEYS = ("lat_deg", "lon_deg", "height_m")
 GEODETIC_KEYS = ORIGIN_KEYS     # a geodetic trajectory's [trajectory] keys
 MAX_ORIGIN_HEIGHT_M = 1e7      # beyond geostationary orbit is not a place to put a tangent frame
+
+
+def position_frame(scene) -> str:
+    """The frame of the kernel's px..pz: the scene's, except ECEF for ECI (rewritten) and geodetic
+    trajectories (converted to ECEF, imu_emulator.motion.earth)."""
+    geodetic = (getattr(scene.trajectory, "keys", ("x", "y", "z")) != ("x", "y", "z")
+                or getattr(scene.trajectory, "geodetic", False))
+    return "ECEF" if geodetic or scene.frame in ("ECEF", "ECI") else scene.frame
+
+
+def model_on(scene) -> bool:
+    """Whether the navigation stage follows the Earth (see imu_emulator.motion.earth's docstring)."""
+    return (position_frame(scene) == "ECEF" or any(name in scene.effects for name in EARTH_EFFECTS)
+            or ("gravity" in scene.effects and scene.gravity_model == "wgs84"))
 
 
 def _origin(head: Mapping):
@@ -31,7 +52,6 @@ def _origin(head: Mapping):
 def earth_keys(head: Mapping, frame: str, effects: frozenset[str], attitude_mode: str, shape: bool,
                trajectory, warnings: list[str]):
     """(origin or None, gravity model), validated against the frame and the effects named."""
-    from imu_emulator.motion.earth import EARTH_EFFECTS
     origin = _origin(head)
     model = choice(head, "gravity_model", "scene", GRAVITY_MODELS, "constant")
     earth = [name for name in EARTH_EFFECTS if name in effects]
@@ -73,7 +93,6 @@ def attitude_reference(att_table: Mapping, frame: str, effects, trajectory, grav
     converted to local level at the current position, imu_emulator.motion.earth.reference_lines)."""
     from types import SimpleNamespace
 
-    from imu_emulator.motion.earth import model_on
     reference = choice(att_table, "reference", "attitude", REFERENCES, "local_level")
     if reference != "local_level":
         scene = SimpleNamespace(frame=frame, effects=effects, trajectory=trajectory, gravity_model=gravity_model)
