@@ -27,6 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from imu_emulator.geo import wgs84
+from imu_emulator.motion import phases
 # EARTH_EFFECTS and model_on are not used here: imported for those that still ask this module (output.size, the
 # Earth effects); the scene answers whether it is on the Earth
 from imu_emulator.scene.earth import EARTH_EFFECTS, model_on, position_frame  # noqa: F401
@@ -268,13 +269,12 @@ def sampled_eci_lines(scene, index: int) -> tuple[dict, list[str], list[str]]:
     """(constants, phase lines, lines) turning the kernel's sampled ECI p, v, a[, j] into ECEF in place.
 
     The Earth rotation angle theta = omega_ie t is phase slot `index`, reduced exactly like the symbolic
-    path's periodic phases (imu_emulator.motion.code). With R = R_z(-theta), r_e = R r_i and d/dt (R u) =
+    path's periodic phases (imu_emulator.motion.phases). With R = R_z(-theta), r_e = R r_i and d/dt (R u) =
     R (u' - w x u), so the k-th derivative of r_e is R D^k r_i, D u = u' - w x u, w = (0, 0, omega_ie):
     v_e = R (v - w x r), a_e = R (a - 2 w x v + w x (w x r)), j_e = R (j - 3 w x a + 3 w x (w x v) - w x (w x (w x r)))."""
     import sympy
 
-    from imu_emulator.motion.code import _phase_constants, _phase_lines
-    constants = _phase_constants(sympy.Rational(OMEGA_IE_TEXT), sympy.Integer(0), scene, index)
+    constants = phases.phase_constants(sympy.Rational(OMEGA_IE_TEXT), sympy.Integer(0), scene, index)
     w = float(OMEGA_IE_TEXT)
     w2, w3 = repr(w * w), repr(w * w * w)
     parts = {"p": ("px", "py"),
@@ -287,7 +287,7 @@ def sampled_eci_lines(scene, index: int) -> tuple[dict, list[str], list[str]]:
     lines = [f"u{prefix}{axis} = {value}" for prefix, (ux, uy) in parts.items() for axis, value in (("x", ux), ("y", uy))]
     for prefix in parts:
         lines += [f"{prefix}x = {c} * u{prefix}x + {s} * u{prefix}y", f"{prefix}y = {c} * u{prefix}y - {s} * u{prefix}x"]
-    return constants, _phase_lines(index), lines
+    return constants, phases.phase_lines(index), lines
 
 
 def eci_to_ecef(xyz, t):
