@@ -1,5 +1,5 @@
 """The scene's Earth keys: [scene] origin, gravity_model, and what the ECEF frame and the Earth effects need; and
-whether the scene is on the Earth (model_on), which the motion, the effects and the outputs ask.
+whether the scene is on the Earth (model_on), which the motion, the effects (Scene.earth_model) and the outputs ask.
 
 With the Earth model on, the motion computes the Earth's geometry and the navigation stage follows the Earth
 (imu_emulator.motion.earth)."""

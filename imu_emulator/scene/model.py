@@ -106,3 +106,10 @@ class Scene:
     @property
     def imu_names(self) -> tuple[str, ...]:
         return tuple(imu.name for imu in self.imus)
+
+    @property
+    def earth_model(self) -> bool:
+        """Whether the navigation stage follows the Earth (imu_emulator.scene.earth.model_on): the effects ask
+        it of the scene they are given, as they import nothing of the scene."""
+        from imu_emulator.scene.earth import model_on
+        return model_on(self)
