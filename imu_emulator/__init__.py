@@ -17,8 +17,8 @@ from imu_emulator.errors import DataError, ImuEmulatorError, SceneError, TargetE
 _API = {
     "SampleBlock": "imu_emulator.runtime.samples",
     "Scene": "imu_emulator.scene.model",
-    "load_scene": "imu_emulator.scene.model",
-    "scene_from_dict": "imu_emulator.scene.model",
+    "load_scene": "imu_emulator.scene.load",
+    "scene_from_dict": "imu_emulator.scene.load",
     "Simulation": "imu_emulator.runtime.simulation",
     "simulate": "imu_emulator.runtime.simulation",
 }

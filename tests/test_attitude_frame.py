@@ -30,7 +30,7 @@ def _stream(tmp_path, scene_path, n):
 
 
 def _scene_attitude(scene_path, n):
-    from imu_emulator.scene.model import load_scene
+    from imu_emulator.scene.load import load_scene
     from imu_emulator.runtime.simulation import Simulation
     block = Simulation(load_scene(scene_path)).block(0, n)
     return Rotation.from_quat(block.quat[0][:, [1, 2, 3, 0]])

@@ -66,7 +66,7 @@ def test_check_describes_what_generate_then_does(tmp_path, capsys, cache):
     after = capsys.readouterr().out
     assert "generate: compiled in the cache" in after and "stream: not compiled yet" in after
     from imu_emulator.commands.check import output_sizes
-    from imu_emulator.scene.model import load_scene
+    from imu_emulator.scene.load import load_scene
     sizes = output_sizes(load_scene(scene), truth=False)
     data = np.load(tmp_path / "o.npz")
     payload = sum(data[k].nbytes for k in data.files)

@@ -174,7 +174,7 @@ def test_ardupilot_vn300_start_up_sequence_and_its_gnss_packet(tmp_path):
     import pymap3d
 
     from imu_emulator.geo.geodesy import DEFAULT_ORIGIN
-    from imu_emulator.scene.model import load_scene
+    from imu_emulator.scene.load import load_scene
     from imu_emulator.runtime.simulation import Simulation
     rate, week = 400, 2345
     scene_path = write_scene(tmp_path, rate=rate, duration=60.0)

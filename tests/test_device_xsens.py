@@ -87,7 +87,7 @@ def test_ardupilot_configuration_then_exactly_the_configured_items(tmp_path):
     from scipy.spatial.transform import Rotation
 
     from imu_emulator.geo.geodesy import DEFAULT_ORIGIN
-    from imu_emulator.scene.model import load_scene
+    from imu_emulator.scene.load import load_scene
     from imu_emulator.runtime.simulation import Simulation
     rate = 400
     scene_path = write_scene(tmp_path, rate=rate, duration=60.0)

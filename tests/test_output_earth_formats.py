@@ -245,7 +245,7 @@ def test_run_size_matches_the_files_written(run):
     import os
 
     from imu_emulator.output.formats.csv import CSV_ESTIMATE_MARGIN, csv_bytes
-    from imu_emulator.scene.model import load_scene
+    from imu_emulator.scene.load import load_scene
     scene = load_scene(run["scene"])
     size = {suffix: os.path.getsize(run[suffix]) for suffix in FORMATS}
     for suffix, record in FORMATS.items():
@@ -266,7 +266,7 @@ def test_simulate_memory_check_counts_every_array(run, monkeypatch):
     increments, temperature, realized biases and Earth truth included: with the available memory one byte
     short of their nbytes it refuses, with exactly that it runs."""
     from imu_emulator.runtime import memory as run_size
-    from imu_emulator.scene.model import load_scene
+    from imu_emulator.scene.load import load_scene
     from imu_emulator.runtime.simulation import simulate
     scene = load_scene(run["scene"])
     monkeypatch.setattr(run_size, "available_memory", lambda: None)

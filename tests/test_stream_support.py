@@ -52,7 +52,7 @@ def write_scene(directory: Path, rate: float = 200, duration: float = 5.0, extra
 
 def reference(scene_path: Path, imu: int = 0):
     """The samples the emulator should send, computed here in-process from the same scene."""
-    from imu_emulator.scene.model import load_scene
+    from imu_emulator.scene.load import load_scene
     from imu_emulator.runtime.simulation import Simulation
     scene = load_scene(scene_path)
     block = Simulation(scene).block(0, scene.n_samples)

@@ -41,7 +41,7 @@ def cold_run(tree: Path, scene: str, env: dict) -> tuple[float, float]:
 #: a fresh process: load the package and the scene, then time what CompileStatus wraps in `generate`
 _COMPILE_ONLY = """
 import sys, time
-from imu_emulator.scene.model import load_scene
+from imu_emulator.scene.load import load_scene
 from imu_emulator.runtime.simulation import Simulation
 scene = load_scene(sys.argv[1])
 wall, cpu = time.perf_counter(), time.thread_time()

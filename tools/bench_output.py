@@ -16,7 +16,7 @@ import numpy as np
 
 from imu_emulator.output.csv_text import RowWriter
 from imu_emulator.output.formats.csv import _csv_text, _pyarrow_csv_rows
-from imu_emulator.scene.model import load_scene
+from imu_emulator.scene.load import load_scene
 from imu_emulator.runtime.simulation import Simulation
 
 

@@ -67,7 +67,7 @@ class Task:
         import dataclasses
 
         from imu_emulator.scene import variations
-        from imu_emulator.scene.model import from_dict
+        from imu_emulator.scene.load import from_dict
         if self.raw is None:
             return dataclasses.replace(self.scene, seed=self.seed)
         names = [imu.get("name", f"imu{i}") for i, imu in enumerate(_imu_tables(self.raw))]
@@ -123,7 +123,7 @@ def _write(task: Task, path: Path, identity: dict) -> float | None:
     if not loaded_before:
         load_s = KERNEL_LOADS[key] = time.perf_counter() - start
     from imu_emulator.motion import earth_truth
-    from imu_emulator.motion.earth import model_on
+    from imu_emulator.scene.earth import model_on
     conventions = earth_truth.conventions(scene) if task.truth and model_on(scene) else None   # Earth columns
     with open_writer(path, scene.imu_names, task.truth, bias_truth=sim.bias_truth,
                      temperature=sim.temperature, metadata=run_metadata(scene, batch={**identity, "truth": task.truth}),
@@ -176,11 +176,12 @@ class BatchResult:
 def load_source(scene):
     """(raw, base_dir, path, scene_object) from a scene file path, a scene dict or a validated Scene; the file
     or dict is validated here once, so a bad scene fails before any task is sent."""
-    from imu_emulator.scene.model import Scene, from_dict, load_scene
+    from imu_emulator.scene.load import from_dict, load_scene
+    from imu_emulator.scene.model import Scene
     if isinstance(scene, Scene):
         return None, ".", scene.path, scene
     if isinstance(scene, (str, Path)):
-        from imu_emulator.scene.model import tomllib
+        from imu_emulator.scene.load import tomllib
         validated = load_scene(scene)      # reads and checks the file, errors naming it
         raw = tomllib.loads(Path(scene).read_bytes().decode("utf-8"))
         return raw, str(Path(scene).parent), str(scene), validated

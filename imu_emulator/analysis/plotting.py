@@ -38,7 +38,7 @@ class PlotData:
 
 
 def from_scene(path: str) -> PlotData:
-    from imu_emulator.scene.model import load_scene
+    from imu_emulator.scene.load import load_scene
     from imu_emulator.runtime.simulation import Simulation
     return from_simulation(Simulation(load_scene(path), attitude=False, truth=True))
 

@@ -33,7 +33,7 @@ import numpy as np
 
 from imu_emulator.effects import EFFECTS, FRAME_ORDERS, AXES, EmitContext, Stage, TRIADS
 from imu_emulator.effects.mounting import mounting_matrix, rotation as mounting_rotation  # noqa: F401 (API)
-from imu_emulator.scene.model import Scene
+from imu_emulator.scene import Scene
 
 CODEGEN_VERSION = "2"
 EPS_SPEED = 1e-6     # m/s: below this the body is standing still for tangent attitude

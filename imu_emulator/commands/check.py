@@ -62,7 +62,7 @@ def _describe_part(part) -> str:
 def cmd_check(args) -> int:
     from imu_emulator.codegen import kernel
     from imu_emulator.effects import EFFECTS
-    from imu_emulator.scene.model import load_scene
+    from imu_emulator.scene.load import load_scene
     from imu_emulator.live.budget import link_budget
     from imu_emulator.live.config import streams_from_tables
     from imu_emulator.live.stream import build_streams
@@ -76,7 +76,7 @@ def cmd_check(args) -> int:
     print(f"  frame      {scene.frame} (body {body}; at rest and level f = {gravity}, g = {scene.gravity_mps2!r} m/s²)")
     print("  attitude   z-y-x: R = Rz(yaw)·Ry(pitch)·Rx(roll) maps body to navigation; gyros give body-frame rate")
     from imu_emulator.motion import earth_truth
-    from imu_emulator.motion.earth import model_on
+    from imu_emulator.scene.earth import model_on
     if model_on(scene):
         for line in earth_truth.conventions(scene)[:2] + earth_truth.conventions(scene)[4:5]:
             print(f"  earth      {line}")

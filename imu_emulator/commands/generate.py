@@ -49,7 +49,7 @@ def _generate(args, scene, stopped) -> int:
     # at its path only when every block is written (a failed run leaves nothing behind).
     from imu_emulator.codegen.kernel import EffectPlan
     bias_truth = EffectPlan(scene).bias_truth    # the realized-bias columns, known before compiling
-    from imu_emulator.motion.earth import model_on
+    from imu_emulator.scene.earth import model_on
     from imu_emulator.effects.noise import variances
     record = format_of(args.output)
     conventions = None

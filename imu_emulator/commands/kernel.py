@@ -29,7 +29,7 @@ def cmd_kernel(args) -> int:
     if not args.scene:
         raise ImuEmulatorError("kernel: give a scene file (or --effects)")
     from imu_emulator.codegen.kernel import generate_source
-    from imu_emulator.scene.model import load_scene
+    from imu_emulator.scene.load import load_scene
     scene = load_scene(args.scene)
     for warning in scene.warnings:
         print(f"warning: {warning}", file=sys.stderr)

@@ -37,7 +37,7 @@ def cmd_plot(args) -> int:
         raise ImuEmulatorError(f"{source}: no such file")
     if source.suffix.lower() == ".toml":
         from imu_emulator.runtime.progress import CompileStatus
-        from imu_emulator.scene.model import load_scene
+        from imu_emulator.scene.load import load_scene
         from imu_emulator.runtime.simulation import Simulation
         scene = load_scene(source)
         with CompileStatus(scene, attitude=False, truth=True):

@@ -50,7 +50,7 @@ def build_scene_table(log: Path, overrides: dict, recorded_rate_hz: float | None
 
 
 def build_scene(log: Path, overrides: dict, recorded_rate_hz: float | None):
-    from imu_emulator.scene.model import from_dict
+    from imu_emulator.scene.load import from_dict
     return from_dict(build_scene_table(log, overrides, recorded_rate_hz), base_dir=log.parent, path=str(log))
 
 

@@ -10,7 +10,7 @@ import sys
 def load_scene_with_warnings(path):
     """The scene, its warnings printed to stderr. Always printed, --quiet or not: each warning says that
     something the scene file asks for does not reach the output."""
-    from imu_emulator.scene.model import load_scene
+    from imu_emulator.scene.load import load_scene
     scene = load_scene(path)
     for warning in scene.warnings:
         print(f"warning: {warning}", file=sys.stderr, flush=True)

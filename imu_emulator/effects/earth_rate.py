@@ -1,7 +1,20 @@
 """Earth rate: the gyros sense the Earth's rotation, omega_ie^n = omega_ie (cos L, 0, -sin L) in local NED."""
-from imu_emulator.motion.earth import EARTH_RATE, earth_rate_lines
 from imu_emulator.effects import _earth
 from imu_emulator.effects._record import Effect, Stage
+from imu_emulator.geo import wgs84
+
+
+def earth_rate_lines() -> list[str]:
+    """omega_ie^n = omega_ie (cos L, 0, -sin L) (t_wi.., NED) and the rate of change of those components,
+    t_wp.. = omega_ie L' (-sin L, 0, -cos L) (= -rho x omega_ie^n: omega_ie^e is constant and the level frame
+    turns at rho against the Earth)."""
+    w = repr(wgs84.OMEGA_IE)
+    return [_earth.LATITUDE_RATE, f"t_win = {w} * e_cl", f"t_wid = -{w} * e_sl", f"t_wpn = -{w} * e_sl * t_ld",
+            f"t_wpd = -{w} * e_cl * t_ld"]
+
+
+#: omega_ie^n and its derivative as NED triples (after earth_rate_lines)
+EARTH_RATE = (("t_win", "0.0", "t_wid"), ("t_wpn", "0.0", "t_wpd"))
 
 
 def emit(ctx) -> list[str]:

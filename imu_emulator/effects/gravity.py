@@ -6,7 +6,7 @@ from imu_emulator.effects._record import Effect, Stage
 
 def emit(ctx) -> list[str]:
     scene = ctx.scene
-    if not _earth.model_on(scene):
+    if not scene.earth_model:
         # g = (0, 0, -g0) in ENU, (0, 0, +g0) in NED; g0 is [scene] gravity_mps2
         sign = "+" if scene.frame == "ENU" else "-"
         return [f"fnz = fnz {sign} {float(scene.gravity_mps2)!r}"]

@@ -32,7 +32,7 @@ def device_navigation(position, velocity, specific_force, frame: str, gravity: f
     """What a device reports about where it is, from the run's truth: geodetic position, NED velocity and
     linear acceleration (specific force in the level axes the attitude refers to, plus gravity).
 
-    `positions` is the frame of the truth position and velocity (effects._earth.position_frame: ECEF for ECEF,
+    `positions` is the frame of the truth position and velocity (scene.earth.position_frame: ECEF for ECEF,
     ECI and geodetic scenes); ECEF and ECI attitudes refer to local NED at the current position."""
     from imu_emulator.geo import wgs84
     earth = (positions or frame) == "ECEF"

@@ -303,7 +303,7 @@ def run_streams(scene, sim, configs: list[StreamConfig], options: RunOptions) ->
         stream.frame = scene.frame
         stream.exact_gyro = scene.effects <= _TRUE_RATE_EFFECTS
         if stream.device is not None and stream.info.device_navigation:
-            from imu_emulator.motion.earth import position_frame
+            from imu_emulator.scene.earth import position_frame
             stream.navigation = (scene.frame, float(scene.gravity_mps2), scene.origin, scene.gravity_model,
                                  position_frame(scene))
     if not math.isfinite(options.speed) or options.speed < 0:

@@ -5,7 +5,8 @@ the attitude with its rates.
 Symbolic input: sympy differentiates the expressions exactly, common subexpressions are shared, and the
 result is printed as straight-line code. Sin/cos/tan of an argument linear in t get their phase reduced
 exactly: the phase in cycles is frac(C0 + k*CS) with CS held as a double-double and k*CS formed with an
-error-free product, so t = 1e7 s is as exact as t = 1 s; sin and cos of it come from imu_emulator.numerics.phase.
+error-free product, so t = 1e7 s is as exact as t = 1 s (imu_emulator.motion.phases); sin and cos of it come from
+imu_emulator.numerics.phase.
 
 Sampled input: derivative arrays are evaluated per block in Python (imu_emulator.numerics.derivatives) and the
 kernel reads them.
@@ -19,6 +20,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from imu_emulator.motion import phases
 from imu_emulator.numerics import expressions
 from imu_emulator.scene.model import Expressions, SampledData, Scene
 
@@ -37,67 +39,6 @@ class MotionCode:
     rotation_given: bool = False  # the lines define R (r00..r22), w and alpha themselves (quaternion input)
     after_rotation: list[str] = field(default_factory=list)   # run after R, w, alpha (attitude reference)
     level_rate: tuple[str, str, str] = ("wx", "wy", "wz")     # the body's rate w.r.t. the level axes R maps to
-
-
-def _phase_constants(coef, offset, scene: Scene, index: int) -> dict[str, float]:
-    """C0 = frac((A t0 + B) / 2pi), CS = A dt / 2pi as (hi, lo) doubles, hi pre-split for Dekker."""
-    import mpmath
-    import sympy
-    with mpmath.workdps(50):
-        a_cycles = mpmath.mpf(sympy.N(coef / (2 * sympy.pi), 50))
-        b_cycles = mpmath.mpf(sympy.N(offset / (2 * sympy.pi), 50))
-        # dt is 1/rate exactly, not the rounded double, so phase does not drift over long runs.
-        step = a_cycles / mpmath.mpf(scene.rate_hz)
-        start = a_cycles * mpmath.mpf(scene.t0_s) + b_cycles
-        start = start - mpmath.floor(start)
-        hi = float(step)
-        lo = float(step - mpmath.mpf(hi))
-    split = 134217729.0 * hi
-    hi_h = split - (split - hi)
-    return {f"PH{index}_C0": float(start), f"PH{index}_HI": hi, f"PH{index}_HI_H": hi_h,
-            f"PH{index}_HI_L": hi - hi_h, f"PH{index}_LO": lo}
-
-
-def _phase_lines(index: int) -> list[str]:
-    # Exact product k*HI = p + err (Dekker); frac(p) is exact; the small terms are added after.
-    c = f"PH{index}"
-    return [
-        f"_p = kf * {c}_HI",
-        f"_e = ((kh * {c}_HI_H - _p) + kh * {c}_HI_L + kl * {c}_HI_H) + kl * {c}_HI_L",
-        f"_c = (_p - math.floor(_p)) + ((_e + kf * {c}_LO) + {c}_C0)",
-        f"sph{index}, cph{index} = sincos_cycles(_c)",
-    ]
-
-
-def _reduce_phases(exprs, t, scene: Scene):
-    """Replace sin/cos/tan of A*t + B by sph_i, cph_i (sin and cos of the exactly reduced phase i)."""
-    import sympy
-    slots: dict[tuple, tuple] = {}
-    constants: dict[str, float] = {}
-
-    def replace(fn):
-        def inner(arg):
-            coef = sympy.diff(arg, t)
-            if coef.free_symbols or coef == 0:
-                return fn(arg)
-            offset = sympy.simplify(arg - coef * t)
-            if offset.free_symbols:
-                return fn(arg)
-            key = (sympy.srepr(coef), sympy.srepr(offset))
-            if key not in slots:
-                index = len(slots)
-                slots[key] = (sympy.Symbol(f"sph{index}", real=True), sympy.Symbol(f"cph{index}", real=True))
-                constants.update(_phase_constants(coef, offset, scene, index))
-            sin_, cos_ = slots[key]
-            return sin_ if fn is sympy.sin else cos_ if fn is sympy.cos else sin_ / cos_
-        return inner
-
-    out = []
-    for e in exprs:
-        for fn in (sympy.sin, sympy.cos, sympy.tan):
-            e = e.replace(fn, replace(fn))
-        out.append(e)
-    return out, constants, len(slots)
 
 
 def _kernel_printer_class():
@@ -122,7 +63,7 @@ def _symbolic(parts: list[tuple[str, object]], scene: Scene) -> MotionCode:
     t = sympy.Symbol("t", real=True)
     names = [name for name, _ in parts]
     exprs = [sympy.sympify(e).replace(sympy.DiracDelta, lambda *a: sympy.Integer(0)) for _, e in parts]
-    exprs, constants, n_phases = _reduce_phases(exprs, t, scene)
+    exprs, constants, n_phases = phases.reduce_phases(exprs, t, scene)
     # Fold numeric constants (pi**3 etc.) to 30 digits now, not per sample in the kernel.
     exprs = [sympy.N(e, 30) for e in exprs]
     replacements, reduced = sympy.cse(exprs, symbols=sympy.numbered_symbols("_x"), optimizations="basic")
@@ -130,9 +71,9 @@ def _symbolic(parts: list[tuple[str, object]], scene: Scene) -> MotionCode:
     phase_lines = []
     if n_phases:
         # Split k once for Dekker's product; every phase slot shares it.
-        phase_lines += ["kf = float(k)", "_s = 134217729.0 * kf", "kh = _s - (_s - kf)", "kl = kf - kh"]
+        phase_lines += list(phases.SPLIT_K)
         for i in range(n_phases):
-            phase_lines += _phase_lines(i)
+            phase_lines += phases.phase_lines(i)
     lines = []
     for sym, value in replacements:
         lines.append(f"{sym} = {printer.doprint(value)}")
@@ -304,7 +245,8 @@ def motion_code(scene: Scene, angles: bool) -> MotionCode:
         lines += sampled_translational_lines(order)
     attitude_lines: list[str] = []
     rotation_given = False
-    from imu_emulator.motion.earth import geometry_lines, model_on, tangent_level_lines
+    from imu_emulator.motion.earth import geometry_lines, tangent_level_lines
+    from imu_emulator.scene.earth import model_on
     earth = model_on(scene)
     if tangent and earth:
         # heading and pitch from the velocity in the local level frame at the current position
@@ -356,9 +298,9 @@ def motion_code(scene: Scene, angles: bool) -> MotionCode:
 
 
 def _earth_rotation_slot(sym: MotionCode) -> int:
-    """A new phase slot for the Earth rotation angle (its lines come from earth_motion.sampled_eci_lines)."""
+    """A new phase slot for the Earth rotation angle (its lines come from motion.earth.sampled_eci_lines)."""
     if not sym.phase_lines:     # k split once for Dekker's product, as _symbolic does
-        sym.phase_lines = ["kf = float(k)", "_s = 134217729.0 * kf", "kh = _s - (_s - kf)", "kl = kf - kh"]
+        sym.phase_lines = list(phases.SPLIT_K)
     index = len(sym.phase_vars) // 2
     sym.phase_vars += [f"sph{index}", f"cph{index}"]
     return index

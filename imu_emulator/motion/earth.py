@@ -13,7 +13,9 @@ level axes as ax ay az. The Earth effects (imu_emulator/effects/earth_rate.py, c
     e_sl e_cl (sin, cos latitude), e_so e_co (longitude), e_h (height, m), e_w = sqrt(1 - e2 sin^2 L),
     e_rn e_re (R_N + h, R_E + h), e_vn e_ve e_vd (Earth-referenced velocity, local NED).
 The formulas are written once, in NED (Groves 2nd ed. §2.4, §5.4); `level` maps NED components to the scene's
-level axes (ENU: x = E, y = N, z = -D).
+level axes (ENU: x = E, y = N, z = -D). Those helpers and the rates the Earth effects add (omega_ie^n: earth_rate,
+rho: coriolis) live with the effects (imu_emulator/effects/_earth.py and the effect modules); this module reads
+them for tangent attitude and [attitude] reference.
 
 Tangent attitude (tangent_level_lines) follows the Earth-referenced velocity in the local level frame, with
 the frame's own turning in its derivatives; [attitude] reference = "ECEF" | "ECI" (reference_lines) turns
@@ -26,33 +28,18 @@ from __future__ import annotations
 
 import numpy as np
 
+from imu_emulator.effects._earth import cross, level, ned
+from imu_emulator.effects.coriolis import TRANSPORT_RATE, rho_lines
+from imu_emulator.effects.earth_rate import EARTH_RATE, earth_rate_lines
 from imu_emulator.geo import wgs84
+from imu_emulator.motion import phases
+from imu_emulator.scene.earth import position_frame
 
-EARTH_EFFECTS = ("earth_rate", "coriolis")
 #: updates of the geodetic latitude after Bowring's start (tan L from the parametric latitude u, tan u =
 #: a z / (b p)): the start is within 1e-13 rad at 10 km, 1e-9 at 1000 km, 4e-7 at 40 000 km, and each update
 #: (tan L = z / (p (1 - e2 N / (N + h)))) squares the error times about e2, so two reach 1e-15 rad from the
 #: ground to beyond geostationary height (imu_emulator.geo.frames runs the same scheme; tests/test_frames.py)
 GEODETIC_UPDATES = 2
-
-
-def position_frame(scene) -> str:
-    """The frame of the kernel's px..pz: the scene's, except ECEF for ECI (rewritten) and geodetic
-    trajectories (converted to ECEF, below)."""
-    geodetic = (getattr(scene.trajectory, "keys", ("x", "y", "z")) != ("x", "y", "z")
-                or getattr(scene.trajectory, "geodetic", False))
-    return "ECEF" if geodetic or scene.frame in ("ECEF", "ECI") else scene.frame
-
-
-def model_on(scene) -> bool:
-    """Whether the navigation stage follows the Earth (see the module's docstring)."""
-    return (position_frame(scene) == "ECEF" or any(name in scene.effects for name in EARTH_EFFECTS)
-            or ("gravity" in scene.effects and scene.gravity_model == "wgs84"))
-
-
-def level(scene, n: str, e: str, d: str) -> tuple[str, str, str]:
-    """NED components as the scene's level axes (ENU for an ENU scene, NED otherwise)."""
-    return (e, n, f"-({d})") if scene.frame == "ENU" else (n, e, d)
 
 
 def tangent_to_ecef(frame: str, origin) -> tuple[np.ndarray, np.ndarray]:
@@ -126,16 +113,6 @@ def geometry_lines(scene, jerk: bool = False) -> list[str]:
     return lines + [f"ax = {fx}", f"ay = {fy}", f"az = {fz}"]
 
 
-def _cross(name: str, u: tuple[str, str, str], v: tuple[str, str, str]) -> list[str]:
-    """name{n,e,d} = u x v (NED components)."""
-    return [f"{name}n = {u[1]} * {v[2]} - {u[2]} * {v[1]}", f"{name}e = {u[2]} * {v[0]} - {u[0]} * {v[2]}",
-            f"{name}d = {u[0]} * {v[1]} - {u[1]} * {v[0]}"]
-
-
-def _ned(name: str) -> tuple[str, str, str]:
-    return (f"{name}n", f"{name}e", f"{name}d")
-
-
 def tangent_level_lines(scene) -> list[str]:
     """Velocity and its first two time derivatives as components in the local level frame at the current
     position (t_v.., t_a.., t_j.. in the scene's level axes), for tangent attitude: heading and pitch
@@ -149,54 +126,13 @@ def tangent_level_lines(scene) -> list[str]:
     dR_N/dL = 3 a (1 - e2) e2 sin L cos L / w^5 (w = sqrt(1 - e2 sin^2 L)). tan L: the level frame's
     heading is undefined at the poles."""
     lines = rho_lines()
-    lines += _cross("t_ra", _ned("t_rh"), _ned("e_a")) + _cross("t_rd", _ned("t_rh"), _ned("t_d"))
-    lines += _cross("t_rq", _ned("t_rp"), _ned("e_v"))
+    lines += cross("t_ra", ned("t_rh"), ned("e_a")) + cross("t_rd", ned("t_rh"), ned("t_d"))
+    lines += cross("t_rq", ned("t_rp"), ned("e_v"))
     lines += [f"t_j{axis} = e_j{axis} - t_ra{axis} - t_rq{axis} - t_rd{axis}" for axis in "ned"]
     for out, src in (("t_v", "e_v"), ("t_a", "t_d"), ("t_j", "t_j")):
-        lines += [f"{out}{axis} = {value}" for axis, value in zip("xyz", level(scene, *_ned(src)))]
+        lines += [f"{out}{axis} = {value}" for axis, value in zip("xyz", level(scene, *ned(src)))]
     return lines
 
-
-#: L' = v_N / (R_N + h), the latitude's rate (t_ld)
-LATITUDE_RATE = "t_ld = e_vn / e_rn"
-
-
-def rho_lines() -> list[str]:
-    """rho = omega_en^n (t_rh..), v^n' (t_d..) and rho' (t_rp..) in NED, from the geometry's e_* (see
-    tangent_level_lines)."""
-    a, e2 = wgs84.A, wgs84.E2
-    lines = [
-        LATITUDE_RATE,
-        "t_tl = e_sl / e_cl",
-        "t_rhn = e_ve / e_re",
-        "t_rhe = -e_vn / e_rn",
-        "t_rhd = -t_rhn * t_tl",
-    ]
-    rho = _ned("t_rh")
-    lines += _cross("t_rv", rho, _ned("e_v")) + [f"t_d{axis} = e_a{axis} - t_rv{axis}" for axis in "ned"]
-    lines += [
-        "t_scw = e_sl * e_cl / (e_w * e_w * e_w)",
-        f"t_red = {a * e2!r} * t_scw * t_ld - e_vd",                    # (R_E + h)'
-        f"t_rnd = {3.0 * a * (1.0 - e2) * e2!r} * t_scw / (e_w * e_w) * t_ld - e_vd",   # (R_N + h)'
-        "t_rpn = (t_de - t_rhn * t_red) / e_re",
-        "t_rpe = -(t_dn + t_rhe * t_rnd) / e_rn",
-        "t_rpd = -t_rpn * t_tl - t_rhn * t_ld / (e_cl * e_cl)",
-    ]
-    return lines
-
-
-def earth_rate_lines() -> list[str]:
-    """omega_ie^n = omega_ie (cos L, 0, -sin L) (t_wi.., NED) and the rate of change of those components,
-    t_wp.. = omega_ie L' (-sin L, 0, -cos L) (= -rho x omega_ie^n: omega_ie^e is constant and the level frame
-    turns at rho against the Earth)."""
-    w = repr(wgs84.OMEGA_IE)
-    return [LATITUDE_RATE, f"t_win = {w} * e_cl", f"t_wid = -{w} * e_sl", f"t_wpn = -{w} * e_sl * t_ld",
-            f"t_wpd = -{w} * e_cl * t_ld"]
-
-
-#: omega_ie^n and its derivative as NED triples (after earth_rate_lines); rho and rho' (after rho_lines)
-EARTH_RATE = (("t_win", "0.0", "t_wid"), ("t_wpn", "0.0", "t_wpd"))
-TRANSPORT_RATE = (_ned("t_rh"), _ned("t_rp"))
 
 #: the kernel's rate of the body w.r.t. the local level frame, body axes, where w is not it (reference_lines)
 LEVEL_RATE = ("m_lx", "m_ly", "m_lz")
@@ -209,7 +145,7 @@ def _sum(name: str, vectors) -> list[str]:
 
 def _to_body(scene, name: str) -> list[str]:
     """name_b{0,1,2} = R^T (the NED triple name{n,e,d} in the level axes)."""
-    lx, ly, lz = level(scene, *_ned(name))
+    lx, ly, lz = level(scene, *ned(name))
     return [f"{name}b{c} = r0{c} * ({lx}) + r1{c} * ({ly}) + r2{c} * ({lz})" for c in "012"]
 
 
@@ -250,8 +186,8 @@ def reference_lines(scene, angles: bool, index: int | None) -> list[str]:
         lines += _sum("m_u", [rate for rate, _ in u]) + _sum("m_du", [derivative for _, derivative in u])
         lines += _to_body(scene, "m_u") + _to_body(scene, "m_du")
         lines += [f"w{axis} -= m_ub{c}" for c, axis in zip("012", "xyz")]
-        lines += _cross("m_wu", LEVEL_RATE, ("m_ub0", "m_ub1", "m_ub2"))
-        lines += [f"al{axis} -= m_dub{c} - m_wu{ned}" for c, axis, ned in zip("012", "xyz", "ned")]
+        lines += cross("m_wu", LEVEL_RATE, ("m_ub0", "m_ub1", "m_ub2"))
+        lines += [f"al{axis} -= m_dub{c} - m_wu{ned_axis}" for c, axis, ned_axis in zip("012", "xyz", "ned")]
     if angles:
         lines += ["roll = math.atan2(r21, r22)", "pitch = math.atan2(-r20, math.hypot(r21, r22))",
                   "yaw = math.atan2(r10, r00)"]
@@ -280,13 +216,12 @@ def sampled_eci_lines(scene, index: int) -> tuple[dict, list[str], list[str]]:
     """(constants, phase lines, lines) turning the kernel's sampled ECI p, v, a[, j] into ECEF in place.
 
     The Earth rotation angle theta = omega_ie t is phase slot `index`, reduced exactly like the symbolic
-    path's periodic phases (imu_emulator.motion.code). With R = R_z(-theta), r_e = R r_i and d/dt (R u) =
+    path's periodic phases (imu_emulator.motion.phases). With R = R_z(-theta), r_e = R r_i and d/dt (R u) =
     R (u' - w x u), so the k-th derivative of r_e is R D^k r_i, D u = u' - w x u, w = (0, 0, omega_ie):
     v_e = R (v - w x r), a_e = R (a - 2 w x v + w x (w x r)), j_e = R (j - 3 w x a + 3 w x (w x v) - w x (w x (w x r)))."""
     import sympy
 
-    from imu_emulator.motion.code import _phase_constants, _phase_lines
-    constants = _phase_constants(sympy.Rational(OMEGA_IE_TEXT), sympy.Integer(0), scene, index)
+    constants = phases.phase_constants(sympy.Rational(OMEGA_IE_TEXT), sympy.Integer(0), scene, index)
     w = float(OMEGA_IE_TEXT)
     w2, w3 = repr(w * w), repr(w * w * w)
     parts = {"p": ("px", "py"),
@@ -299,7 +234,7 @@ def sampled_eci_lines(scene, index: int) -> tuple[dict, list[str], list[str]]:
     lines = [f"u{prefix}{axis} = {value}" for prefix, (ux, uy) in parts.items() for axis, value in (("x", ux), ("y", uy))]
     for prefix in parts:
         lines += [f"{prefix}x = {c} * u{prefix}x + {s} * u{prefix}y", f"{prefix}y = {c} * u{prefix}y - {s} * u{prefix}x"]
-    return constants, _phase_lines(index), lines
+    return constants, phases.phase_lines(index), lines
 
 
 def eci_to_ecef(xyz, t):

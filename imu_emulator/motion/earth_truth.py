@@ -39,7 +39,7 @@ def conventions(scene) -> list[str]:
     body = "forward-left-up" if level == "ENU" else "forward-right-down"
     where = {"ENU": "ENU tangent to the Earth at origin", "NED": "NED tangent to the Earth at origin",
              "ECEF": "WGS-84 ECEF", "ECI": "ECI (axes on ECEF's at t = 0 s, turning at omega_ie about z)"}
-    from imu_emulator.motion.earth import position_frame
+    from imu_emulator.scene.earth import position_frame
     if position_frame(scene) == "ECEF" and scene.frame != "ECI":
         where[scene.frame] = "WGS-84 ECEF" + (" (from the geodetic trajectory)" if scene.frame != "ECEF" else "")
     lines = [f"frame: trajectory px py pz, vx vy vz in {where[scene.frame]}"
@@ -57,7 +57,8 @@ def conventions(scene) -> list[str]:
 
 def fill(scene, t: np.ndarray, truth: dict) -> None:
     """Add the Earth keys to one block's truth, in place (the arrays exist: Simulation allocates KEYS)."""
-    from imu_emulator.motion.earth import position_frame, tangent_to_ecef
+    from imu_emulator.motion.earth import tangent_to_ecef
+    from imu_emulator.scene.earth import position_frame
     position, velocity = truth["position"], truth["velocity"]
     r0, c = tangent_to_ecef(position_frame(scene), scene.origin)
     r_e = r0 + position @ c.T

@@ -53,6 +53,9 @@ class Format:
     estimated_bytes: Callable[..., int]
     margin: tuple[float, float]
     description: str
+    #: where the format stands when formats are listed (the suffixes an error or a help text names): the plain
+    #: files first, as users met them
+    order: int = 100
     increments: bool = True                         # can carry --increments
     #: the writer wants the sensor frame's attitude (block.quat): the simulation computes it only then
     attitude: bool = False

@@ -41,7 +41,7 @@ class Simulation:
         self._stateful = bool(self._plan.slots)
         #: each IMU's temperature profile reaches the samples when the temperature effect is on
         self.temperature = "temperature" in scene.effects
-        from imu_emulator.motion.earth import model_on    # not earth_truth (frames, rotations) unless it is used
+        from imu_emulator.scene.earth import model_on    # not earth_truth (frames, rotations) unless it is used
         self._earth_truth = truth and model_on(scene)   # geodetic, NED, ECEF truth (earth_truth.KEYS)
         self._position = self._series(scene.trajectory, 3 if scene.attitude_mode == "tangent" else 2, "trajectory")
         self._euler = self._series(scene.attitude, 2, "attitude")

@@ -1,10 +1,20 @@
-"""The scene's Earth keys: [scene] origin, gravity_model, and what the ECEF frame and the Earth effects need."""
+"""The scene's Earth keys: [scene] origin, gravity_model, and what the ECEF frame and the Earth effects need; and
+whether the scene is on the Earth (model_on), which the motion, the effects (Scene.earth_model) and the outputs ask.
+
+With the Earth model on, the motion computes the Earth's geometry and the navigation stage follows the Earth
+(imu_emulator.motion.earth)."""
 from __future__ import annotations
 
 from typing import Mapping
 
 from imu_emulator.errors import SceneError
-from imu_emulator.scene.model import GRAVITY_MODELS, _choice, _no_unknown, _number, _table
+from imu_emulator.scene.checks import choice, no_unknown, number, subtable
+
+#: effects that switch the Earth model on when named (so do the ECEF and ECI frames, geodetic trajectories and
+#: gravity_model = "wgs84" with effects.gravity)
+EARTH_EFFECTS = ("earth_rate", "coriolis")
+#: [scene] gravity_model: "constant" (gravity_mps2) or "wgs84" (normal gravity)
+GRAVITY_MODELS = ("constant", "wgs84")
 
 #: [attitude] reference: what roll, pitch, yaw (or a file's attitude) are relative to
 REFERENCES = ("local_level", "ECEF", "ECI")
@@ -14,23 +24,36 @@ GEODETIC_KEYS = ORIGIN_KEYS     # a geodetic trajectory's [trajectory] keys
 MAX_ORIGIN_HEIGHT_M = 1e7      # beyond geostationary orbit is not a place to put a tangent frame
 
 
+def position_frame(scene) -> str:
+    """The frame of the kernel's px..pz: the scene's, except ECEF for ECI (rewritten) and geodetic
+    trajectories (converted to ECEF, imu_emulator.motion.earth)."""
+    geodetic = (getattr(scene.trajectory, "keys", ("x", "y", "z")) != ("x", "y", "z")
+                or getattr(scene.trajectory, "geodetic", False))
+    return "ECEF" if geodetic or scene.frame in ("ECEF", "ECI") else scene.frame
+
+
+def model_on(scene) -> bool:
+    """Whether the navigation stage follows the Earth (see imu_emulator.motion.earth's docstring)."""
+    return (position_frame(scene) == "ECEF" or any(name in scene.effects for name in EARTH_EFFECTS)
+            or ("gravity" in scene.effects and scene.gravity_model == "wgs84"))
+
+
 def _origin(head: Mapping):
     if "origin" not in head:
         return None
-    table = _table(head, "origin", "scene.")
-    _no_unknown(table, set(ORIGIN_KEYS), "scene.origin")
-    lat = _number(table, "lat_deg", "scene.origin", required=True, bound=90.0, unit=" deg")
-    lon = _number(table, "lon_deg", "scene.origin", required=True, bound=360.0, unit=" deg")
-    height = _number(table, "height_m", "scene.origin", default=0.0, bound=MAX_ORIGIN_HEIGHT_M, unit=" m")
+    table = subtable(head, "origin", "scene.")
+    no_unknown(table, set(ORIGIN_KEYS), "scene.origin")
+    lat = number(table, "lat_deg", "scene.origin", required=True, bound=90.0, unit=" deg")
+    lon = number(table, "lon_deg", "scene.origin", required=True, bound=360.0, unit=" deg")
+    height = number(table, "height_m", "scene.origin", default=0.0, bound=MAX_ORIGIN_HEIGHT_M, unit=" m")
     return (lat, lon, height)
 
 
 def earth_keys(head: Mapping, frame: str, effects: frozenset[str], attitude_mode: str, shape: bool,
                trajectory, warnings: list[str]):
     """(origin or None, gravity model), validated against the frame and the effects named."""
-    from imu_emulator.motion.earth import EARTH_EFFECTS
     origin = _origin(head)
-    model = _choice(head, "gravity_model", "scene", GRAVITY_MODELS, "constant")
+    model = choice(head, "gravity_model", "scene", GRAVITY_MODELS, "constant")
     earth = [name for name in EARTH_EFFECTS if name in effects]
     if model == "wgs84":
         if "gravity" not in effects:
@@ -65,32 +88,12 @@ def earth_keys(head: Mapping, frame: str, effects: frozenset[str], attitude_mode
     return origin, model
 
 
-def sampled_geodetic(track, derivative: str, noise: float):
-    """A track's lat_deg, lon_deg, height_m columns as ECEF samples (WGS-84, imu_emulator.geo.frames): the
-    derivatives are fitted in ECEF, where the motion is smooth across the antimeridian and the poles."""
-    import numpy as np
-
-    from imu_emulator.geo import frames
-    from imu_emulator.scene.model import SampledData
-    lat, height = track.position[:, 0], track.position[:, 2]
-    for column, values, bound in (("lat_deg", lat, 90.0), ("height_m", height, MAX_ORIGIN_HEIGHT_M)):
-        bad = np.abs(values) > bound
-        if bad.any():
-            i = int(np.argmax(bad))
-            raise SceneError(f"trajectory.file: {track.source.name}: {track.row_label(i)}, column '{column}': "
-                             f"{float(values[i])!r} is out of range (|value| <= {bound:g})")
-    ecef = frames.geodetic_to_ecef(lat, track.position[:, 1], height)
-    return SampledData(t=track.t, values=np.ascontiguousarray(ecef), derivative=derivative,
-                       source=str(track.source), noise=noise, geodetic=True)
-
-
 def attitude_reference(att_table: Mapping, frame: str, effects, trajectory, gravity_model: str) -> str:
     """[attitude] reference, validated: another frame than local level needs the Earth model (the attitude is
     converted to local level at the current position, imu_emulator.motion.earth.reference_lines)."""
     from types import SimpleNamespace
 
-    from imu_emulator.motion.earth import model_on
-    reference = _choice(att_table, "reference", "attitude", REFERENCES, "local_level")
+    reference = choice(att_table, "reference", "attitude", REFERENCES, "local_level")
     if reference != "local_level":
         scene = SimpleNamespace(frame=frame, effects=effects, trajectory=trajectory, gravity_model=gravity_model)
         if not model_on(scene):

@@ -16,8 +16,9 @@ from typing import Mapping
 import numpy as np
 
 from imu_emulator.errors import SceneError
-from imu_emulator.scene.model import MAX_FREQUENCY_HZ, MAX_POSITION_M, Expressions, _choice, _no_unknown, _number
-from imu_emulator.scene.model import _vector3 as _bounded_vector3
+from imu_emulator.scene.checks import choice, no_unknown, number
+from imu_emulator.scene.checks import vector3 as bounded_vector3
+from imu_emulator.scene.model import MAX_FREQUENCY_HZ, MAX_POSITION_M, Expressions
 
 # Step of the dense sampling of piecewise shapes: fine enough that the quintic spline refitted to the samples
 # follows the exact curve to ~1e-9 of its size between junctions.
@@ -36,7 +37,7 @@ class Shape:
 
 def _vector3(table, key, where):
     """A position-like triple within the scene's bounds (harden-input's MAX_POSITION_M)."""
-    return _bounded_vector3(table, key, where, MAX_POSITION_M, " m")
+    return bounded_vector3(table, key, where, MAX_POSITION_M, " m")
 
 
 def _expr(*texts: str) -> Expressions:
@@ -48,27 +49,27 @@ def _phase(frequency_hz: float, phase_deg: float) -> str:
 
 
 def _static(table, where, frame, g):
-    _no_unknown(table, {"shape", "position_m"}, where)
+    no_unknown(table, {"shape", "position_m"}, where)
     x, y, z = _vector3(table, "position_m", where)
     return Shape(_expr(repr(x), repr(y), repr(z)))
 
 
 def _circle(table, where, frame, g):
     """x = cx + r cos 2πft, y = cy + r sin 2πft, z = cz + h (f < 0 turns the other way)."""
-    _no_unknown(table, {"shape", "radius_m", "frequency_hz", "height_m", "center_m"}, where)
-    r = _number(table, "radius_m", where, required=True, positive=True, bound=MAX_POSITION_M, unit=" m")
-    f = _number(table, "frequency_hz", where, required=True, bound=MAX_FREQUENCY_HZ, unit=" Hz")
-    h = _number(table, "height_m", where, default=0.0, bound=MAX_POSITION_M, unit=" m")
+    no_unknown(table, {"shape", "radius_m", "frequency_hz", "height_m", "center_m"}, where)
+    r = number(table, "radius_m", where, required=True, positive=True, bound=MAX_POSITION_M, unit=" m")
+    f = number(table, "frequency_hz", where, required=True, bound=MAX_FREQUENCY_HZ, unit=" Hz")
+    h = number(table, "height_m", where, default=0.0, bound=MAX_POSITION_M, unit=" m")
     cx, cy, cz = _vector3(table, "center_m", where)
     return Shape(_expr(f"{cx!r} + {r!r}*cos(2*pi*{f!r}*t)", f"{cy!r} + {r!r}*sin(2*pi*{f!r}*t)", repr(cz + h)))
 
 
 def _helix(table, where, frame, g):
     """A circle climbing at a constant rate: z = cz + climb·t."""
-    _no_unknown(table, {"shape", "radius_m", "frequency_hz", "climb_mps", "center_m"}, where)
-    r = _number(table, "radius_m", where, required=True, positive=True)
-    f = _number(table, "frequency_hz", where, required=True)
-    climb = _number(table, "climb_mps", where, required=True)
+    no_unknown(table, {"shape", "radius_m", "frequency_hz", "climb_mps", "center_m"}, where)
+    r = number(table, "radius_m", where, required=True, positive=True)
+    f = number(table, "frequency_hz", where, required=True)
+    climb = number(table, "climb_mps", where, required=True)
     cx, cy, cz = _vector3(table, "center_m", where)
     return Shape(_expr(f"{cx!r} + {r!r}*cos(2*pi*{f!r}*t)", f"{cy!r} + {r!r}*sin(2*pi*{f!r}*t)",
                        f"{cz!r} + {climb!r}*t"))
@@ -76,11 +77,11 @@ def _helix(table, where, frame, g):
 
 def _figure8(table, where, frame, g):
     """Lemniscate of Gerono: x = cx + (L/2) sin 2πft, y = cy + (W/2) sin 4πft; one eight per 1/f seconds."""
-    _no_unknown(table, {"shape", "length_m", "width_m", "frequency_hz", "height_m", "center_m"}, where)
-    length = _number(table, "length_m", where, required=True, positive=True)
-    width = _number(table, "width_m", where, required=True, positive=True)
-    f = _number(table, "frequency_hz", where, required=True, positive=True)
-    h = _number(table, "height_m", where, default=0.0)
+    no_unknown(table, {"shape", "length_m", "width_m", "frequency_hz", "height_m", "center_m"}, where)
+    length = number(table, "length_m", where, required=True, positive=True)
+    width = number(table, "width_m", where, required=True, positive=True)
+    f = number(table, "frequency_hz", where, required=True, positive=True)
+    h = number(table, "height_m", where, default=0.0)
     cx, cy, cz = _vector3(table, "center_m", where)
     return Shape(_expr(f"{cx!r} + {length / 2!r}*sin(2*pi*{f!r}*t)", f"{cy!r} + {width / 2!r}*sin(4*pi*{f!r}*t)",
                        repr(cz + h)))
@@ -88,7 +89,7 @@ def _figure8(table, where, frame, g):
 
 def _line(table, where, frame, g):
     """p = start + v·t + a·t²/2."""
-    _no_unknown(table, {"shape", "start_m", "velocity_mps", "acceleration_mps2"}, where)
+    no_unknown(table, {"shape", "start_m", "velocity_mps", "acceleration_mps2"}, where)
     p0 = _vector3(table, "start_m", where)
     v = _vector3(table, "velocity_mps", where)
     a = _vector3(table, "acceleration_mps2", where)
@@ -104,13 +105,13 @@ def _coordinated_turn(table, where, frame, g):
     r = v² / (g tan|bank|). With a_y the centripetal acceleration along the level body y axis, the roll that
     zeroes the lateral specific force is tan(roll) = -a_y / f_z with f_z = +g (ENU) or -g (NED).
     """
-    _no_unknown(table, {"shape", "speed_mps", "bank_deg", "height_m", "center_m", "initial_heading_deg"}, where)
-    v = _number(table, "speed_mps", where, required=True, positive=True)
-    bank = _number(table, "bank_deg", where, required=True)
+    no_unknown(table, {"shape", "speed_mps", "bank_deg", "height_m", "center_m", "initial_heading_deg"}, where)
+    v = number(table, "speed_mps", where, required=True, positive=True)
+    bank = number(table, "bank_deg", where, required=True)
     if not 0 < abs(bank) < 89:
         raise SceneError(f"{where}.bank_deg: must be non-zero and within ±89°, got {bank}")
-    h = _number(table, "height_m", where, default=0.0)
-    heading = math.radians(_number(table, "initial_heading_deg", where, default=0.0))
+    h = number(table, "height_m", where, default=0.0)
+    heading = math.radians(number(table, "initial_heading_deg", where, default=0.0))
     cx, cy, cz = _vector3(table, "center_m", where)
     r = v * v / (g * math.tan(math.radians(abs(bank))))
     right = bank > 0
@@ -131,12 +132,12 @@ def _racetrack(table, where, frame, g):
     the x-y plane, starting at the beginning of the first straight (x = cx - L/2, y = cy - r, heading +x).
     The curvature steps at the four junctions (as a car's would without transition curves); the spline through the
     dense samples spreads each step of acceleration over a few sample steps."""
-    _no_unknown(table, {"shape", "straight_m", "radius_m", "speed_mps", "laps", "height_m", "center_m"}, where)
-    length = _number(table, "straight_m", where, required=True, positive=True)
-    r = _number(table, "radius_m", where, required=True, positive=True)
-    v = _number(table, "speed_mps", where, required=True, positive=True)
-    laps = _number(table, "laps", where, default=1.0, positive=True)
-    h = _number(table, "height_m", where, default=0.0)
+    no_unknown(table, {"shape", "straight_m", "radius_m", "speed_mps", "laps", "height_m", "center_m"}, where)
+    length = number(table, "straight_m", where, required=True, positive=True)
+    r = number(table, "radius_m", where, required=True, positive=True)
+    v = number(table, "speed_mps", where, required=True, positive=True)
+    laps = number(table, "laps", where, default=1.0, positive=True)
+    h = number(table, "height_m", where, default=0.0)
     cx, cy, cz = _vector3(table, "center_m", where)
     lap = 2 * length + 2 * math.pi * r
     t = _sample_times(laps * lap / v, where)
@@ -191,12 +192,12 @@ def _waypoints(table, where, frame, g):
     from scipy.interpolate import make_interp_spline
     from scipy.spatial.transform import Rotation, RotationSpline
 
-    _no_unknown(table, {"shape", "positions_m", "times_s", "speed_mps", "attitudes_deg", "ends"}, where)
+    no_unknown(table, {"shape", "positions_m", "times_s", "speed_mps", "attitudes_deg", "ends"}, where)
     points = _list_of_vectors(table, "positions_m", where, required=True)
     n = len(points)
     if n < 2:
         raise SceneError(f"{where}.positions_m: at least two waypoints are needed, got {n}")
-    ends = _choice(table, "ends", where, ("coast", "rest"), "coast")
+    ends = choice(table, "ends", where, ("coast", "rest"), "coast")
     if ("times_s" in table) == ("speed_mps" in table):
         raise SceneError(f"{where}: give either times_s or speed_mps")
     if "times_s" in table:
@@ -208,7 +209,7 @@ def _waypoints(table, where, frame, g):
         if not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
             raise SceneError(f"{where}.times_s: must be finite and strictly increasing, got {times.tolist()}")
     else:
-        speed = _number(table, "speed_mps", where, positive=True)
+        speed = number(table, "speed_mps", where, positive=True)
         chords = np.linalg.norm(np.diff(points, axis=0), axis=1)
         if np.any(chords == 0):
             i = int(np.argmax(chords == 0)) + 1
@@ -241,5 +242,5 @@ SHAPES = tuple(BUILDERS)
 
 
 def build(table: Mapping, where: str, frame: str, gravity_mps2: float) -> Shape:
-    shape = _choice(table, "shape", where, SHAPES, None)
+    shape = choice(table, "shape", where, SHAPES, None)
     return BUILDERS[shape](table, where, frame, gravity_mps2)

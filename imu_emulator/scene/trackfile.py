@@ -2,9 +2,9 @@
 
 CSV: comma-separated, UTF-8 (a byte-order mark is accepted), a header row naming the columns, in any
 order: t, x, y, z and optionally roll, pitch, yaw (all three or none); or t, lat_deg, lon_deg, height_m
-(WGS-84 geodetic, for scenes with the Earth model: imu_emulator.scene.earth.sampled_geodetic).  Names are matched after stripping
-spaces and ignoring case.  Any other column is an error: a column we silently dropped (a "yaw_deg", a
-second time base) is a column the user believed we used.  Blank lines and lines starting with '#' are
+(WGS-84 geodetic, for scenes with the Earth model: imu_emulator.scene.sources.sampled_geodetic).  Names are
+matched after stripping spaces and ignoring case.  Any other column is an error: a column we silently dropped (a
+"yaw_deg", a second time base) is a column the user believed we used.  Blank lines and lines starting with '#' are
 skipped; error messages give line numbers as an editor shows them (the header is usually line 1, so the
 first data row is row 2).
 

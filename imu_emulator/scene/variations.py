@@ -7,7 +7,7 @@ A parameter of three independent values ("triple": lever_arm_m, mounting_rpy_deg
 other draws one value, which the scene's own rules spread (a vector3 parameter's one value is all three axes).
 
 A varied scene is never pasted together as text: the drawn numbers are set in the parsed TOML tables and the
-whole scene goes through the scene validator (imu_emulator.scene.model.from_dict) again, with the same checks and
+whole scene goes through the scene validator (imu_emulator.scene.load.from_dict) again, with the same checks and
 one-line errors as a scene file.
 """
 from __future__ import annotations

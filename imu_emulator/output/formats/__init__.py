@@ -17,7 +17,8 @@ from imu_emulator.output.columns import Layout
 
 def _discover() -> dict[str, Format]:
     found = {}
-    for record in extensions.declared(sys.modules[__name__], "FORMAT", Format, named=False):
+    records = extensions.declared(sys.modules[__name__], "FORMAT", Format, named=False)
+    for record in sorted(records, key=lambda record: (record.order, record.name)):
         for suffix in record.suffixes:
             if suffix in found:
                 raise ImportError(f"{record.name} format: suffix {suffix} is already {found[suffix].name}'s")

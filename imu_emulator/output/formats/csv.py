@@ -165,6 +165,6 @@ def read_conventions(path: Path) -> list[str]:
     return _header(path)[0]
 
 
-FORMAT = Format("CSV", (".csv",), CsvWriter, estimated_bytes, margin=(1 - CSV_ESTIMATE_MARGIN, 1 + CSV_ESTIMATE_MARGIN),
-                description="a CSV file", check=check_disk, read_columns=read_columns,
-                read_conventions=read_conventions)
+FORMAT = Format("CSV", (".csv",), CsvWriter, estimated_bytes, order=10,
+                margin=(1 - CSV_ESTIMATE_MARGIN, 1 + CSV_ESTIMATE_MARGIN), description="a CSV file", check=check_disk,
+                read_columns=read_columns, read_conventions=read_conventions)

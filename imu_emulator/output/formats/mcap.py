@@ -294,6 +294,6 @@ def read_columns(path: Path, names: tuple[str, ...]) -> dict | None:
     return {name: columns[name] for name in names} if set(names) <= set(columns) else None
 
 
-FORMAT = Format("MCAP", (".mcap",), open_bag, estimated_bytes, margin=(0.1, 1.0),
+FORMAT = Format("MCAP", (".mcap",), open_bag, estimated_bytes, order=30, margin=(0.1, 1.0),
                 description="a ROS 2 bag's sensor_msgs/Imu", increments=False, attitude=True, columns=carried,
                 read_columns=read_columns)

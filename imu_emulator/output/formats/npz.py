@@ -72,7 +72,7 @@ class NpzWriter(FinishOnExit):
 
 def estimated_bytes(scene, truth: bool, increments: bool = False) -> int:
     """NpzWriter's arrays: (count of numbers per sample, arrays) summed, as float64."""
-    from imu_emulator.motion.earth import model_on
+    from imu_emulator.scene.earth import model_on
     from imu_emulator.codegen.kernel import EffectPlan
     from imu_emulator.runtime.simulation import TRUTH_KEYS
     n, n_imu = scene.n_samples, len(scene.imus)
@@ -135,5 +135,5 @@ def read_conventions(path: Path) -> list[str]:
         return [str(line) for line in data["conventions"]] if "conventions" in data else []
 
 
-FORMAT = Format("NPZ", (".npz",), NpzWriter, estimated_bytes, margin=(0.99, 1.01), description="an NPZ file",
-                check=check_memory, read_columns=read_columns, read_conventions=read_conventions)
+FORMAT = Format("NPZ", (".npz",), NpzWriter, estimated_bytes, order=20, margin=(0.99, 1.01),
+                description="an NPZ file", check=check_memory, read_columns=read_columns, read_conventions=read_conventions)

@@ -122,6 +122,6 @@ def read_conventions(path: Path) -> list[str]:
     return list(read_metadata(path).get("conventions", []))
 
 
-FORMAT = Format("Parquet", (".parquet",), ParquetWriter, estimated_bytes, margin=(0.1, 1.25),
+FORMAT = Format("Parquet", (".parquet",), ParquetWriter, estimated_bytes, order=40, margin=(0.1, 1.25),
                 description="a Parquet table", run_metadata=run_metadata, read_columns=read_columns,
                 read_conventions=read_conventions)
