@@ -12,11 +12,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from imu_emulator.codegen import kernel as kernel_module
+from imu_emulator.runtime import cache, kernels as kernel_module
 from imu_emulator import scene_from_dict
 from imu_emulator.effects import EFFECTS, STAGE_CONTRACT, Stage, all_params
 from imu_emulator.errors import SceneError
-from imu_emulator.codegen.kernel import compile_kernel, generate_source, generator_modules, scene_key
+from imu_emulator.codegen.generate import generate_source
+from imu_emulator.runtime.cache import generator_modules, scene_key
+from imu_emulator.runtime.kernels import compile_kernel
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"
@@ -111,12 +113,15 @@ def test_imu_names_and_seed_do_not_reach_the_source():
 
 def test_generator_modules_are_found_by_their_imports():
     names = {p.relative_to(ROOT).as_posix() for p in generator_modules()}
-    for expected in ("kernel.py", "motion.py", "expressions.py", "rotations.py", "phase.py", "counter_rng.py",
-                     "scene.py", "units.py", "effects/__init__.py", "effects/_record.py",
-                     *(f"effects/{name}.py" for name in EFFECTS)):
+    for expected in ("codegen/generate.py", "codegen/plan.py", "codegen/signature.py", "codegen/template.py",
+                     "codegen/increments.py", "motion/code.py", "numerics/expressions.py", "geo/rotations.py",
+                     "numerics/phase.py", "numerics/counter_rng.py", "scene/model.py", "scene/units.py",
+                     "effects/__init__.py", "effects/_record.py", *(f"effects/{name}.py" for name in EFFECTS)):
         assert f"imu_emulator/{expected}" in names, expected
-    # how the kernel's machine code is written and loaded is part of the entry too
-    assert {"imu_emulator.native/objects.py", "imu_emulator.native/lazy.py"} <= names
+    # how the kernel is compiled, and its machine code written and loaded, is part of the entry too
+    assert {"imu_emulator/runtime/kernels.py", "imu_emulator/runtime/cache.py",
+            "imu_emulator/native/objects.py", "imu_emulator/native/lazy.py"} <= names
+    assert "imu_emulator/runtime/simulation.py" not in names     # how blocks are driven does not shape the source
 
 
 @pytest.mark.parametrize("scene_path", sorted(EXAMPLES.glob("*.toml")), ids=lambda p: p.stem)
@@ -192,7 +197,7 @@ def test_a_corrupt_entry_is_regenerated(fresh_cache, damage):
     kernel_module._loaded.clear()
     again = _run(scene)
     np.testing.assert_array_equal(again.accel, expected.accel)
-    assert kernel_module._valid_entry(source_file)
+    assert cache.valid_entry(source_file)
     assert _entries(fresh_cache) == [scene_key(scene, True, False)]
 
 

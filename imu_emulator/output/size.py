@@ -66,7 +66,7 @@ def _csv_size(scene, truth: bool, increments: bool, chars_per_number: int) -> in
 def row_numbers(scene, truth: bool, increments: bool) -> tuple[int, int]:
     """The numbers of a CSV/Parquet row besides its time: (per IMU, shared by the IMUs of a sample)."""
     from imu_emulator.motion.earth import model_on
-    from imu_emulator.codegen.kernel import EffectPlan
+    from imu_emulator.codegen.plan import EffectPlan
     from imu_emulator.output.writer import BIAS_COLUMNS, INCREMENT_COLUMNS, TRUTH_COLUMNS
     per_imu = 6 + (len(INCREMENT_COLUMNS) if increments else 0) + ("temperature" in scene.effects)
     per_imu += len(BIAS_COLUMNS) if truth and EffectPlan(scene).bias_truth else 0
@@ -101,7 +101,7 @@ def output_bytes(scene, fmt: str, truth: bool, increments: bool = False) -> int:
 def _npz_bytes(scene, truth: bool, increments: bool) -> int:
     """output.Writer._save_npz's arrays: (count of numbers per sample, arrays) summed, as float64."""
     from imu_emulator.motion.earth import model_on
-    from imu_emulator.codegen.kernel import EffectPlan
+    from imu_emulator.codegen.plan import EffectPlan
     from imu_emulator.runtime.simulation import TRUTH_KEYS
     n, n_imu = scene.n_samples, len(scene.imus)
     parts = [(1, 1), (6 * n_imu, 2)]                                  # t; accel, gyro
