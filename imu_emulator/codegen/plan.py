@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from imu_emulator.codegen.explain import effect_comment
 from imu_emulator.effects import EFFECTS, FRAME_ORDERS, EmitContext, Stage
 from imu_emulator.scene.model import Scene
 
@@ -21,6 +22,12 @@ class EffectPlan:
         self.counters: list[tuple[int, int, str]] = []    # (state slot, imu, label)
         self.constants: dict[str, tuple[float, ...]] = {}  # module-level arrays (numba freezes them)
         self.axes_turns: dict[int, list[tuple[list[str], tuple]]] = {}  # imu -> [(lines, quaternion)], body stage
+        # which effect asked for each slot, stream and constant, and which emitted lines (the source's glossary)
+        self.slot_effects: list[str] = []
+        self.stream_effects: list[str] = []
+        self.constant_effects: dict[str, str] = {}
+        self.emitted: set[str] = set()
+        self._effect = None     # the effect whose emit is running
         navigation = [e for e in self.active if e.stage == Stage.NAVIGATION]
         self.clock = self._emit([e for e in navigation if e.sample_clock], None, None)
         self.navigation = self._emit([e for e in navigation if not e.sample_clock], None, None)
@@ -43,21 +50,29 @@ class EffectPlan:
     def _emit(self, effects, imu, m) -> list[str]:
         lines = []
         for effect in effects:
-            lines += effect.emit(EmitContext(self, effect, self.scene, imu, m))
+            self._effect = effect.name
+            emitted = effect.emit(EmitContext(self, effect, self.scene, imu, m))
+            if emitted:
+                self.emitted.add(effect.name)
+                lines += [effect_comment(effect)] + emitted
+        self._effect = None
         return lines
 
     def add_state(self, var: str, m: int, initial) -> str:
         self.slots.append((var, m, initial))
+        self.slot_effects.append(self._effect)
         return var
 
     def add_state_block(self, m: int, initials) -> int:
         """Slots the kernel reads as state[base + i] (no local variable): returns base."""
         base = len(self.slots)
         self.slots += [(None, m, initial) for initial in initials]
+        self.slot_effects += [self._effect] * (len(self.slots) - base)
         return base
 
     def add_constant(self, name: str, values) -> str:
         self.constants[name] = tuple(float(v) for v in values)
+        self.constant_effects[name] = self._effect
         return name
 
     def add_axes_turn(self, m: int, lines: list[str], quaternion: tuple) -> None:
@@ -70,6 +85,7 @@ class EffectPlan:
     def add_stream(self, m: int, name: str) -> int:
         if (m, name) not in self.streams:
             self.streams.append((m, name))
+            self.stream_effects.append(self._effect)
         return self.streams.index((m, name))
 
     def keys(self, seed: int) -> np.ndarray:

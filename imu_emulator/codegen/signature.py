@@ -17,6 +17,31 @@ RUNTIME_IMPORTS = {
 #: The kernel's arguments (then imu_emulator.codegen.increments.ARGS when it integrates); `arguments` lays them out.
 ARGS = ("k0", "n", "s0", "mot", "att", "hold", "keys", "state", "out_acc", "out_gyro", "out_quat",
         "tr_pos", "tr_vel", "tr_euler", "tr_omega", "tr_alpha", "tr_bias_acc", "tr_bias_gyro")
+#: What each argument holds (the generated source's glossary prints these), kernel_body's scratch included
+ARG_NOTES = {
+    "k0": "the block's first scene sample (motion: t = t0 + k dt, k = k0 + j)",
+    "n": "the block's length in samples (j = 0 .. n-1)",
+    "s0": "the run sample of k0 (random numbers and state follow the run sample s = s0 + j)",
+    "mot": "sampled trajectory [derivative, row, axis]: rows 0..n-1 the samples, then the increments' nodes; "
+           "empty when the trajectory is symbolic",
+    "att": "sampled attitude [derivative, row, component] (Euler angles or quaternion), rows as mot; empty else",
+    "hold": "tangent attitude's last defined heading and pitch (cos, sin, cos, sin), carried across blocks",
+    "keys": "one key per random stream (below), made from the seed at run time",
+    "state": "the state slots (below), carried across blocks",
+    "out_acc": "accelerometer output (n_imu, n, 3), m/s^2, sensor axes",
+    "out_gyro": "gyro output (n_imu, n, 3), rad/s, sensor axes",
+    "out_quat": "attitude of each IMU's axes (n_imu, n, 4), scalar first; empty when not output",
+    "tr_pos": "truth: position of S (n, 3), m, navigation axes; empty when not output",
+    "tr_vel": "truth: velocity of S (n, 3), m/s",
+    "tr_euler": "truth: roll, pitch, yaw (n, 3), rad",
+    "tr_omega": "truth: body rate (n, 3), rad/s, body axes",
+    "tr_alpha": "truth: body angular acceleration (n, 3), rad/s^2, body axes",
+    "tr_bias_acc": "truth: realized accelerometer bias (n_imu, n, 3); empty unless an effect adds a bias",
+    "tr_bias_gyro": "truth: realized gyro bias (n_imu, n, 3)",
+    "out_dtheta": "integrated gyro output (n_imu, n, 3), rad over (t_k-1, t_k] (imu_emulator.codegen.increments)",
+    "out_dvel": "integrated accelerometer output (n_imu, n, 3), m/s over (t_k-1, t_k]",
+    "phases": "kernel_body's scratch (N_PHASE, CHUNK): sin and cos of each periodic term, per chunk sample",
+}
 TRUTH_OUTPUTS = (("tr_pos", ("px", "py", "pz")), ("tr_vel", ("vx", "vy", "vz")),
                  ("tr_euler", ("roll", "pitch", "yaw")), ("tr_omega", ("wx", "wy", "wz")),
                  ("tr_alpha", ("alx", "aly", "alz")))
