@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from imu_emulator.codegen import kernel as kernel_module
+from imu_emulator.runtime import kernels as kernel_module
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -139,7 +139,7 @@ def test_effects_off_add_nothing_and_a_missing_origin_is_said():
                                              "origin": {"lat_deg": 30, "lon_deg": 5, "height_m": 0}},
                                    "trajectory": {"shape": "static"}, "imu": [{"name": "a"}],
                                    "effects": {"gravity": True}})
-    from imu_emulator.codegen.kernel import generate_source
+    from imu_emulator.codegen.generate import generate_source
     assert generate_source(flat, True, True) == generate_source(with_origin, True, True)
     with pytest.raises(SceneError, match=r"^scene.origin: effects.earth_rate needs the point where the ENU frame"):
         scene_from_dict({"scene": {"rate_hz": 10, "duration_s": 0.2}, "trajectory": {"shape": "static"},

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -12,11 +13,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from imu_emulator.codegen import kernel as kernel_module
+from imu_emulator.runtime import cache, kernels as kernel_module
 from imu_emulator import scene_from_dict
 from imu_emulator.effects import EFFECTS, STAGE_CONTRACT, Stage, all_params
 from imu_emulator.errors import SceneError
-from imu_emulator.codegen.kernel import compile_kernel, generate_source, generator_modules, scene_key
+from imu_emulator.codegen.generate import CODEGEN_VERSION, generate_source
+from imu_emulator.codegen.plan import EffectPlan
+from imu_emulator.runtime.cache import generator_modules, scene_key
+from imu_emulator.runtime.kernels import compile_kernel
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"
@@ -111,12 +115,66 @@ def test_imu_names_and_seed_do_not_reach_the_source():
 
 def test_generator_modules_are_found_by_their_imports():
     names = {p.relative_to(ROOT).as_posix() for p in generator_modules()}
-    for expected in ("kernel.py", "motion.py", "expressions.py", "rotations.py", "phase.py", "counter_rng.py",
-                     "scene.py", "units.py", "effects/__init__.py", "effects/_record.py",
-                     *(f"effects/{name}.py" for name in EFFECTS)):
+    for expected in ("codegen/generate.py", "codegen/plan.py", "codegen/signature.py", "codegen/template.py",
+                     "codegen/increments.py", "motion/code.py", "numerics/expressions.py", "geo/rotations.py",
+                     "numerics/phase.py", "numerics/counter_rng.py", "scene/model.py", "scene/units.py",
+                     "effects/__init__.py", "effects/_record.py", *(f"effects/{name}.py" for name in EFFECTS)):
         assert f"imu_emulator/{expected}" in names, expected
-    # how the kernel's machine code is written and loaded is part of the entry too
-    assert {"imu_emulator.native/objects.py", "imu_emulator.native/lazy.py"} <= names
+    # how the kernel is compiled, and its machine code written and loaded, is part of the entry too
+    assert {"imu_emulator/runtime/kernels.py", "imu_emulator/runtime/cache.py",
+            "imu_emulator/native/objects.py", "imu_emulator/native/lazy.py"} <= names
+    assert "imu_emulator/runtime/simulation.py" not in names     # how blocks are driven does not shape the source
+
+
+def _explained_scenes():
+    """Every effect on (navigation-stage streams, state blocks, counters, effect arrays), two IMUs; more IMUs than
+    stay inline (each IMU a function of its own); and the examples."""
+    from imu_emulator import load_scene
+    base = {param: _sample_value(param, 1.0) for _, param in all_params()}
+    everything = {"scene": {"rate_hz": 100, "duration_s": 0.5, "origin": {"lat_deg": 47.0, "lon_deg": 8.0}},
+                  "trajectory": {"x": "0.5*t*t", "y": "sin(t)", "z": "0"},
+                  "attitude": {"roll": "0.1*t", "pitch": "0", "yaw": "0.2*t"},
+                  "imu": [_imu_with(base), {**_imu_with(base), "name": "b"}],
+                  "effects": {name: True for name in EFFECTS}}
+    many = {**everything, "imu": [{"name": f"i{m}", "gyro": {"noise_density": 1e-3}} for m in range(20)],
+            "effects": {"gravity": True, "noise": True}}
+    yield "every_effect", scene_from_dict(everything)
+    yield "many_imus", scene_from_dict(many)
+    for path in sorted(EXAMPLES.glob("*.toml")):
+        yield path.stem, load_scene(path)
+
+
+def _glossary(source: str, array: str) -> dict[int, str]:
+    """Index -> glossary line for `#   state[i]: ...` and `#   state[i..j]: ...` (keys likewise)."""
+    found = {}
+    for first, last, text in re.findall(rf"^#   {array}\[(\d+)(?:\.\.(\d+))?\]: (.*)$", source, re.M):
+        found.update({i: text for i in range(int(first), int(last or first) + 1)})
+    return found
+
+
+@pytest.mark.parametrize("truth", [False, True])
+def test_the_source_explains_its_slots_streams_and_effects(truth):
+    """The header and glossary name every state slot and random stream of the EffectPlan, with the effect that
+    asked for it, and cover every one the code reads; each effect that emits lines has its comment line."""
+    for name, scene in _explained_scenes():
+        plan = EffectPlan(scene)
+        source = generate_source(scene, True, truth)
+        code = "\n".join(line for line in source.splitlines() if not line.lstrip().startswith("#"))
+        slots, streams = _glossary(source, "state"), _glossary(source, "keys")
+        assert set(slots) == set(range(len(plan.slots))), name
+        assert set(streams) == set(range(len(plan.streams))), name
+        assert {int(i) for i in re.findall(r"\bstate\[(\d+)\]", code)} <= set(slots), name
+        assert {int(i) for i in re.findall(r"\bkeys\[(\d+)\]", code)} <= set(streams), name
+        for i, (var, _, _) in enumerate(plan.slots):
+            assert f"effect {plan.slot_effects[i]}," in slots[i] and (var is None or var in slots[i]), (name, i)
+        for i, (_, stream) in enumerate(plan.streams):
+            assert f"stream {stream} " in streams[i] and streams[i].endswith(f"effect {plan.stream_effects[i]}")
+        header = source[: source.index("\nimport math")]
+        for effect in plan.active:
+            assert re.search(rf"^#   \d\. [^:]+: .*\b{effect.name}\b", header, re.M), (name, effect.name)
+            if effect.name in plan.emitted:
+                assert f"# effect {effect.name} (" in source, (name, effect.name)
+        assert f"(CODEGEN_VERSION {CODEGEN_VERSION})" in header
 
 
 @pytest.mark.parametrize("scene_path", sorted(EXAMPLES.glob("*.toml")), ids=lambda p: p.stem)
@@ -192,7 +250,7 @@ def test_a_corrupt_entry_is_regenerated(fresh_cache, damage):
     kernel_module._loaded.clear()
     again = _run(scene)
     np.testing.assert_array_equal(again.accel, expected.accel)
-    assert kernel_module._valid_entry(source_file)
+    assert cache.valid_entry(source_file)
     assert _entries(fresh_cache) == [scene_key(scene, True, False)]
 
 

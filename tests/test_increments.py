@@ -19,7 +19,7 @@ from scipy.spatial.transform import Rotation
 
 from imu_emulator import scene_from_dict
 from imu_emulator.codegen.increments import DEFAULT_NODES, nodes
-from imu_emulator.codegen.kernel import generate_source
+from imu_emulator.codegen.generate import generate_source
 from imu_emulator.runtime.simulation import Simulation
 
 G0 = sympy.Rational("9.80665")
@@ -157,7 +157,7 @@ def test_kernel_without_increments_is_unchanged_and_with_them_names_the_outputs(
     assert "out_dtheta" not in off and "inc_" not in off
     assert "out_dtheta, out_dvel" in on and f"for q in range({DEFAULT_NODES})" in on
     # the module that writes those lines is part of the cache key
-    from imu_emulator.codegen.kernel import generator_modules
+    from imu_emulator.runtime.cache import generator_modules
     assert any(path.name == "increments.py" for path in generator_modules())
 
 

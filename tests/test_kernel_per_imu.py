@@ -11,7 +11,7 @@ import pytest
 
 from imu_emulator import scene_from_dict
 from imu_emulator.effects import EFFECTS, all_params
-from imu_emulator.codegen.kernel import INLINE_IMUS, generate_source
+from imu_emulator.codegen.generate import INLINE_IMUS, generate_source
 from imu_emulator.runtime.simulation import Simulation
 
 sys.path.insert(0, str(Path(__file__).parent))

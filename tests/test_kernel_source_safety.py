@@ -12,7 +12,7 @@ import tokenize
 import pytest
 
 from imu_emulator import SceneError, scene_from_dict
-from imu_emulator.codegen.kernel import generate_source
+from imu_emulator.codegen.generate import generate_source
 from imu_emulator.runtime.simulation import Simulation
 
 EXPLOIT = 'a\nimport os; os.system("touch PWNED")\nif 1:\n    if 1:'

@@ -160,7 +160,7 @@ def test_tangent_attitude_standing_still_holds_heading_and_stays_finite():
 
 
 def test_effects_that_are_off_are_absent_from_generated_code():
-    from imu_emulator.codegen.kernel import generate_source
+    from imu_emulator.codegen.generate import generate_source
     on = circle_scene("ENU", 100)
     off = scene_from_dict({"scene": {"rate_hz": 100, "duration_s": 1.0},
                            "trajectory": {"shape": "circle", "radius_m": 5.0, "frequency_hz": 1.0},

@@ -11,10 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from imu_emulator.codegen import kernel as kernel_module
+from imu_emulator.runtime import kernels as kernel_module
 from imu_emulator import load_scene, scene_from_dict
 from imu_emulator.native import objects as native
 from imu_emulator.effects import EFFECTS, all_params
+from imu_emulator.codegen.signature import trial_arguments
 from imu_emulator.runtime.simulation import Simulation
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -125,7 +126,7 @@ def test_damaged_machine_code_is_compiled_again(cache, damage):
 def test_native_kernel_refuses_wrong_arguments(cache):
     scene = load_scene(ROOT / "examples" / "circle.toml")
     kernel = Simulation(scene).kernel
-    args = list(Simulation.trial_args(scene, True, False))
+    args = list(trial_arguments(scene, True, False))
     with pytest.raises(TypeError, match="takes"):
         kernel(*args[:-1])
     args[8] = np.zeros((1, 0))      # out_acc of the wrong rank

@@ -37,7 +37,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from imu_emulator.codegen import kernel as kernel_module  # noqa: E402
+from imu_emulator.runtime import kernels as kernel_module  # noqa: E402
 from imu_emulator import scene_from_dict  # noqa: E402
 from imu_emulator.motion.attitude_rates import dcm_rate, euler_rate, increment_rate  # noqa: E402
 from imu_emulator.numerics.derivatives import wrap_angles  # noqa: E402

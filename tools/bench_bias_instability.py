@@ -23,7 +23,7 @@ sys.path.insert(0, str(ROOT / "tools"))
 
 from bench_effects import FULL, circle, interleave, report  # noqa: E402
 
-from imu_emulator.codegen import kernel  # noqa: E402
+from imu_emulator.runtime import kernels  # noqa: E402
 from imu_emulator.effects import bias_instability  # noqa: E402
 from imu_emulator.runtime.simulation import Simulation  # noqa: E402
 
@@ -34,7 +34,7 @@ def build(effects, steps: int, seconds: float, cache: Path):
     """A Simulation whose kernel was generated with FLICKER_STEPS_PER_TAU = steps."""
     shipped = bias_instability.FLICKER_STEPS_PER_TAU
     os.environ["IMU_EMULATOR_CACHE"] = str(cache / f"steps{steps}")
-    kernel._loaded.clear()
+    kernels._loaded.clear()
     bias_instability.FLICKER_STEPS_PER_TAU = steps
     try:
         scene = circle(effects, seconds)

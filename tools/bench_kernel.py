@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from imu_emulator import load_scene, scene_from_dict  # noqa: E402
-from imu_emulator.codegen.kernel import generate_source  # noqa: E402
+from imu_emulator.codegen.generate import generate_source  # noqa: E402
 from imu_emulator.runtime.simulation import Simulation  # noqa: E402
 
 BLOCK = 65536

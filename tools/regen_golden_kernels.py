@@ -11,7 +11,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from imu_emulator.codegen.kernel import generate_source  # noqa: E402
+from imu_emulator.codegen.generate import generate_source  # noqa: E402
 from imu_emulator.scene.load import load_scene  # noqa: E402
 
 GOLDEN = ROOT / "tests" / "data" / "kernels"

@@ -110,9 +110,10 @@ def realize(task: Task) -> dict:
 
 
 def _write(task: Task, path: Path, identity: dict) -> float | None:
-    from imu_emulator.codegen.kernel import is_loaded, scene_key
     from imu_emulator.output.formats import open_writer
     from imu_emulator.output.formats.parquet import run_metadata
+    from imu_emulator.runtime.cache import scene_key
+    from imu_emulator.runtime.kernels import is_loaded
     from imu_emulator.runtime.simulation import Simulation
     scene = task.build()
     key = scene_key(scene, attitude=False, truth=task.truth)

@@ -60,7 +60,7 @@ def _describe_part(part) -> str:
 
 
 def cmd_check(args) -> int:
-    from imu_emulator.codegen import kernel
+    from imu_emulator.runtime import kernels
     from imu_emulator.effects import EFFECTS
     from imu_emulator.scene.load import load_scene
     from imu_emulator.live.budget import link_budget
@@ -123,7 +123,7 @@ def cmd_check(args) -> int:
 
     for command, attitude, truth in (("generate", False, False), ("generate --truth", False, True),
                                      ("stream", True, False)):
-        path, compiled = kernel.cached_kernel(scene, attitude=attitude, truth=truth)
+        path, compiled = kernels.cached_kernel(scene, attitude=attitude, truth=truth)
         state = "compiled in the cache" if compiled else "not compiled yet (the first run compiles it)"
         print(f"  kernel     {command}: {state} ({path.name})")
     if problems:

@@ -47,7 +47,7 @@ def _generate(args, scene, stopped) -> int:
 
     # The output file is created before the kernel compiles: an unwritable path fails at once. It appears
     # at its path only when every block is written (a failed run leaves nothing behind).
-    from imu_emulator.codegen.kernel import EffectPlan
+    from imu_emulator.codegen.plan import EffectPlan
     bias_truth = EffectPlan(scene).bias_truth    # the realized-bias columns, known before compiling
     from imu_emulator.scene.earth import model_on
     from imu_emulator.effects.noise import variances

@@ -28,7 +28,7 @@ def cmd_kernel(args) -> int:
         return 0
     if not args.scene:
         raise ImuEmulatorError("kernel: give a scene file (or --effects)")
-    from imu_emulator.codegen.kernel import generate_source
+    from imu_emulator.codegen.generate import generate_source
     from imu_emulator.scene.load import load_scene
     scene = load_scene(args.scene)
     for warning in scene.warnings:

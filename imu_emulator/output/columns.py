@@ -123,7 +123,7 @@ class Layout:
 
 def scene_layout(scene, truth: bool, increments: bool = False) -> Layout:
     """The layout of `generate`'s output of a scene (known before compiling: the size estimates use it)."""
-    from imu_emulator.codegen.kernel import EffectPlan
+    from imu_emulator.codegen.plan import EffectPlan
     from imu_emulator.scene.earth import model_on
     return Layout(truth=truth, bias_truth=truth and EffectPlan(scene).bias_truth,
                   temperature="temperature" in scene.effects, increments=increments,

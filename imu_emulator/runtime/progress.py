@@ -43,7 +43,7 @@ class CompileStatus:
     the progress bar, silent when stderr is not a terminal (logs, pipes, tests: errors stay one line) or --quiet."""
 
     def __init__(self, scene, attitude: bool, truth: bool, quiet: bool = False, increments: int = 0):
-        from imu_emulator.codegen.kernel import cached_kernel
+        from imu_emulator.runtime.kernels import cached_kernel
         self.active = (not quiet and sys.stderr.isatty()
                        and not cached_kernel(scene, attitude=attitude, truth=truth, increments=increments)[1])
         self.label = f"compiling kernel for scene {scene.path or '<in code>'} (first run) …"

@@ -13,16 +13,13 @@ import numpy as np
 
 from imu_emulator.errors import DataError
 from imu_emulator.codegen.increments import check_nodes
-from imu_emulator.codegen.kernel import EffectPlan, compile_kernel
+from imu_emulator.codegen.plan import EffectPlan
+from imu_emulator.codegen.signature import BIAS_TRUTH_KEYS, EMPTY3, TRUTH_KEYS, arguments
+from imu_emulator.runtime.kernels import compile_kernel
 from imu_emulator.runtime.memory import check_memory
 from imu_emulator.runtime.samples import SampleBlock
 from imu_emulator.scene.model import SampledData, Scene
 
-TRUTH_KEYS = ("position", "velocity", "euler", "omega_body", "alpha_body")
-#: per-IMU truth (n_imu, n, 3), present when an effect adds a bias: the realized bias of each triad
-BIAS_TRUTH_KEYS = ("accel_bias", "gyro_bias")
-_EMPTY3 = np.zeros((0, 0, 0))
-_EMPTY2 = np.zeros((0, 0))
 _REPLAY_BLOCK = 65536
 
 
@@ -72,27 +69,6 @@ class Simulation:
         for slot, m, label in self._plan.counters:
             found.setdefault(self.scene.imus[m].name, {})[label] = int(self._state[slot])
         return found
-
-    @staticmethod
-    def trial(kernel, scene: Scene, attitude: bool, truth: bool, increments: int = 0) -> None:
-        """Call a freshly loaded kernel on no sample with the argument types `block` uses (numba compiles on
-        the first call; the cache publishes only compiled kernels)."""
-        kernel(*Simulation.trial_args(scene, attitude, truth, increments))
-
-    @staticmethod
-    def trial_args(scene: Scene, attitude: bool, truth: bool, increments: int = 0) -> tuple:
-        """Arguments for no sample, of the types `block` passes (the machine-code export is typed from them)."""
-        n_imu = len(scene.imus)
-        plan = EffectPlan(scene)
-        sampled = isinstance(scene.trajectory, SampledData)
-        empty = np.zeros((1, 0, 3))
-        return (np.int64(0), np.int64(0), np.int64(0), empty if sampled else _EMPTY3,
-                empty if isinstance(scene.attitude, SampledData) else _EMPTY3, np.zeros(4),
-                plan.keys(0), plan.initial_state(0), np.zeros((n_imu, 0, 3)), np.zeros((n_imu, 0, 3)),
-                np.zeros((n_imu, 0, 4)) if attitude else _EMPTY3,
-                *([np.zeros((0, 3))] * 5 if truth else [_EMPTY2] * 5),
-                *([np.zeros((n_imu, 0, 3))] * 2 if truth and plan.bias_truth else [_EMPTY3] * 2),
-                *([np.zeros((n_imu, 0, 3))] * 2 if increments else []))
 
     @staticmethod
     def _series(part, order: int, where: str):
@@ -169,12 +145,11 @@ class Simulation:
     def _call(self, k0: int, n: int, s0: int, out: SampleBlock) -> None:
         mot = self._evaluate(self._position, k0, n, s0)
         att = self._evaluate(self._euler, k0, n, s0)
-        quat = out.quat if self.attitude else _EMPTY3
-        tr = [out.truth[k] for k in TRUTH_KEYS] if self.truth else [_EMPTY2] * 5
-        bias = [out.truth[k] for k in BIAS_TRUTH_KEYS] if self.bias_truth else [_EMPTY3] * 2
-        increments = [out.dtheta, out.dvel] if self.increments else []
-        self.kernel(np.int64(k0), np.int64(n), np.int64(s0), mot, att, self._hold, self._keys, self._state,
-                    out.accel, out.gyro, quat, *tr, *bias, *increments)
+        self.kernel(*arguments(k0, n, s0, mot, att, self._hold, self._keys, self._state, out.accel, out.gyro,
+                               quat=out.quat if self.attitude else None,
+                               truth=[out.truth[k] for k in TRUTH_KEYS] if self.truth else None,
+                               bias=[out.truth[k] for k in BIAS_TRUTH_KEYS] if self.bias_truth else None,
+                               increments=[out.dtheta, out.dvel] if self.increments else None))
         self._next = s0 + n
 
     def _replay_to(self, s0: int) -> None:
@@ -190,7 +165,7 @@ class Simulation:
 
     def _evaluate(self, series, k0: int, n: int, s0: int):
         if series is None:
-            return _EMPTY3
+            return EMPTY3
         fitted, order = series
         # Relative to the data's first stamp: an absolute t = 1e7 s carries 1.9e-9 s of rounding.
         tau = (self.scene.t0_s - fitted.t_start) + (k0 + np.arange(n, dtype=np.float64)) / self.scene.rate_hz

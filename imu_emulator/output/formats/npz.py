@@ -73,7 +73,7 @@ class NpzWriter(FinishOnExit):
 def estimated_bytes(scene, truth: bool, increments: bool = False) -> int:
     """NpzWriter's arrays: (count of numbers per sample, arrays) summed, as float64."""
     from imu_emulator.scene.earth import model_on
-    from imu_emulator.codegen.kernel import EffectPlan
+    from imu_emulator.codegen.plan import EffectPlan
     from imu_emulator.runtime.simulation import TRUTH_KEYS
     n, n_imu = scene.n_samples, len(scene.imus)
     parts = [(1, 1), (6 * n_imu, 2)]                                  # t; accel, gyro

@@ -41,7 +41,7 @@ def versions() -> dict[str, str]:
 
 def run_metadata(scene, **extra) -> dict:
     """What a Parquet file records about the run that made it."""
-    from imu_emulator.codegen.kernel import scene_digest
+    from imu_emulator.scene.digest import scene_digest
     return {"scene_sha256": scene_digest(scene), "scene_path": scene.path, "seed": scene.seed,
             "rate_hz": scene.rate_hz, "t0_s": scene.t0_s, "n_samples": scene.n_samples,
             "imu_names": list(scene.imu_names), "versions": dict(versions()), **extra}

@@ -1,0 +1,112 @@
+"""What a scene's effects contribute to its kernel: their lines per stage, the state slots carried across blocks,
+the random streams and the module-level constants. The generator (imu_emulator.codegen.generate) writes the
+source from it; the Simulation builds it too, to lay out the state array and the stream keys the same way."""
+from __future__ import annotations
+
+import numpy as np
+
+from imu_emulator.codegen.explain import effect_comment
+from imu_emulator.effects import EFFECTS, FRAME_ORDERS, EmitContext, Stage
+from imu_emulator.scene.model import Scene
+
+
+class EffectPlan:
+    """What the scene's effects contribute, built without sympy: the Simulation builds it too, to lay out the
+    state array and the stream keys the same way the source does."""
+
+    def __init__(self, scene: Scene):
+        self.scene = scene
+        self.active = [e for e in EFFECTS.values() if e.name in scene.effects]
+        self.slots: list[tuple[str, int, object]] = []    # (variable, imu, initial(draw))
+        self.streams: list[tuple[int, str]] = []          # (imu, name)
+        self.counters: list[tuple[int, int, str]] = []    # (state slot, imu, label)
+        self.constants: dict[str, tuple[float, ...]] = {}  # module-level arrays (numba freezes them)
+        self.axes_turns: dict[int, list[tuple[list[str], tuple]]] = {}  # imu -> [(lines, quaternion)], body stage
+        # which effect asked for each slot, stream and constant, and which emitted lines (the source's glossary)
+        self.slot_effects: list[str] = []
+        self.stream_effects: list[str] = []
+        self.constant_effects: dict[str, str] = {}
+        self.emitted: set[str] = set()
+        self._effect = None     # the effect whose emit is running
+        navigation = [e for e in self.active if e.stage == Stage.NAVIGATION]
+        self.clock = self._emit([e for e in navigation if e.sample_clock], None, None)
+        self.navigation = self._emit([e for e in navigation if not e.sample_clock], None, None)
+        self.nav_rate = any(e.nav_rate for e in self.active if e.stage == Stage.NAVIGATION)
+        self.per_imu = []
+        for m, imu in enumerate(scene.imus):
+            sensor = [e for e in self.active if e.stage == Stage.SENSOR]
+            self.per_imu.append({
+                "body": self._lines(Stage.BODY, imu, m),
+                "frame": self._emit([e for e in sensor if e.order < FRAME_ORDERS], imu, m),
+                "sensor": self._emit([e for e in sensor if e.order >= FRAME_ORDERS], imu, m),
+                "output": self._lines(Stage.OUTPUT, imu, m),
+            })
+        self.bias_truth = any("bgx +=" in line or "bax +=" in line
+                              for stages in self.per_imu for line in stages["sensor"])
+
+    def _lines(self, stage: Stage, imu, m) -> list[str]:
+        return self._emit([e for e in self.active if e.stage == stage], imu, m)
+
+    def _emit(self, effects, imu, m) -> list[str]:
+        lines = []
+        for effect in effects:
+            self._effect = effect.name
+            emitted = effect.emit(EmitContext(self, effect, self.scene, imu, m))
+            if emitted:
+                self.emitted.add(effect.name)
+                lines += [effect_comment(effect)] + emitted
+        self._effect = None
+        return lines
+
+    def add_state(self, var: str, m: int, initial) -> str:
+        self.slots.append((var, m, initial))
+        self.slot_effects.append(self._effect)
+        return var
+
+    def add_state_block(self, m: int, initials) -> int:
+        """Slots the kernel reads as state[base + i] (no local variable): returns base."""
+        base = len(self.slots)
+        self.slots += [(None, m, initial) for initial in initials]
+        self.slot_effects += [self._effect] * (len(self.slots) - base)
+        return base
+
+    def add_constant(self, name: str, values) -> str:
+        self.constants[name] = tuple(float(v) for v in values)
+        self.constant_effects[name] = self._effect
+        return name
+
+    def add_axes_turn(self, m: int, lines: list[str], quaternion: tuple) -> None:
+        self.axes_turns.setdefault(m, []).append((lines, quaternion))
+
+    def add_counter(self, var: str, m: int, label: str) -> str:
+        self.counters.append((len(self.slots), m, label))
+        return self.add_state(var, m, lambda draw: 0.0)
+
+    def add_stream(self, m: int, name: str) -> int:
+        if (m, name) not in self.streams:
+            self.streams.append((m, name))
+            self.stream_effects.append(self._effect)
+        return self.streams.index((m, name))
+
+    def keys(self, seed: int) -> np.ndarray:
+        from imu_emulator.numerics.counter_rng import stream_key
+        # the navigation stage's streams belong to no IMU: index -1
+        return np.array([stream_key(seed, -1 if m is None else m, name) for m, name in self.streams] or [0],
+                        dtype=np.uint64)
+
+    def initial_state(self, seed: int) -> np.ndarray:
+        """Every state slot's value at the run's start (random draws keyed on the seed, never on the block)."""
+        from imu_emulator.numerics.counter_rng import normals, stream_key
+
+        drawn: dict = {}   # the flicker sums' starts redraw their poles' values: each draw costs a hash and a call
+
+        def draw(m, stream, counter):
+            if (m, stream) not in drawn or counter >= len(drawn[m, stream]):
+                key = np.uint64(stream_key(seed, m, f"init.{stream}"))
+                drawn[m, stream] = normals(key, 0, max(2, counter + 1))   # slots draw counters 0 and 1
+            return float(drawn[m, stream][counter])
+
+        def draw_for(m):
+            return lambda stream, counter: draw(m, stream, counter)
+        return np.array([initial(draw_for(m)) for _, m, initial in self.slots] or [0.0])
+

@@ -1,0 +1,112 @@
+"""The kernel cache on disk: where it lives, the key of an entry, and an entry's checksum.
+
+An entry is cache_dir()/<key>/: the generated source kernel.py (its first line the checksum of the rest), its
+machine code kernel.o (imu_emulator.native.objects: a warm run loads it without importing numba) and numba's
+__pycache__ beside it. The key hashes the whole validated scene (imu_emulator.scene.digest), the outputs and the
+bytes of every module of the generator; imu_emulator.runtime.kernels publishes an entry (directory rename) only
+after it compiled, and removes and regenerates an entry that fails its checksum or its compile.
+"""
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import os
+import re
+import shutil
+import sys
+from pathlib import Path
+
+from imu_emulator.codegen.generate import CODEGEN_VERSION
+from imu_emulator.codegen.signature import RUNTIME_IMPORTS
+from imu_emulator.effects import EFFECTS
+from imu_emulator.scene.digest import KEY_EXCLUDES, canonical  # noqa: F401 (KEY_EXCLUDES: what the key leaves out)
+from imu_emulator.scene.model import Scene
+
+
+def cache_dir() -> Path:
+    root = os.environ.get("IMU_EMULATOR_CACHE")
+    path = Path(root) if root else Path.home() / ".cache" / "imu-emulator"
+    return path / "kernels"
+
+
+def generator_modules() -> list[Path]:
+    """Every module the generated source depends on: found by following the imports (static, within the
+    package) from every module of the generator (imu_emulator.codegen), from how an entry is compiled, exported
+    and loaded (imu_emulator.runtime.kernels, which imports this module), every effect module, and the modules
+    the generated source imports."""
+    package_root = Path(__file__).resolve().parents[2]     # the folder holding imu_emulator/
+    package = package_root / "imu_emulator"
+    start = ["imu_emulator.codegen", *(f"imu_emulator.codegen.{p.stem}" for p in (package / "codegen").glob("*.py"))]
+    start += ["imu_emulator.runtime.kernels", *RUNTIME_IMPORTS, *(f"imu_emulator.effects.{n}" for n in EFFECTS)]
+    start += [f"imu_emulator.effects.{p.stem}" for p in (package / "effects").glob("_*.py")]
+    start += ["imu_emulator.native.objects", "imu_emulator.native.lazy"]   # how its machine code is written and run
+    seen: dict[str, Path] = {}
+    todo = list(start)
+    while todo:
+        name = todo.pop()
+        if name in seen:
+            continue
+        path = package_root / Path(*name.split("."))
+        path = path / "__init__.py" if path.is_dir() else path.with_suffix(".py")
+        if not path.exists():
+            continue
+        seen[name] = path
+        text = path.read_text()
+        for module, names in _FROM_IMPORT.findall(text):
+            todo.append(module)
+            todo += [f"{module}.{n.split()[0]}" for n in _NAME.findall(names)]
+        todo += _IMPORT.findall(text)
+    return sorted(set(seen.values()))     # a package is found as itself and as its __init__
+
+
+# Imports of the package, found by pattern rather than by parsing (parsing the 37 modules cost 90 ms of every
+# start-up). A pattern matching an import inside a string only adds a module to the key: safe.
+_FROM_IMPORT = re.compile(r"^[ \t]*from[ \t]+(imu_emulator[\w.]*)[ \t]+import[ \t]+(\([^)]*\)|[^\n]*)", re.M)
+_NAME = re.compile(r"\b(\w+(?:[ \t]+as[ \t]+\w+)?)")
+_IMPORT = re.compile(r"^[ \t]*import[ \t]+(imu_emulator[\w.]*)", re.M)
+
+
+@functools.lru_cache(maxsize=1)
+def _code_fingerprint() -> str:
+    """Read once per process: keying a scene costs microseconds (Monte Carlo builds many Simulations)."""
+    h = hashlib.sha256(CODEGEN_VERSION.encode())
+    for path in generator_modules():
+        h.update(path.name.encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()
+
+def scene_key(scene: Scene, attitude: bool, truth: bool, increments: int = 0) -> str:
+    """The whole validated scene (less KEY_EXCLUDES), the outputs and every generator module, hashed."""
+    outputs = [attitude, truth] + ([increments] if increments else [])
+    spec = {"scene": canonical(scene), "outputs": outputs, "code": _code_fingerprint(),
+            "python": list(sys.version_info[:2])}
+    return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:32]
+
+
+_CHECK = "# sha256 "
+
+
+def with_checksum(source: str) -> str:
+    """An entry's kernel.py: the checksum line, then the source."""
+    return _CHECK + hashlib.sha256(source.encode()).hexdigest() + "\n" + source
+
+
+def valid_entry(path: Path) -> bool:
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError):
+        return False
+    first, _, rest = text.partition("\n")
+    return first == _CHECK + hashlib.sha256(rest.encode()).hexdigest()
+
+
+def discard(directory: Path) -> None:
+    """Move aside, then delete: a reader never sees a half-deleted entry under the key's name."""
+    trash = directory.with_name(f".trash-{directory.name}-{os.getpid()}-{os.urandom(4).hex()}")
+    try:
+        os.rename(directory, trash)
+    except OSError:
+        return
+    shutil.rmtree(trash, ignore_errors=True)
+

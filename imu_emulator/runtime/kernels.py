@@ -1,0 +1,162 @@
+"""The compiled kernels this process holds: compile_kernel generates a scene's source (imu_emulator.codegen),
+publishes it in the cache (imu_emulator.runtime.cache) only once it compiled, and loads it as machine code
+without numba when the entry holds it (imu_emulator.native.objects), else through numba's dispatcher.
+"""
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import os
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from imu_emulator.codegen.generate import generate_source
+from imu_emulator.codegen.signature import RUNTIME_IMPORTS, trial, trial_arguments
+from imu_emulator.runtime.cache import cache_dir, discard, scene_key, valid_entry, with_checksum
+from imu_emulator.scene.model import Scene
+
+_loaded: dict[str, object] = {}
+NATIVE = "kernel.o"     # the entry's machine code (imu_emulator.native.objects), beside kernel.py
+
+
+def _module_name(key: str) -> str:
+    return f"imu_emulator_kernel_{key}"
+
+
+def _import(path: Path, key: str):
+    # numba's on-disk cache refers to the module by name when it reloads a compiled kernel.
+    spec = importlib.util.spec_from_file_location(_module_name(key), path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        sys.modules.pop(spec.name, None)
+        raise
+    return module
+
+
+def _trial_call(kernel, scene: Scene, attitude: bool, truth: bool, increments: int) -> None:
+    """Compile now (numba compiles on the first call) on one sample, with the argument types the Simulation
+    uses, so that an entry is only ever published compiled."""
+    trial(kernel, scene, attitude, truth, increments)
+
+
+def _export_native(module, scene: Scene, attitude: bool, truth: bool, increments: int, directory: Path) -> bool:
+    """Write the machine code of the generated `kernel_body` (compiled for the Simulation's argument types, plus
+    its scratch) to directory/NATIVE; False if this numba cannot (the entry then runs on numba's dispatcher)."""
+    from imu_emulator.native import objects as native
+    if not _native_enabled():
+        return False
+    scratch = [(module.N_PHASE, module.CHUNK)]
+    args = trial_arguments(scene, attitude, truth, increments) + tuple(np.empty(shape) for shape in scratch)
+    meta = {"scratch": scratch, "source": _source_check(directory)}
+    return native.export(module.kernel_body, args, directory / NATIVE, meta)
+
+
+def _native_enabled() -> bool:
+    """IMU_EMULATOR_NATIVE=0: numba's dispatcher only, nothing exported (an escape hatch, and the benchmarks'
+    comparison)."""
+    return os.environ.get("IMU_EMULATOR_NATIVE") != "0"
+
+
+def _source_check(directory: Path) -> str:
+    """The checksum line of the entry's source: the machine code names the source it was compiled from."""
+    with open(directory / "kernel.py") as f:
+        return f.readline().rstrip("\n")
+
+
+def _load_native(directory: Path, scene: Scene, attitude: bool, truth: bool, increments: int):
+    """The entry's kernel as machine code (no numba import), tried on no sample; None if there is none, it is
+    damaged or it was compiled from another source."""
+    from imu_emulator.native import objects as native
+    if not _native_enabled():
+        return None
+    loaded = native.load(directory / NATIVE)
+    if loaded is None or loaded[1].get("source") != _source_check(directory):
+        return None
+    _trial_call(loaded[0], scene, attitude, truth, increments)
+    return loaded[0]
+
+
+def _realize_runtime() -> None:
+    """The functions the generated source imports become numba dispatchers (imu_emulator.native.lazy) before numba
+    types a kernel that calls them."""
+    from imu_emulator.native import lazy as lazy_jit
+    for module in RUNTIME_IMPORTS:
+        importlib.import_module(module)
+    lazy_jit.realize()
+
+
+def _numba_kernel(path: Path, key: str, scene: Scene, attitude: bool, truth: bool, increments: int):
+    """The generated module's numba kernel (loaded from numba's cache beside it, or compiled), tried."""
+    _realize_runtime()
+    module = _import(path, key)
+    _trial_call(module.kernel, scene, attitude, truth, increments)
+    return module
+
+
+def compile_kernel(scene: Scene, attitude: bool = True, truth: bool = False, increments: int = 0):
+    """The kernel function for this scene's motion, effects and outputs (cached in memory and on disk).
+    Loaded as machine code without numba when the entry holds it (imu_emulator.native.objects), else numba's."""
+    key = scene_key(scene, attitude, truth, increments)
+    if key in _loaded:
+        return _loaded[key]
+    root = cache_dir()
+    root.mkdir(parents=True, exist_ok=True)
+    entry = root / key
+    if entry.exists():
+        try:
+            if not valid_entry(entry / "kernel.py"):
+                raise ValueError("checksum")
+            kernel = _load_native(entry, scene, attitude, truth, increments)
+            if kernel is None:   # no machine code, or damaged: numba's, and write the machine code again
+                module = _numba_kernel(entry / "kernel.py", key, scene, attitude, truth, increments)
+                kernel = module.kernel
+                if _export_native(module, scene, attitude, truth, increments, entry):
+                    kernel = _load_native(entry, scene, attitude, truth, increments) or kernel
+            _loaded[key] = kernel
+            return kernel
+        except Exception:   # truncated, garbage or not compiling: regenerate (never trust it again)
+            sys.modules.pop(_module_name(key), None)
+            discard(entry)
+    _realize_runtime()
+    source = generate_source(scene, attitude, truth, increments)
+    staging = Path(tempfile.mkdtemp(prefix=f".tmp-{key}-", dir=root))
+    kernel = None
+    try:
+        (staging / "kernel.py").write_text(with_checksum(source))
+        module = _import(staging / "kernel.py", key)
+        if _export_native(module, scene, attitude, truth, increments, staging):   # compiles kernel_body once
+            kernel = _load_native(staging, scene, attitude, truth, increments)
+        if kernel is None:
+            _trial_call(module.kernel, scene, attitude, truth, increments)
+        try:
+            os.rename(staging, entry)    # atomic publish; fails if another process published first
+        except OSError:
+            pass                         # theirs is as good as ours: same key, same source
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+        sys.modules.pop(_module_name(key), None)
+    if kernel is None:
+        # Load from the published path, so numba's cache index lives beside the entry, not in the staging dir.
+        kernel = _import(entry / "kernel.py", key).kernel
+    _loaded[key] = kernel
+    return kernel
+
+
+def is_loaded(scene: Scene, attitude: bool = True, truth: bool = False, increments: int = 0) -> bool:
+    """Whether this process has this scene's kernel loaded already (compile_kernel returns it at once)."""
+    return scene_key(scene, attitude, truth, increments) in _loaded
+
+
+def cached_kernel(scene: Scene, attitude: bool = True, truth: bool = False, increments: int = 0) -> tuple[Path, bool]:
+    """Where this scene's kernel lives in the cache, and whether it is there compiled already (numba's index
+    beside it), for `check` and the first-run status line; it generates and compiles nothing."""
+    entry = cache_dir() / scene_key(scene, attitude, truth, increments)
+    return entry, (entry / "kernel.py").exists() and ((entry / NATIVE).exists()
+                                                      or any((entry / "__pycache__").glob("*.nbi")))
