@@ -20,7 +20,10 @@ from imu_emulator.codegen.signature import ARG_NOTES, ARGS, RUNTIME_IMPORTS, TRU
 from imu_emulator.codegen.template import CHUNK, IMU_FRAME_TEMPLATE, KERNEL_TEMPLATE, PER_IMU_TEMPLATE, fill
 from imu_emulator.effects import EFFECTS, AXES, EmitContext, TRIADS
 from imu_emulator.effects.mounting import rotation as mounting_rotation
-from imu_emulator.scene.model import Scene
+# From the package, not scene.model: the cache key's fingerprint follows this module's imports, and the scene's
+# loaders (units, presets, shapes, sources) decide the values a kernel is generated from, as they did when they
+# were one module.
+from imu_emulator.scene import Scene
 
 CODEGEN_VERSION = "2"
 EPS_SPEED = 1e-6     # m/s: below this the body is standing still for tangent attitude
