@@ -24,7 +24,7 @@ class Stage(IntEnum):
 STAGE_TITLES = {Stage.NAVIGATION: "navigation frame", Stage.BODY: "body frame at the IMU",
                 Stage.SENSOR: "sensor frame", Stage.OUTPUT: "sensor output"}
 
-#: The variables each stage may read and update (the generated kernel's contract, see kernel.KERNEL_TEMPLATE).
+#: The variables each stage may read and update (the generated kernel's contract, see codegen.template.KERNEL_TEMPLATE).
 STAGE_CONTRACT = {
     Stage.NAVIGATION: (
         "reads  t (s), k (scene sample), s (run sample), px py pz, vx vy vz, ax ay az (navigation frame), "

@@ -193,7 +193,7 @@ class McapWriter(FinishOnExit):
     def _to_earth_rate(self, tr) -> np.ndarray:
         """What to add (in local NED) to the kernel's body rate w to get omega_eb. w is the rate w.r.t. the
         attitude's reference X less u, the part of X's rate that the named Earth effects add back
-        (earth_motion.reference_lines): X = local level turns at rho = omega_en over the Earth, ECEF not at
+        (motion.earth.reference_lines): X = local level turns at rho = omega_en over the Earth, ECEF not at
         all, ECI at -omega_ie; u holds rho with coriolis and, for ECI, omega_ie with earth_rate."""
         rho, w_ie = tr["transport_rate_ned"], tr["earth_rate_ned"]
         if self.attitude_reference == "local_level":
