@@ -1,7 +1,7 @@
 """CAN frame arrays (base.CLASSIC_FRAME_DTYPE, FD_FRAME_DTYPE) as the plain bytes compiled encoders write.
 
-Machine code (imu_emulator.native.objects) passes plain arrays only, so an encoder takes `frame_bytes(frames)`, a uint8 view
-with one row of the record's bytes per frame, and writes each field at its offset in the record (read from the
+Machine code (imu_emulator.native.objects) passes plain arrays only, so an encoder takes `frame_bytes(frames)`, a
+uint8 view with one row of the record's bytes per frame, and writes each field at its offset in the record (read from the
 dtype here, the same in both widths), little-endian as the dtype declares. A warm stream then never needs numba.
 """
 from __future__ import annotations

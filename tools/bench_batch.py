@@ -3,8 +3,8 @@ and a long `generate` to Parquet (wall time, peak RSS).
 
     .venv/bin/python tools/bench_batch.py [--runs 32] [--minutes 10] [--repeat 2] [--generate-hours 24]
 
-Batch: a one-IMU figure-eight scene with sensor noise and bias instability at 1 kHz; `imu_emulator.analysis.batch.run` on a LocalCluster
-(one thread per worker process) started before the clock starts. The first trial uses an empty kernel cache (its
+Batch: a one-IMU figure-eight scene with sensor noise and bias instability at 1 kHz; `imu_emulator.analysis.batch.run`
+on a LocalCluster (one thread per worker process) started before the clock starts. The first trial uses an empty kernel cache (its
 kernel loads are compiles); the trials alternate 1 and 2 workers so machine load falls on both alike. Wall time,
 and the CPU seconds the realizations took on the workers' threads (time.thread_time), are printed per trial.
 Generate: four IMUs at 1 kHz for --generate-hours to a Parquet file in --dir (deleted after; a 24 h run needs

@@ -14,7 +14,8 @@ def register(subparsers) -> None:
                                           "reference point and the IMUs marked, and per IMU specific force and "
                                           "angular rate against time. Needs the `plot` extra (matplotlib).")
     p.add_argument("source", metavar="SCENE|OUTPUT",
-                   help="scene file (.toml), or an output of `generate` (.parquet/.npz/.csv; --truth for the trajectory)")
+                   help="scene file (.toml), or an output of `generate` (.parquet/.npz/.csv; --truth for the "
+                        "trajectory)")
     p.add_argument("-o", "--output", help="PNG to write (default: SOURCE with .png)")
     p.set_defaults(func=cmd_plot)
 

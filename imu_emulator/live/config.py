@@ -63,8 +63,8 @@ def streams_from_tables(tables, imu_names, defaults: TargetOptions = TargetOptio
             if key in table:
                 value = table[key]
                 if not isinstance(value, kind) or (kind is int and (isinstance(value, bool) or value <= 0)):
-                    raise SceneError(f"{where}.{key}: expected {'a positive integer' if kind is int else kind.__name__}, "
-                                     f"got {value!r}")
+                    expected = "a positive integer" if kind is int else kind.__name__
+                    raise SceneError(f"{where}.{key}: expected {expected}, got {value!r}")
                 overrides[key] = value
         configs.append(StreamConfig(imu, table["format"], table["to"], dict(options), replace(defaults, **overrides),
                                     device))

@@ -27,7 +27,7 @@ MAX_ANGLE_DEG = 1e4            # mounting angles, initial heading
 MAX_TRACK_ANGLE_RAD = 1e9      # track angles may be unwrapped over long runs
 MAX_FREQUENCY_HZ = 1e6         # circle shape
 MAX_TIME_OFFSET_S = 1e6        # [[imu]] time_offset_s: a clock offset, not a second epoch
-MAX_IMUS = 256                 # beyond codegen.generate.INLINE_IMUS, an IMU is a kernel function: ~0.3 s CPU compile each
+MAX_IMUS = 256                 # beyond codegen.generate.INLINE_IMUS, an IMU is a kernel function: ~0.3 s CPU each
 
 #: plain-number limits of IMU parameters (the records' units), so no huge value reaches the kernel's literals
 BOUNDS = {"imu.lever_arm_m": (MAX_LEVER_ARM_M, " m"), "imu.mounting_rpy_deg": (MAX_ANGLE_DEG, " deg")}

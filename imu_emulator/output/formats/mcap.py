@@ -81,7 +81,8 @@ def ros_name(name: str) -> str:
 
 
 class McapWriter(FinishOnExit):
-    """Like every output writer (imu_emulator.output.base.Writer), the bag appears at its path only once it is complete."""
+    """Like every output writer (imu_emulator.output.base.Writer), the bag appears at its path only once it is
+    complete."""
 
     def __init__(self, path: str | Path, imu_names, truth: bool, covariances: dict | None = None,
                  earth_frame: str | None = None, attitude_reference: str = "local_level", effects=()):

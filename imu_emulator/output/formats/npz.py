@@ -136,4 +136,5 @@ def read_conventions(path: Path) -> list[str]:
 
 
 FORMAT = Format("NPZ", (".npz",), NpzWriter, estimated_bytes, order=20, margin=(0.99, 1.01),
-                description="an NPZ file", check=check_memory, read_columns=read_columns, read_conventions=read_conventions)
+                description="an NPZ file", check=check_memory, read_columns=read_columns,
+                read_conventions=read_conventions)
