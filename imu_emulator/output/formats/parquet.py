@@ -14,7 +14,6 @@ from __future__ import annotations
 import json
 import platform
 from functools import lru_cache
-from importlib import metadata as importlib_metadata
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +29,9 @@ METADATA_KEY = b"imu_emulator"
 @lru_cache(maxsize=1)
 def versions() -> dict[str, str]:
     """The versions whose code shaped the samples (read once per process: a batch writes many files)."""
+    # here, not at the top: importlib.metadata pulls in email, csv and zipfile, and every command that finds the
+    # output formats (check, generate) imports this module
+    from importlib import metadata as importlib_metadata
     found = {"python": platform.python_version()}
     for package in ("imu-emulator", "numpy", "numba", "pyarrow"):
         try:
