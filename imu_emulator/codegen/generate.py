@@ -166,10 +166,10 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
         imu_functions += function
         per_imu_lines.append(call)
     header = explain.header(plan, module=__name__, version=CODEGEN_VERSION, attitude=attitude, truth=truth,
-                            increments=increments, digest=explain.source_digest(scene, attitude, truth, increments))
+                            increments=increments)
     header += explain.glossary(plan, args=args, arg_notes=ARG_NOTES, motion_constants=motion.constants)
     load_state = ["# the state slots this loop keeps in local variables (the glossary names them)"] * bool(shared_slots)
-    return fill(
+    return explain.stamp(fill(
         KERNEL_TEMPLATE, header=header, imports=imports, eps_v2=repr(EPS_SPEED ** 2), chunk=CHUNK,
         constants=constants + [f"{name} = np.array({list(values)!r})" for name, values in plan.constants.items()],
         imu_functions=imu_functions, args=", ".join(args), increments=integrate,
@@ -177,7 +177,7 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
         store_state=[f"state[{i}] = {var}" for i, var in shared_slots],
         n_phase=max(n_phase, 1), phase_stage=phase_stage, t0=repr(float(scene.t0_s)), dt=repr(1.0 / scene.rate_hz),
         clock=plan.clock, clock_shift=f" + clk * {1.0 / scene.rate_hz!r}" if plan.clock else "",
-        motion=body, navigation=navigation, attitude=attitude_lines, per_imu=per_imu_lines, truth=truth_lines)
+        motion=body, navigation=navigation, attitude=attitude_lines, per_imu=per_imu_lines, truth=truth_lines))
 
 
 def _imu_function(m: int, lines: list[str], slots: list[tuple[int, str]], module_names: set[str]):
