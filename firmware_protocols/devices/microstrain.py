@@ -127,7 +127,9 @@ class MipDevice(Device):
     def _receive(self, data: bytes, now_ns: int) -> list:
         replies = []
         skipped = self._scanner.stats.skipped_bytes
-        for frame, ok in self._scanner.candidates(data):
+        for frame, ok, inside_bad in self._scanner.marked_candidates(data):
+            if not ok and inside_bad:
+                continue                            # its bytes count as skipped by the scanner
             if not ok:
                 # NACK the command it claims to be (a packet may begin inside it: the scanner hunts on)
                 first = frame[5] if len(frame) > 6 else 0
@@ -137,6 +139,9 @@ class MipDevice(Device):
             replies.append(self._command_packet(frame[2], frame[4:-2]))
         self.stats.ignored_bytes += self._scanner.stats.skipped_bytes - skipped
         return replies
+
+    def _drop_partial(self) -> int:
+        return self._scanner.drop_partial()
 
     def _command_packet(self, descriptor_set: int, payload: bytes) -> bytes:
         """The one reply packet of a command packet. Its payload holds 255 bytes (the length is a u8): a command
