@@ -105,7 +105,9 @@ def test_a_flood_of_mavlink_start_bytes_costs_time_linear_in_its_size(flood):
         # The flood's tail may look like the start of a long frame: a command hidden behind it is found once
         # that false frame's claimed length has arrived (the driver resending), as any MAVLink parser does.
         assert (511, 0) in _acks(device.receive(_command(105, 20_000) * 8))
-    assert cpu_ratio(run, flood * 32_768, flood * 131_072) < 8     # 4 for linear, 16 for quadratic
+    # The rescan was a memchr, so its quadratic term shows late: on 168021a this ratio measured 6.5-7.2, with
+    # the fix 3.9-4.2 (4 is linear); the bound sits between.
+    assert cpu_ratio(run, flood * 131_072, flood * 524_288) < 5.5
 
 
 # - MIP -
