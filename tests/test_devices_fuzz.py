@@ -119,8 +119,8 @@ def _extreme_float(rng):
 def _mavlink_command(rng) -> bytes:
     from pymavlink.dialects.v20 import common as mavlink2
     mav = mavlink2.MAVLink(None, srcSystem=int(rng.integers(256)), srcComponent=int(rng.integers(256)))
-    command = int(rng.choice([510, 511, 512, 400, int(rng.integers(65536))]))
-    targets = [int(rng.choice([0, 1, int(rng.integers(256))])) for _ in range(2)]
+    command = int(rng.choice([510, 511, 511, 512, 512, 400, int(rng.integers(65536))]))
+    targets = [int(rng.choice([0, 1, 1, 1, int(rng.integers(256))])) for _ in range(2)]   # mostly ours
     params = [_extreme_float(rng) for _ in range(7)]
     return mav.command_long_encode(*targets, command, int(rng.integers(256)), *params).pack(mav)
 

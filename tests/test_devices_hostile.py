@@ -180,12 +180,13 @@ def test_a_command_cut_by_a_new_one_is_still_answered_as_before():
     assert [r.split(b",")[0] for r in replies] == [b"$VNERR", b"$VNRRG"]
 
 
-@pytest.mark.parametrize("flood", [b"$VNRRG,", b"$", b"$VNRRG,01*XX"])
+@pytest.mark.parametrize("flood", [b"$VNRRG,", b"$"])
 def test_a_flood_of_vectornav_lines_costs_time_linear_in_its_size(flood):
-    """On 168021a `$VNRRG,` x 128 KiB took 42 s: each line searched the whole buffer for CR and LF."""
+    """On 168021a `$VNRRG,` x 128 KiB took 42 s: each line searched the whole buffer for CR and LF (a memchr,
+    so the quadratic term shows late: this ratio measured 7.6 there, 4.0 with the fix; 4 is linear)."""
     def run(data):
         firmware_protocols.create_device("vectornav-binary", 100.0).receive(data)
-    assert cpu_ratio(run, flood * 8_192, flood * 32_768) < 8
+    assert cpu_ratio(run, flood * 32_768, flood * 131_072) < 5.5
 
 
 # - the reply path -
