@@ -55,7 +55,8 @@ def _acks(replies):
 
 def _imu_messages(device, samples, n=4):
     mav = _gcs()
-    return sum(m.get_type() == "HIGHRES_IMU" for i in range(n) for m in mav.parse_buffer(device.output(samples, i)) or [])
+    return sum(m.get_type() == "HIGHRES_IMU"
+               for i in range(n) for m in mav.parse_buffer(device.output(samples, i)) or [])
 
 
 @pytest.mark.parametrize("msgid, interval", [
