@@ -39,7 +39,8 @@ VN-300 sequence (`$VNWRG,77,3,80,49,0003,26B8,0018`) gets its GNSS packet.
 
 Errors (`$VNERR,<2 digits>`): 03 bad checksum (or none), 04 unknown command, 05 / 06 too few / too many
 parameters, 07 invalid parameter, 08 invalid register (unknown, or read-only on write). Input that is not a
-command line is ignored and counted; a line cut by a new `$` is answered as what it is (usually 03).
+command line is ignored and counted; a line cut by a new `$` is answered as what it is (usually 03), but one
+physical line (up to CR or LF) gets at most one error reply: a flood of `$` is answered once, not per byte.
 """
 from __future__ import annotations
 
