@@ -17,7 +17,9 @@ MAV_RESULT ACCEPTED 0 / DENIED 2 / UNSUPPORTED 3).
 - SET_MESSAGE_INTERVAL for the streamed IMU message sets a divider of the sample rate: the interval is
   rounded to the nearest whole number of sample periods (at least one), since samples exist only at the
   scene's rate; -1 stops the message, 0 restores every sample. For HEARTBEAT it sets the heartbeat
-  period the same way. Other message ids: DENIED (we cannot stream them).
+  period the same way. Other message ids: DENIED (we cannot stream them). So are the values common.xml does
+  not allow: a message id or interval that is NaN or infinite, a negative interval other than -1, and one
+  longer than MESSAGE_INTERVAL's int32 microseconds could report back.
 - REQUEST_MESSAGE for the IMU message or HEARTBEAT: ACCEPTED and the message is sent once with the next
   sample; others: DENIED. Any other command: UNSUPPORTED.
 - GET_MESSAGE_INTERVAL (510, param1 message id), and REQUEST_MESSAGE for MESSAGE_INTERVAL (param1 244,

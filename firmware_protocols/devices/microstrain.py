@@ -27,7 +27,9 @@ sends the field every d-th sample; fields of one set due at the same sample shar
 configured order. Data flow only while the device is not idle and the set's stream is enabled. A
 field the emulator cannot produce is NACKed with 0x03 (invalid parameter) as a device does for a field it
 lacks; an unknown command with 0x01; a packet with a bad checksum with 0x02 (echoing the first field's
-descriptor). Bytes outside packets are ignored and counted.
+descriptor; false syncs inside a packet just NACKed are not answered again); a command whose reply would
+overflow the 255-byte reply packet with 0x04 (command failed), and a message format listing a field twice
+with 0x03. Bytes outside packets are ignored and counted.
 """
 from __future__ import annotations
 
