@@ -2,6 +2,7 @@
 sent as a driver (or an attacker) would, then the stream still streams and still answers; exit status 0."""
 import math
 import os
+import re
 import select
 import socket
 import time
@@ -138,3 +139,27 @@ def test_vectornav_over_a_pty_answers_a_dollar_flood_once_and_keeps_answering(tm
     assert code == 0, err
     assert got.count(b"$VNERR") <= 2 and b"$VNRRG,01,VN-100T-CR" in got
     assert "Traceback" not in err
+
+
+def test_replies_on_a_full_link_wait_for_room_and_all_arrive(tmp_path):
+    """A UART at 9600 baud carries a sixth of 100 Hz HIGHRES_IMU: samples are dropped for lack of room (counted).
+    Every COMMAND_ACK still arrives, ahead of the samples (on 168021a the refused ones were dropped)."""
+    scene_path = write_scene(tmp_path, rate=100, duration=60.0)
+    with Emulator(scene_path, "--format", "mavlink-highres", "--to", "pty", "--pace-baud", "9600",
+                  "--allow-overload", "--duration", "30") as emu:
+        fd = os.open(emu.targets[0], os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        assert read_for(fd, 30, stop_after=1)
+        read_for(fd, 1.0)
+        answers = b""
+        for k in range(10):
+            _write_all(fd, _command(105, 10_000 * (1 + k % 2)))
+            answers += read_for(fd, 0.3)
+        answers += read_for(fd, 1.0)
+        os.close(fd)
+        code, err = emu.interrupt()
+    assert code == 0, err
+    assert len(_acks(answers)) == 10
+    waited, replies_dropped = map(int, re.search(r"replies sent \((\d+) after waiting for room\), (\d+) dropped",
+                                                 err).groups())
+    assert waited >= 1 and replies_dropped == 0
+    assert int(re.search(r"sent \d+, dropped (\d+)", err).group(1)) > 0     # samples were: the link is full
