@@ -241,6 +241,8 @@ class FrameScanner:
         self.checksum_ok = checksum_ok
         self.stats = DecoderStats()
         self._buf = bytearray()
+        self._offset = 0        # stream offset of the buffer's first byte
+        self._bad_end = 0       # stream offset just after the last damaged candidate answered
 
     def frames(self, chunk: bytes) -> list[bytes]:
         return [frame for frame, ok in self.candidates(chunk) if ok]
@@ -248,6 +250,20 @@ class FrameScanner:
     def candidates(self, chunk: bytes) -> list[tuple[bytes, bool]]:
         """Complete candidates in stream order with whether their checksum held: a device answers a damaged
         command (Xsens Error, MIP NACK) where a decoder only counts it."""
+        return [(frame, ok) for frame, ok, _ in self.marked_candidates(chunk)]
+
+    def marked_candidates(self, chunk: bytes) -> list[tuple[bytes, bool, bool]]:
+        """candidates, each also with whether it starts inside the last damaged one: a device answers only the
+        first of those, so a flood of sync patterns (each a false frame overlapping the previous) gets one
+        error reply per claimed frame length instead of one per sync."""
+        marked = []
+        for frame, ok, start in self._candidates(chunk):
+            marked.append((frame, ok, start < self._bad_end))
+            if not ok and start >= self._bad_end:
+                self._bad_end = start + len(frame)
+        return marked
+
+    def _candidates(self, chunk: bytes) -> list[tuple[bytes, bool, int]]:
         buf = self._buf
         buf += chunk
         found = []
@@ -274,13 +290,22 @@ class FrameScanner:
             frame = bytes(buf[j:j + total])
             if not self.checksum_ok(frame):
                 self.stats.bad_checksum += 1
-                found.append((frame, False))
+                found.append((frame, False, self._offset + j))
                 search = j + 1
                 continue
-            found.append((frame, True))
+            found.append((frame, True, self._offset + j))
             pos = search = j + total
         del buf[:pos]
+        self._offset += pos
         return found
+
+    def drop_partial(self) -> int:
+        """Forget a frame still arriving (its datagram ended: the rest will never come); how many bytes."""
+        n = len(self._buf)
+        self.stats.skipped_bytes += n
+        self._buf.clear()
+        self._offset += n
+        return n
 
 def parse_names(value, known, what: str) -> tuple:
     names = tuple(n.strip() for n in value.split(",") if n.strip()) if isinstance(value, str) else tuple(value)

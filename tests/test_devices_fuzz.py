@@ -1,7 +1,21 @@
 """Every device takes any input without raising, keeps streaming, and keeps its memory bounded: random bytes,
-damaged copies of valid commands, truncated commands and floods, fed in random chunk sizes."""
+damaged copies of valid commands, truncated commands and floods, fed in random chunk sizes.
+
+The device-command fuzzer (issue 23) goes further: commands with VALID checksums and random or extreme
+parameters (+-inf, NaN, huge, negative, empty and 5000-character fields), partial frames, bad checksums,
+sync-byte floods and bursts, interleaved with output(); no exception, every reply bytes (or frame rows), the
+device still answers a valid command afterwards, and a sync-byte flood costs CPU time linear in its size (a
+ratio of n and 4n, never a time). The quick run (~300 inputs per device) is in every test run; the `slow` one
+runs FUZZ inputs per device (default 1000, about 10 s in all; FUZZ=100000 for a long run, FUZZ_SEED to vary).
+"""
+import math
+import os
+import struct
+import time
+
 import can
 import numpy as np
+import pytest
 from hypothesis import given, settings, strategies as st
 
 import firmware_protocols
@@ -87,3 +101,172 @@ def test_can_devices_never_raise(name, frames):
     for reply in device.receive(messages):
         assert reply.dtype.names and len(reply) >= 1
     device.output(samples, 1)
+
+
+# --- the device-command fuzzer ------------------------------------------------------------------------------
+
+_EXTREME_FLOATS = (math.inf, -math.inf, math.nan, 3.4e38, -3.4e38, 1e-45, -1.0, 0.0, -5.0, 2.0 ** 31, 105.0, 0.0,
+                   244.0, 1e30, -0.5)
+_EXTREME_TEXT = ("", "-1", "0", "nan", "inf", "-inf", "1e308", "9" * 40, "X" * 5000, "0x7F", "+", ",", "-0", "\x00")
+
+
+def _extreme_float(rng):
+    if rng.random() < 0.6:
+        return float(rng.choice(_EXTREME_FLOATS))
+    return float(np.float32(rng.normal(0, 10.0 ** rng.integers(0, 38))))
+
+
+def _mavlink_command(rng) -> bytes:
+    from pymavlink.dialects.v20 import common as mavlink2
+    mav = mavlink2.MAVLink(None, srcSystem=int(rng.integers(256)), srcComponent=int(rng.integers(256)))
+    command = int(rng.choice([510, 511, 511, 512, 512, 400, int(rng.integers(65536))]))
+    targets = [int(rng.choice([0, 1, 1, 1, int(rng.integers(256))])) for _ in range(2)]   # mostly ours
+    params = [_extreme_float(rng) for _ in range(7)]
+    return mav.command_long_encode(*targets, command, int(rng.integers(256)), *params).pack(mav)
+
+
+def _vectornav_command(rng) -> bytes:
+    from firmware_protocols.vectornav_common import sentence
+    command = str(rng.choice(["VNRRG", "VNWRG", "VNASY", "VNWNV", "VNRFS", "VNRST", "VNXXX", ""]))
+    fields = [str(rng.choice(_EXTREME_TEXT)) if rng.random() < 0.5 else str(int(rng.integers(-300, 300)))
+              for _ in range(int(rng.integers(0, 12)))]
+    if command in ("VNRRG", "VNWRG") and fields:
+        fields[0] = str(rng.choice([0, 1, 5, 6, 7, 30, 32, 35, 75, 76, 77, 82, 255, -1]))
+    body = ",".join([command] + fields).encode("latin-1")
+    return sentence(body, str(rng.choice(["xor", "crc"])))
+
+
+def _mip_command(rng) -> bytes:
+    from firmware_protocols.devices.microstrain import _BASE_COMMANDS, _DM_COMMANDS, packet
+    descriptor_set = int(rng.choice([0x01, 0x0C, 0x0C, int(rng.integers(256))]))
+    fields, room = [], 255
+    for _ in range(int(rng.integers(1, 130))):
+        known = _BASE_COMMANDS if descriptor_set == 0x01 else _DM_COMMANDS
+        command = int(rng.choice(list(known) + [int(rng.integers(256))]))
+        size = int(rng.choice([0, 1, 2, 3, 4, 7, int(rng.integers(0, 60))]))
+        data = bytes([int(rng.choice([1, 2, 3, 4, 5, 0, 255]))]) + rng.integers(0, 256, size, dtype=np.uint8).tobytes()
+        if rng.random() < 0.3:    # a message format: function, set, count, (descriptor, decimation)...
+            count = int(rng.integers(0, 12))
+            data = bytes([int(rng.choice([1, 2])), int(rng.choice([0x80, 0x81, 0x82, 0xFF])), count]) + b"".join(
+                bytes([int(rng.integers(1, 0x60))]) + struct.pack(">H", int(rng.choice([0, 1, 2, 65535])))
+                for _ in range(count))
+        if 2 + len(data) > room:
+            break
+        fields.append((command, data))
+        room -= 2 + len(data)
+    return packet(descriptor_set, fields)
+
+
+def _xsens_command(rng) -> bytes:
+    from firmware_protocols.devices.xsens import xbus
+    mid = int(rng.choice([0x30, 0x40, 0xC0, 0x10, 0x00, 0x3E, 0x18, 0x0E, 0x62, 0xD0, int(rng.integers(256))]))
+    size = int(rng.choice([0, 1, 2, 4, 8, 12, 254, 255, 300, 2000, int(rng.integers(0, 40))]))
+    return xbus(mid, rng.integers(0, 256, size, dtype=np.uint8).tobytes())
+
+
+COMMAND_MAKERS = {"mavlink-highres": _mavlink_command, "vectornav-binary": _vectornav_command,
+                  "microstrain-mip": _mip_command, "xsens-mtdata2": _xsens_command}
+SYNC_BYTES = {"mavlink-highres": [b"\xfd", b"\xfe"], "vectornav-binary": [b"$", b"$VNRRG,", b"\xfa"],
+              "microstrain-mip": [b"ue", b"u"], "xsens-mtdata2": [b"\xfa\xff", b"\xfa"]}
+# What each device surely answers afterwards: it still serves its driver.
+PROBES = {"mavlink-highres": SERIAL["mavlink-highres"][0], "vectornav-binary": b"$VNRRG,01*XX\r\n",
+          "microstrain-mip": SERIAL["microstrain-mip"][0], "xsens-mtdata2": SERIAL["xsens-mtdata2"][0]}
+
+
+def _hostile_input(name: str, rng) -> bytes:
+    """One input: a valid-checksum command with extreme parameters, or one damaged, cut, flooded or repeated."""
+    command = COMMAND_MAKERS[name](rng)
+    kind = rng.integers(8)
+    if kind == 0:                                        # bad checksum
+        data = bytearray(command)
+        data[-1 if name != "vectornav-binary" else -3] ^= 0x5A
+        return bytes(data)
+    if kind == 1:                                        # a partial frame
+        return command[:int(rng.integers(0, len(command)))]
+    if kind == 2:                                        # a sync-byte flood
+        return bytes(rng.choice(SYNC_BYTES[name])) * int(rng.integers(1, 5000))
+    if kind == 3:                                        # a burst of one command
+        return command * int(rng.integers(2, 40))
+    if kind == 4:                                        # noise
+        return rng.integers(0, 256, int(rng.integers(1, 300)), dtype=np.uint8).tobytes()
+    return command
+
+
+def fuzz_serial_device(name: str, inputs: int, seed: int) -> int:
+    """Feed `inputs` hostile inputs in random chunks, one output() per chunk; returns how many inputs ran."""
+    rng = np.random.default_rng(seed)
+    device = firmware_protocols.create_device(name, 100.0)
+    samples = _samples()
+    for k in range(inputs):
+        data = _hostile_input(name, rng)
+        chunk = max(int(rng.choice([1, 7, 64, 4096])), len(data) // 16)     # at most ~16 output() calls an input
+        for at in range(0, max(len(data), 1), chunk):
+            for reply in device.receive(data[at:at + chunk], whole=bool(rng.random() < 0.05)):
+                assert isinstance(reply, bytes) and reply
+            out = device.output(samples, k % len(samples))
+            assert isinstance(out, bytes)
+        assert len(getattr(device, "_buf", b"")) <= 8192
+    device.receive(b"", whole=True)                   # forget a half frame the last input left
+    device.receive(b"\r\n")                          # end a VectorNav line the last input cut
+    assert device.receive(PROBES[name] * 2), f"{name} stopped answering"
+    return inputs
+
+
+def fuzz_can_device(name: str, inputs: int, seed: int) -> int:
+    rng = np.random.default_rng(seed)
+    device = firmware_protocols.create_device(name, 100.0)
+    samples = _samples()
+    for k in range(inputs):
+        if rng.random() < 0.5:     # near-valid: extended ids with the service / request bits a driver sets
+            can_id = int(rng.choice([0x18EA0000 | int(rng.integers(1 << 16)), 0x18EEFF00 | int(rng.integers(256)),
+                                     (1 << 15) | (1 << 7) | (1 << 16) | int(rng.integers(1 << 29)) & ~0x7F00]))
+        else:
+            can_id = int(rng.integers(1 << 29))
+        data = rng.integers(0, 256, int(rng.integers(0, 9)), dtype=np.uint8).tobytes()
+        frames = [can.Message(arbitration_id=can_id & 0x1FFFFFFF, data=data, is_extended_id=bool(rng.random() < 0.9))
+                  ] * int(rng.choice([1, 1, 1, 30]))
+        for reply in device.receive(frames):
+            assert reply.dtype.names and len(reply) >= 1
+        device.output(samples, k % len(samples))
+    return inputs
+
+
+FUZZ_INPUTS = int(os.environ.get("FUZZ", "1000"))
+FUZZ_SEED = int(os.environ.get("FUZZ_SEED", "23"))
+
+
+@pytest.mark.parametrize("name", sorted(COMMAND_MAKERS))
+def test_device_command_fuzzer_quick(name):
+    assert fuzz_serial_device(name, 300, seed=1) == 300
+
+
+@pytest.mark.parametrize("name", CAN)
+def test_can_device_command_fuzzer_quick(name):
+    assert fuzz_can_device(name, 300, seed=1) == 300
+
+
+@pytest.mark.slow
+def test_device_command_fuzzer_long():
+    """FUZZ inputs per device (default 1000: about 10 s for all six)."""
+    ran = sum(fuzz_serial_device(name, FUZZ_INPUTS, FUZZ_SEED) for name in sorted(COMMAND_MAKERS))
+    ran += sum(fuzz_can_device(name, FUZZ_INPUTS, FUZZ_SEED) for name in CAN)
+    print(f"device-command fuzzer: {ran} inputs")
+    assert ran == FUZZ_INPUTS * (len(COMMAND_MAKERS) + len(CAN))
+
+
+def _cpu(run, data) -> float:
+    times = []
+    for _ in range(3):
+        start = time.process_time()
+        run(data)
+        times.append(time.process_time() - start)
+    return max(min(times), 1e-3)
+
+
+@pytest.mark.parametrize("name, flood", [(n, f) for n in sorted(SYNC_BYTES) for f in SYNC_BYTES[n]])
+def test_sync_byte_floods_cost_time_linear_in_their_size(name, flood):
+    """CPU of a 4n flood over an n flood: 4 when linear, 16 when quadratic; < 8 leaves room for noise."""
+    def run(data):
+        firmware_protocols.create_device(name, 100.0).receive(data)
+    n = max(1, 8_192 // len(flood))
+    assert _cpu(run, flood * 4 * n) / _cpu(run, flood * n) < 8

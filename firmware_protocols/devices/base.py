@@ -54,11 +54,20 @@ class Device:
         self.notes: list[str] = []     # things the user should hear about (lost address claim, ...)
 
     # - input -
-    def receive(self, data, now_ns: int = 0) -> list:
-        """Feed what the driver wrote; returns the replies in order (bytes, or CAN frame row arrays)."""
+    def receive(self, data, now_ns: int = 0, whole: bool = False) -> list:
+        """Feed what the driver wrote; returns the replies in order (bytes, or CAN frame row arrays).
+
+        `whole`: the data is one complete datagram (UDP). A frame it leaves unfinished will never be finished,
+        so it is dropped and counted instead of swallowing the start of the next datagram's commands."""
         replies = self._receive(data, now_ns)
+        if whole:
+            self.stats.ignored_bytes += self._drop_partial()
         self.stats.replies += len(replies)
         return replies
+
+    def _drop_partial(self) -> int:
+        """Forget input kept for a frame still arriving; how many bytes that was (devices that keep some)."""
+        return 0
 
     def _receive(self, data, now_ns: int) -> list:  # pragma: no cover - interface
         raise NotImplementedError

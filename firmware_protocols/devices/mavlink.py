@@ -17,7 +17,9 @@ MAV_RESULT ACCEPTED 0 / DENIED 2 / UNSUPPORTED 3).
 - SET_MESSAGE_INTERVAL for the streamed IMU message sets a divider of the sample rate: the interval is
   rounded to the nearest whole number of sample periods (at least one), since samples exist only at the
   scene's rate; -1 stops the message, 0 restores every sample. For HEARTBEAT it sets the heartbeat
-  period the same way. Other message ids: DENIED (we cannot stream them).
+  period the same way. Other message ids: DENIED (we cannot stream them). So are the values common.xml does
+  not allow: a message id or interval that is NaN or infinite, a negative interval other than -1, and one
+  longer than MESSAGE_INTERVAL's int32 microseconds could report back.
 - REQUEST_MESSAGE for the IMU message or HEARTBEAT: ACCEPTED and the message is sent once with the next
   sample; others: DENIED. Any other command: UNSUPPORTED.
 - GET_MESSAGE_INTERVAL (510, param1 message id), and REQUEST_MESSAGE for MESSAGE_INTERVAL (param1 244,
@@ -34,10 +36,11 @@ Incoming frames may be MAVLink 1 or 2; replies are MAVLink 2.
 from __future__ import annotations
 
 import hashlib
+import math
+import re
 import struct
 import time
 
-import numpy as np
 
 from firmware_protocols.base import Samples
 from firmware_protocols.crc import crc16_mcrf4xx_bytes
@@ -54,6 +57,8 @@ MAV_TYPE_IMU, MAV_AUTOPILOT_INVALID, MAV_STATE_ACTIVE = 40, 8, 4
 MAVLINK_VERSION = 3
 _COMMAND_LONG = struct.Struct("<7fHBBB")
 _COMMAND_LONG_LEN = _COMMAND_LONG.size   # 33
+_STX = re.compile(bytes([ord("["), STX_V2, STX_V1, ord("]")]))
+_INT32_MAX = 2 ** 31 - 1     # MESSAGE_INTERVAL.interval_us is an int32: a longer interval could not be read back
 
 
 def _signed_tail(link, frame: bytes) -> bytes:
@@ -87,8 +92,10 @@ class _FrameReader:
         buf += data
         out, pos = [], 0
         while True:
-            v2, v1 = buf.find(STX_V2, pos), buf.find(STX_V1, pos)
-            start = min(x for x in (v2, v1, len(buf)) if x >= 0)
+            # One search for either start byte: finding each separately rescans the rest of the buffer for
+            # the absent one at every false start, quadratic in a flood of the other (0xFD x 2 MB: minutes).
+            match = _STX.search(buf, pos)
+            start = len(buf) if match is None else match.start()
             self.skipped += start - pos
             pos = start
             if pos >= len(buf):
@@ -102,6 +109,14 @@ class _FrameReader:
             self.skipped += len(buf)
             del buf[:]
         return out
+
+    def drop_partial(self) -> int:
+        """Forget a frame still waiting for its end (a datagram is whole: the rest will never come); how many
+        bytes that was."""
+        n = len(self.buf)
+        self.skipped += n
+        del self.buf[:]
+        return n
 
     def _frame(self, buf, pos, out):
         """Bytes consumed at pos: a frame's length, 1 for a false start, None when more bytes are needed."""
@@ -210,9 +225,13 @@ class MavlinkDevice(Device):
 
     def _command(self, command: int, params) -> int:
         if command == MAV_CMD_SET_MESSAGE_INTERVAL:
-            msgid, interval_us = params[0], params[1]
-            target = {self.spec.msgid: self.imu, HEARTBEAT: None}.get(int(msgid) if msgid == msgid else -1, "no")
-            if target == "no" or not np.isfinite(interval_us):
+            msgid, interval_us = _message_id(params[0]), params[1]
+            target = {self.spec.msgid: self.imu, HEARTBEAT: None}.get(msgid, "no")
+            # common.xml, MAV_CMD_SET_MESSAGE_INTERVAL param2: "Set to -1 to disable and 0 to request default
+            # rate"; any other negative, a non-finite value or one MESSAGE_INTERVAL cannot report back is
+            # MAV_RESULT_DENIED: "one or more parameter values are invalid ... Retrying ... will not work".
+            if target == "no" or not math.isfinite(interval_us) or (interval_us < 0 and interval_us != -1) \
+                    or interval_us > _INT32_MAX:
                 return MAV_RESULT_DENIED
             divider = self._divider(interval_us)
             if target is None:
@@ -223,7 +242,7 @@ class MavlinkDevice(Device):
                 target.set(divider)
             return MAV_RESULT_ACCEPTED
         if command == MAV_CMD_REQUEST_MESSAGE:
-            msgid = int(params[0]) if np.isfinite(params[0]) else -1
+            msgid = _message_id(params[0])
             if msgid not in (self.spec.msgid, HEARTBEAT):
                 return MAV_RESULT_DENIED
             self._once.add(msgid)
@@ -238,22 +257,34 @@ class MavlinkDevice(Device):
             asked = params[1]
         else:
             return None
-        msgid = int(asked) if np.isfinite(asked) and 0 <= asked <= 0xFFFF and asked == int(asked) else None
+        msgid = _message_id(asked)
+        msgid = msgid if msgid is not None and msgid <= 0xFFFF else None      # MESSAGE_INTERVAL's field is u16
         if msgid == self.spec.msgid:
             samples = self.imu.divider
         elif msgid == HEARTBEAT:
             samples = self.heartbeat.period_samples
         else:
             return 0, (0 if msgid is None else msgid)        # interval 0: not available from this component
-        return (-1 if samples <= 0 else int(round(samples * 1e6 / self.rate_hz))), msgid
+        return (-1 if samples <= 0 else min(_INT32_MAX, int(round(samples * 1e6 / self.rate_hz)))), msgid
+
+    def _drop_partial(self) -> int:
+        return self._reader.drop_partial()
 
     def _divider(self, interval_us: float) -> int:
-        """Interval in us -> samples between messages; 0 = off, 1 = every sample (interval 0 = default)."""
+        """Interval in us (finite, -1 or >= 0) -> samples between messages; 0 = off, 1 = every sample (interval 0
+        = default)."""
         if interval_us < 0:
             return 0
         if interval_us == 0:
             return 1
         return max(1, int(round(interval_us * 1e-6 * self.rate_hz)))
+
+
+def _message_id(value: float) -> int | None:
+    """A COMMAND_LONG float parameter as a MAVLink message id (24 bits), None when it is none (NaN, inf, -3, 1.5)."""
+    if not math.isfinite(value) or value != int(value) or not 0 <= value <= 0xFFFFFF:
+        return None
+    return int(value)
 
 
 _DEVICE_OPTIONS = {

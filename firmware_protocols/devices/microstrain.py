@@ -27,7 +27,9 @@ sends the field every d-th sample; fields of one set due at the same sample shar
 configured order. Data flow only while the device is not idle and the set's stream is enabled. A
 field the emulator cannot produce is NACKed with 0x03 (invalid parameter) as a device does for a field it
 lacks; an unknown command with 0x01; a packet with a bad checksum with 0x02 (echoing the first field's
-descriptor). Bytes outside packets are ignored and counted.
+descriptor; false syncs inside a packet just NACKed are not answered again); a command whose reply would
+overflow the 255-byte reply packet with 0x04 (command failed), and a message format listing a field twice
+with 0x03. Bytes outside packets are ignored and counted.
 """
 from __future__ import annotations
 
@@ -49,6 +51,16 @@ _LEGACY_FORMAT = {0x08: SENSOR_DATA_SET, 0x09: GNSS_SET, 0x0A: FILTER_SET}
 _LEGACY_REPLY = {SENSOR_DATA_SET: 0x80, GNSS_SET: 0x81, FILTER_SET: 0x82}
 _BASE_COMMANDS = (0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07, 0x7E)
 _DM_COMMANDS = (0x06, 0x07, 0x08, 0x09, 0x0A, 0x0E, 0x0F, 0x11, 0x30)
+_MAX_PAYLOAD = 255           # a MIP packet's payload length is one byte
+_ACK_LEN = 4                 # 04 F1 <command> <code>
+
+
+def _count_fields(payload: bytes, k: int) -> int:
+    """Well-formed fields of a command payload from offset k on."""
+    n = 0
+    while k + 2 <= len(payload) and payload[k] >= 2 and k + payload[k] <= len(payload):
+        n, k = n + 1, k + payload[k]
+    return n
 
 
 def packet(descriptor_set: int, fields: list) -> bytes:
@@ -117,7 +129,9 @@ class MipDevice(Device):
     def _receive(self, data: bytes, now_ns: int) -> list:
         replies = []
         skipped = self._scanner.stats.skipped_bytes
-        for frame, ok in self._scanner.candidates(data):
+        for frame, ok, inside_bad in self._scanner.marked_candidates(data):
+            if not ok and inside_bad:
+                continue                            # its bytes count as skipped by the scanner
             if not ok:
                 # NACK the command it claims to be (a packet may begin inside it: the scanner hunts on)
                 first = frame[5] if len(frame) > 6 else 0
@@ -128,19 +142,37 @@ class MipDevice(Device):
         self.stats.ignored_bytes += self._scanner.stats.skipped_bytes - skipped
         return replies
 
+    def _drop_partial(self) -> int:
+        return self._scanner.drop_partial()
+
     def _command_packet(self, descriptor_set: int, payload: bytes) -> bytes:
-        out, k = [], 0
+        """The one reply packet of a command packet. Its payload holds 255 bytes (the length is a u8): a command
+        whose data would not fit is answered NACK 0x04 (mip_result.h: "The device could not complete the
+        command") without its data; when only one acknowledgement still fits and more commands follow, that one
+        is a NACK 0x04 for the next command and the rest are not run (counted as errors), so the driver learns
+        where its packet stopped."""
+        out, k, room = [], 0, _MAX_PAYLOAD
         while k + 2 <= len(payload):
             size, command = payload[k], payload[k + 1]
             if size < 2 or k + size > len(payload):
                 break
+            more = k + size + 2 <= len(payload)
+            if more and room < 2 * _ACK_LEN:
+                out.append((ACK_FIELD, bytes([command, NACK_FAILED])))
+                self.stats.errors += _count_fields(payload, k)
+                break
             code, reply_fields = self._command(descriptor_set, command, payload[k + 2:k + size])
+            reply_fields = reply_fields if code == ACK_OK else []
+            need = _ACK_LEN + sum(2 + len(data) for _, data in reply_fields) + (_ACK_LEN if more else 0)
+            if need > room:
+                code, reply_fields = NACK_FAILED, []
             if code == ACK_OK:
                 self.stats.commands += 1
             else:
                 self.stats.errors += 1
             out.append((ACK_FIELD, bytes([command, code])))
-            out.extend(reply_fields if code == ACK_OK else [])
+            out.extend(reply_fields)
+            room -= _ACK_LEN + sum(2 + len(data) for _, data in reply_fields)
             k += size
         if not out:                  # an empty or malformed payload: answer it as an unknown command
             self.stats.errors += 1
@@ -227,6 +259,11 @@ class MipDevice(Device):
             entries = [struct.unpack_from(">BH", rest, 1 + 3 * j) for j in range(count)]
             if len(rest) != 1 + 3 * count or any(d not in by_descriptor or rate == 0 for d, rate in entries):
                 return NACK_PARAM, None
+            names = tuple(by_descriptor[d] for d, _ in entries)
+            if len(set(names)) != len(names):
+                return NACK_PARAM, None        # a field listed twice: a packet cannot carry it twice
+            if names:
+                self._encoder(descriptor_set, names)   # what the encoder refuses (too long a packet) is refused now
             self.formats[descriptor_set] = [(by_descriptor[d], rate) for d, rate in entries]
             return ACK_OK, None
         if function == READ:

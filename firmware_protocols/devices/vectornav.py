@@ -39,9 +39,12 @@ VN-300 sequence (`$VNWRG,77,3,80,49,0003,26B8,0018`) gets its GNSS packet.
 
 Errors (`$VNERR,<2 digits>`): 03 bad checksum (or none), 04 unknown command, 05 / 06 too few / too many
 parameters, 07 invalid parameter, 08 invalid register (unknown, or read-only on write). Input that is not a
-command line is ignored and counted; a line cut by a new `$` is answered as what it is (usually 03).
+command line is ignored and counted; a line cut by a new `$` is answered as what it is (usually 03), but one
+physical line (up to CR or LF) gets at most one error reply: a flood of `$` is answered once, not per byte.
 """
 from __future__ import annotations
+
+import re
 
 from firmware_protocols import attitude
 from firmware_protocols.base import Samples
@@ -67,6 +70,7 @@ _INT_REGISTERS = {30: (0, 0, 0, 0, 1, 0, 1), 32: (3, 0, 0, 0, 0, 0, 0, 100000000
 _DELTA_CONFIG_VALUES = (range(2), range(2), range(2), range(256), range(65536))
 INTEGRATION_NED = 1
 _MAX_LINE = 256
+_LINE_END = re.compile(rb"[\r\n$]")
 
 # Presets: what a driver's parser expects before (or instead of) configuring the unit.
 ARDUPILOT_IMU = "common:timestartup,angularrate,accel,imu,magpres"      # FA 01 21 07
@@ -147,6 +151,7 @@ class VectorNavDevice(Device):
         self.increments = SinceLastOutput()
         self.paused = False
         self._buf = bytearray()
+        self._line_erred = False     # this physical line has had its one error reply (see _receive)
         self.bytes_per_sample = sum(out.layout.packet_size for out in self.binary if out.layout is not None) or (
             self._ascii_encoder().bytes_per_sample if self.ascii_type else 0)
 
@@ -210,31 +215,54 @@ class VectorNavDevice(Device):
 
     # - input -
     def _receive(self, data: bytes, now_ns: int) -> list:
+        """Lines out of the byte stream in one pass: positions move forward and the buffer is cut once, since
+        cutting or searching from its start per line is quadratic in a flood of lines (`$VNRRG,` x 128 KiB: 42 s).
+        A line cut by a new `$` is answered, but a physical line (up to CR / LF) gets at most one error reply:
+        a flood of `$` or of cut commands is answered once, not byte by byte."""
         buf = self._buf
         buf += data
         replies = []
-        while True:
-            start = buf.find(b"$")
+        pos, size = 0, len(buf)
+        while pos < size:
+            start = buf.find(b"$", pos)
             if start < 0:
-                self.stats.ignored_bytes += len(buf)
-                buf.clear()
                 break
-            if start:
-                self.stats.ignored_bytes += start
-                del buf[:start]
-            ends = [x for x in (buf.find(b"\r"), buf.find(b"\n"), buf.find(b"$", 1)) if x > 0]
-            if not ends:
-                if len(buf) > _MAX_LINE:        # a '$' followed by a flood without a line end
-                    self.stats.ignored_bytes += len(buf)
-                    buf.clear()
+            self.stats.ignored_bytes += start - pos
+            pos = start
+            end = _LINE_END.search(buf, pos + 1)
+            if end is None:
+                if size - pos > _MAX_LINE:        # a '$' followed by a flood without a line end
+                    self.stats.ignored_bytes += size - pos
+                    pos = size
                 break
-            end = min(ends)
-            line = bytes(buf[:end])
-            del buf[:end]
-            while buf[:1] in (b"\r", b"\n"):
-                del buf[:1]
-            replies.append(self._answer(line[:_MAX_LINE]))
+            line = bytes(buf[pos:min(end.start(), pos + _MAX_LINE)])
+            cut = buf[end.start()] == ord("$")
+            pos = end.start()
+            while pos < size and buf[pos] in b"\r\n":
+                pos += 1
+            errors = self.stats.errors
+            reply = self._answer(line)
+            if self.stats.errors == errors:
+                replies.append(reply)
+            elif not self._line_erred:
+                replies.append(reply)
+                self._line_erred = cut
+            else:                                   # a second error on one line: not answered
+                self.stats.errors -= 1
+                self.stats.ignored_bytes += len(line)
+            if not cut:
+                self._line_erred = False
+        if pos == size or buf.find(b"$", pos) < 0:
+            self.stats.ignored_bytes += size - pos
+            pos = size
+        del buf[:pos]
         return replies
+
+    def _drop_partial(self) -> int:
+        n = len(self._buf)
+        self._buf.clear()
+        self._line_erred = False
+        return n
 
     def _answer(self, line: bytes) -> bytes:
         body, star, cs = line[1:].partition(b"*")

@@ -185,7 +185,9 @@ class XsensDevice(Device):
     def _receive(self, data: bytes, now_ns: int) -> list:
         replies = []
         skipped = self._scanner.stats.skipped_bytes
-        for frame, ok in self._scanner.candidates(data):
+        for frame, ok, inside_bad in self._scanner.marked_candidates(data):
+            if not ok and inside_bad:
+                continue                            # its bytes count as skipped by the scanner
             if not ok:
                 # A damaged frame, or a false preamble: say so; the scanner hunts on from the next byte.
                 self.stats.errors += 1
@@ -195,6 +197,9 @@ class XsensDevice(Device):
             replies.extend(self._message(frame[2], frame[head:-1]))
         self.stats.ignored_bytes += self._scanner.stats.skipped_bytes - skipped
         return replies
+
+    def _drop_partial(self) -> int:
+        return self._scanner.drop_partial()
 
     def _message(self, mid: int, data: bytes) -> list:
         reply = self._answer(mid, data)

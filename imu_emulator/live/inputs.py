@@ -48,20 +48,18 @@ class Inputs:
         self.poll_unwatched()
 
     def serve(self, stream: Stream) -> bool:
-        data = stream.transport.recv()
-        if not len(data):
+        transport = stream.transport
+        whole = transport.datagrams
+        units = transport.recv_datagrams() if whole else [transport.recv()]
+        if not any(len(data) for data in units):
             return False
         device = stream.device
         if device is None:
-            stream.ignored_input += len(data)
+            stream.ignored_input += sum(len(data) for data in units)
             return True
-        transport = stream.transport
-        for reply in device.receive(data, time.monotonic_ns()):
-            item = reply if stream.info.kind == "serial" else transport.prepare(reply, 0)
-            if transport.send(item):
-                stream.replies_sent += 1
-            else:
-                stream.replies_dropped += 1
+        for data in units:
+            for reply in device.receive(data, time.monotonic_ns(), whole=whole):
+                stream.send_reply(reply if stream.info.kind == "serial" else transport.prepare(reply, 0))
         for request in device.take_link_requests():
             if request.baud:
                 followed = transport.set_baud(request.baud)

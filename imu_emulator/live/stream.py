@@ -2,6 +2,8 @@
 wire payloads of each sample here."""
 from __future__ import annotations
 
+from collections import deque
+
 import numpy as np
 
 import firmware_protocols
@@ -41,7 +43,9 @@ class Stream:
         self.saturated = 0
         self.idle = 0               # samples for which the device had nothing to send (paused, divided)
         self.replies_sent = 0
-        self.replies_dropped = 0
+        self.replies_delayed = 0    # replies the link refused at first, sent later ahead of the samples
+        self.replies_dropped = 0    # replies never sent: the waiting queue was full, or the run ended first
+        self._waiting = deque()     # replies the link refused so far, in order; they go before any sample
         self.ignored_input = 0      # bytes or frames that arrived on a link without a device
         self.queue_max = None       # most bytes seen waiting in the link's queue (sampled twice a second)
         self.link = {}              # what the link itself reported, read just before closing it
@@ -108,6 +112,43 @@ class Stream:
             items = [prepare(encoded[bounds[j]:bounds[j + 1]], time_ns[j]) for j in range(len(time_ns))]
         return items, _saturation_total(self.encoder)
 
+    def send_reply(self, item) -> None:
+        """A reply to the driver: sent now, or kept (in order, before any sample) when the link is full. A
+        driver waits for its answer while samples keep coming: a sample may be dropped, a reply is not, unless
+        _MAX_WAITING are already waiting (then it is counted in replies_dropped)."""
+        if not self._waiting and self.transport.send(item):
+            self.replies_sent += 1
+        elif len(self._waiting) < _MAX_WAITING:
+            self._waiting.append(item)
+        else:
+            self.replies_dropped += 1
+
+    def send_waiting_replies(self) -> bool:
+        """Send the replies the link refused before, in order; whether none is left waiting."""
+        waiting = self._waiting
+        while waiting:
+            if not self.transport.send(waiting[0]):
+                return False
+            waiting.popleft()
+            self.replies_sent += 1
+            self.replies_delayed += 1
+        return True
+
+    def send_sample(self, payload) -> None:
+        """One sample's payload (None: nothing due), after any reply still waiting: while one waits the sample
+        is dropped (counted), so a reply never falls behind the samples."""
+        if not self.send_waiting_replies():
+            if payload is None:
+                self.idle += 1
+            else:
+                self.dropped += 1
+        elif payload is None:
+            self.idle += 1
+        elif self.transport.send(payload):
+            self.sent += 1
+        else:
+            self.dropped += 1
+
     def sample_queue(self) -> None:
         queued = self.transport.queued()
         if queued is not None:
@@ -115,6 +156,9 @@ class Stream:
 
     def close(self) -> None:
         if self.transport is not None:
+            self.send_waiting_replies()
+            self.replies_dropped += len(self._waiting)
+            self._waiting.clear()
             self.transport.finish()
             self.sample_queue()
             self.link = self.transport.link_report()
@@ -137,11 +181,17 @@ class Stream:
                "sent": self.sent, "dropped": self.dropped, "saturated": self.saturated}
         if self.device is not None:
             out["device"] = {**self.device.stats.as_dict(), "replies_sent": self.replies_sent,
-                             "replies_dropped": self.replies_dropped, "idle": self.idle}
+                             "replies_delayed": self.replies_delayed, "replies_dropped": self.replies_dropped,
+                               "idle": self.idle}
         if self.ignored_input:
             out["ignored_input"] = self.ignored_input
         out["link"] = self.link
         return out
+
+
+# Replies kept while the link is full: a driver sends a command and waits, so a handful is what it can have
+# outstanding; more means the link has stopped taking anything and the rest are counted as dropped.
+_MAX_WAITING = 64
 
 
 def _saturation_total(encoder) -> int:

@@ -156,7 +156,8 @@ class Streamer:
             if "device" in s:
                 d = s["device"]
                 print(f"    device: {d['commands']} commands answered, {d['errors']} error replies, "
-                      f"{d['replies_sent']} replies sent, {d['replies_dropped']} dropped, {d['ignored_bytes']} "
+                      f"{d['replies_sent']} replies sent ({d['replies_delayed']} after waiting for room), "
+                      f"{d['replies_dropped']} dropped, {d['ignored_bytes']} "
                       f"input bytes ignored, {d['idle']} samples with nothing due", file=sys.stderr, flush=True)
             if s.get("ignored_input"):
                 print(f"    input ignored (no device): {s['ignored_input']}", file=sys.stderr, flush=True)
@@ -218,7 +219,9 @@ class Streamer:
                     now = pacer.wait_until(deadline)
                     stats.add(now - deadline)
                 for stream, transport, payload in zip(streams, transports, payloads):
-                    if payload is None:
+                    if stream.device is not None:
+                        stream.send_sample(payload)      # replies waiting for room go first
+                    elif payload is None:
                         stream.idle += 1
                     elif transport.send(payload):
                         stream.sent += 1

@@ -49,9 +49,17 @@ class Transport:
     def send(self, item) -> bool:  # pragma: no cover - interface
         raise NotImplementedError
 
+    # Whether input comes in datagrams, each whole (then `recv_datagrams` gives them one by one).
+    datagrams = False
+
     def recv(self):
         """What arrived since the last call; this default is a one-way link (capture files)."""
         return b""
+
+    def recv_datagrams(self) -> list:
+        """What arrived since the last call, one item per datagram (links whose `datagrams` is True)."""
+        data = self.recv()
+        return [data] if len(data) else []
 
     def fileno(self) -> int | None:
         return None

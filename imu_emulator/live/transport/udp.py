@@ -9,6 +9,7 @@ from imu_emulator.live.transport.base import TargetOptions, Transport, error_nam
 
 
 class UdpTransport(Transport):
+    datagrams = True
 
     def __init__(self, host: str, port: int, options: TargetOptions):
         try:
@@ -40,12 +41,17 @@ class UdpTransport(Transport):
 
     def recv(self) -> bytes:
         """Datagrams from the peer (a connected socket receives from that address only)."""
+        return b"".join(self.recv_datagrams())
+
+    def recv_datagrams(self) -> list[bytes]:
+        """The same, one bytes object per datagram: a device drops what a datagram leaves unfinished, since
+        MAVLink over UDP puts whole frames in each datagram and the rest of a damaged one will never come."""
         chunks = []
         while True:
             try:
                 chunks.append(self.sock.recv(65536, socket.MSG_DONTWAIT))
             except (BlockingIOError, InterruptedError, ConnectionRefusedError):
-                return b"".join(chunks)
+                return chunks
 
     def fileno(self) -> int:
         return self.sock.fileno()
