@@ -32,3 +32,17 @@ def test_first_compile_is_announced_with_its_time_on_a_terminal(cache, tmp_path,
     kernel_module._loaded.clear()
     assert main(args) == 0                      # warm: nothing to announce
     assert "compiling" not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("raised, outcome", [(KeyboardInterrupt, "interrupted"), (RuntimeError, "failed")])
+def test_a_compile_cut_short_says_why(cache, capsys, monkeypatch, raised, outcome):
+    """Ctrl-C during the first compile is the user's choice: "interrupted", not "failed" (issue 23, item 12)."""
+    from imu_emulator.runtime.progress import CompileStatus
+    from imu_emulator.scene import load_scene
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    status = CompileStatus(load_scene(ROOT / "examples" / "orientation_only.toml"), attitude=True, truth=False)
+    assert status.active                        # an empty cache: the compile would be announced
+    with pytest.raises(raised):
+        with status:
+            raise raised()
+    assert capsys.readouterr().err.endswith(f"(first run) … {outcome} in 0.0 s\n")

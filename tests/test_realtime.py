@@ -37,6 +37,21 @@ def test_lateness_beyond_histogram_keeps_exact_maximum():
     assert stats.summary()["max_us"] == 5_000_000
 
 
+def test_lateness_beyond_the_fine_bins_is_measured_and_beyond_all_bins_is_not_a_number():
+    """A stream 100 ms to minutes behind (issue 23, item 12: 'p50 65535 us p99 65535 us' for a stream 11-204 s
+    late). 100 ms and 20 s land in the 1 ms bins; 200 s is beyond them: its quantile is None, shown as '> 65536000'."""
+    stats = LatenessStats(period_ns=1e6)
+    for lateness_s in [0.1] * 60 + [20.0] * 30 + [200.0] * 10:
+        stats.add(int(lateness_s * 1e9))
+    summary = stats.summary()
+    assert summary["p50_us"] == 100_000                 # rank 50 of 100: the 100 ms samples' 1 ms bin
+    assert summary["p99_us"] is None                   # rank 99: a 200 s sample, beyond 65.536 s
+    assert stats.quantile_us(0.9) == 20_000_000          # rank 90: the last 20 s sample
+    assert summary["max_us"] == 200_000_000 and summary["over_us"] == 65_536_000
+    assert json.loads(json.dumps(summary))["p99_us"] is None     # --stats-json stays valid JSON
+    assert [LatenessStats.shown(summary[k]) for k in ("p50_us", "p99_us")] == ["100000", "> 65536000"]
+
+
 def _median_lateness(pacer, period_ns=5_000_000, count=100):
     start = time.monotonic_ns() + period_ns
     late = [pacer.wait_until(start + k * period_ns) - (start + k * period_ns) for k in range(count)]
@@ -299,3 +314,32 @@ def test_cpu_clock_step_is_fine_here_and_the_pacer_times_work_by_wall_time_where
     thread.start()
     thread.join()
     assert min(np.diff(woke[1:])) >= 2 * work
+
+
+def _terminal(writes: list[str]) -> str:
+    """The line a terminal shows after `writes`: '\r' returns to column 0, ESC [K clears to the line's end,
+    other characters overwrite."""
+    line, col = [], 0
+    for text in writes:
+        i = 0
+        while i < len(text):
+            if text.startswith("\x1b[K", i):
+                del line[col:]
+                i += 3
+                continue
+            if text[i] == "\r":
+                col = 0
+            else:
+                line[col:col + 1] = [text[i]]
+                col += 1
+            i += 1
+    return "".join(line)
+
+
+def test_a_status_line_rewritten_shorter_leaves_no_tail():
+    """Issue 23, item 12: 'saturated 0ted 0' was the tail of a longer line left behind by a shorter one."""
+    from imu_emulator.live.streamer import status_line
+    long, short = "streaming: 10 samples, dropped 0, saturated 0", "streaming: 12 samples, saturated 0"
+    shown = _terminal(["".join(status_line(long, tty=True)), "".join(status_line(short, tty=True))])
+    assert shown == short
+    assert status_line(short, tty=False) == (short, "\n")        # logs and pipes: one plain line each

@@ -141,7 +141,7 @@ def run_cases(cases, modes, repeat: int, seconds: float, competitors: int, place
 
 
 def row_text(r: dict) -> str:
-    late = r["lateness"]
+    late, shown = r["lateness"], LatenessStats.shown
     link = r["streams"][0]["link"]
     refused = sum(link.get("send_errors", {}).values())
     moved = {k: v for k, v in link.get("interface", {}).items() if v}
@@ -149,17 +149,18 @@ def row_text(r: dict) -> str:
     return (f"{r['place']:5s} {r['case']:22s} {r['rate']:>5.0f} Hz  busy {r['competitors']}  {r['mode']:4s} "
             f"({r['scheduling']:4s})  received {r['received']}/{r['due']} ({100 * r['received'] / r['due']:6.2f} %)"
             f"{frames}  sent {r['streams'][0]['sent']} dropped {r['dropped']} refused {refused}"
-            f"{' ' + str(moved) if moved else ''}  late p50/p99/p99.9/max {late['p50_us']:.0f}/{late['p99_us']:.0f}/"
-            f"{late['p999_us']:.0f}/{late['max_us']:.0f} us, missed {late['missed']}, fifo given up "
+            f"{' ' + str(moved) if moved else ''}  late p50/p99/p99.9/max {shown(late['p50_us'])}/{shown(late['p99_us'])}/"
+            f"{shown(late['p999_us'])}/{late['max_us']:.0f} us, missed {late['missed']}, fifo given up "
             f"{r['fifo_given_up']}  sender cpu "
             f"{r['sender_cpu_ratio'] * 100:.1f} %, whole process {r['cpu_per_s'] * 100:.0f} %")
 
 
 def _spread(values, digits: int = 0) -> str:
-    """min / median / max of the windows, or the one value (lateness quantiles stop at the histogram's
-    65.5 ms bound: shown as ≥65535)."""
-    values = sorted(values)
-    shown = [(f"≥{v:.0f}" if v >= LatenessStats.BINS - 1 else f"{v:.{digits}f}")
+    """min / median / max of the windows, or the one value (a lateness quantile beyond the histogram, None, is
+    shown as "> 65536000")."""
+    over = [v for v in values if v is None]
+    values = sorted(v for v in values if v is not None) + [float("inf")] * len(over)
+    shown = [(LatenessStats.shown(None) if v == float("inf") else f"{v:.{digits}f}")
              for v in (values[0], statistics.median(values), values[-1])]
     return shown[0] if len(set(shown)) == 1 else " / ".join(shown)
 

@@ -149,7 +149,7 @@ class Streamer:
         return summary
 
     def _print_summary(self, summary: dict) -> None:
-        print(self._status_text("done"), file=sys.stderr, flush=True)
+        print(status_line(self._status_text("done"), sys.stderr.isatty())[0], file=sys.stderr, flush=True)
         for s in summary["streams"]:
             print(f"  {s['imu']} {s['format']} -> {s['target']}: sent {s['sent']}, dropped {s['dropped']}, "
                   f"saturated {s['saturated']}", file=sys.stderr, flush=True)
@@ -242,8 +242,8 @@ class Streamer:
                         for stream in streams:
                             stream.sample_queue()
                         if show_status:
-                            print(self._status_text("streaming"), end="\r" if sys.stderr.isatty() else "\n",
-                                  file=sys.stderr, flush=True)
+                            text, end = status_line(self._status_text("streaming"), sys.stderr.isatty())
+                            print(text, end=end, file=sys.stderr, flush=True)
             for stream, saturated in zip(streams, block.saturated):
                 stream.saturated = saturated if stream.device is None else stream.device.saturated
             self.effect_counts = block.counts
@@ -271,9 +271,16 @@ class Streamer:
     def _status_text(self, state: str) -> str:
         s = self.summary()
         late = s["lateness"]
-        return (f"{state}: {s['samples']} samples, {s['achieved_hz']:.1f} Hz, late p50 {late['p50_us']:.0f} us "
-                f"p99 {late['p99_us']:.0f} us max {late['max_us']:.0f} us, dropped {s['dropped']}, "
+        shown = LatenessStats.shown
+        return (f"{state}: {s['samples']} samples, {s['achieved_hz']:.1f} Hz, late p50 {shown(late['p50_us'])} us "
+                f"p99 {shown(late['p99_us'])} us max {late['max_us']:.0f} us, dropped {s['dropped']}, "
                 f"saturated {s['saturated']}" + (f"; {counts_text(self.effect_counts)}" if self.effect_counts else ""))
+
+
+def status_line(text: str, tty: bool) -> tuple[str, str]:
+    """What to print for a status line, and how to end it. On a terminal the line is rewritten in place: it
+    clears to its end (ESC [K), or a shorter line would leave the longer one's tail ("saturated 0ted 0")."""
+    return (text + "\x1b[K", "\r") if tty else (text, "\n")
 
 
 def _raise_stop(signum, frame):

@@ -69,6 +69,8 @@ class CompileStatus:
         if not self.active:
             return
         self._stop.set()
-        outcome = "compiled" if exc[0] is None else "failed"
+        # Ctrl-C is the user's choice, not a compile that failed
+        outcome = ("compiled" if exc[0] is None else "interrupted" if issubclass(exc[0], KeyboardInterrupt)
+                   else "failed")
         sys.stderr.write(f"\r{self.label} {outcome} in {time.monotonic() - self.start:.1f} s\n")
         sys.stderr.flush()
