@@ -30,12 +30,14 @@ def _mixed(key, scale, values, out, n):
     return n, total, tmp[0]
 
 
-def test_exported_function_equals_numba_dispatcher(tmp_path):
+def test_exported_function_equals_numba_dispatcher(tmp_path, monkeypatch):
+    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))     # whose secret seals the object
     values = np.linspace(-1.0, 2.0, 10)
     args = (np.uint64(2**63 + 12345), np.float32(1.5), values, np.zeros(10), 8)
     path = tmp_path / "mixed.o"
-    assert objects.export(_mixed, args, path, {"note": "x"})
-    function, meta = objects.load(path)
+    assert objects.export(_mixed, args, path, {"note": "x"}, "functions/mixed.o")
+    assert objects.load(path, "functions/other.o") is None       # sealed for another place: not linked
+    function, meta = objects.load(path, "functions/mixed.o")
     assert meta == {"note": "x"}
     expected_out, got_out = np.zeros(10), np.zeros(10)
     expected = _mixed(args[0], args[1], values, expected_out, 8)
@@ -51,11 +53,12 @@ def test_exported_function_equals_numba_dispatcher(tmp_path):
 
 @pytest.mark.parametrize("damage", [lambda b: b[: len(b) // 2], lambda b: b[:-50] + bytes([b[-50] ^ 1]) + b[-49:],
                                     lambda b: b"garbage"])
-def test_damaged_object_does_not_load(tmp_path, damage):
+def test_damaged_object_does_not_load(tmp_path, monkeypatch, damage):
+    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
     path = tmp_path / "mixed.o"
-    assert objects.export(_mixed, (np.uint64(1), np.float32(1.0), np.zeros(3), np.zeros(3), 3), path, {})
+    assert objects.export(_mixed, (np.uint64(1), np.float32(1.0), np.zeros(3), np.zeros(3), 3), path, {}, "m.o")
     path.write_bytes(damage(path.read_bytes()))
-    assert objects.load(path) is None
+    assert objects.load(path, "m.o") is None
 
 
 def _run(code: str, cache: Path, native: bool = True) -> list:
