@@ -62,7 +62,7 @@ def _check_ancestors(path: Path) -> None:
                                   f"(mode {stat.S_IMODE(st.st_mode):o})")
 
 
-_checked_ancestors: set[tuple[int, int]] = set()
+_checked_ancestors: set[tuple[str, int, int]] = set()
 
 
 def trusted_dir(sub: str = "") -> Path:
@@ -73,9 +73,9 @@ def trusted_dir(sub: str = "") -> Path:
         os.makedirs(root, mode=0o700, exist_ok=True)
     st = os.lstat(root)
     check_private(root, st)
-    if (st.st_dev, st.st_ino) not in _checked_ancestors:
+    if (str(root), st.st_dev, st.st_ino) not in _checked_ancestors:
         _check_ancestors(root)
-        _checked_ancestors.add((st.st_dev, st.st_ino))
+        _checked_ancestors.add((str(root), st.st_dev, st.st_ino))
     if not sub:
         return root
     path = root / sub
@@ -121,7 +121,7 @@ def check_tree(directory: Path) -> None:
             check_private(path, os.lstat(path))
 
 
-_secrets: dict[tuple[int, int], bytes] = {}
+_secrets: dict[tuple[str, int, int], bytes] = {}
 
 
 def secret() -> bytes:
@@ -129,8 +129,9 @@ def secret() -> bytes:
     concurrent run never reads half of it), refused if it is not the user's alone."""
     root = trusted_dir()
     st = os.lstat(root)
-    if (st.st_dev, st.st_ino) in _secrets:
-        return _secrets[(st.st_dev, st.st_ino)]
+    known = (str(root), st.st_dev, st.st_ino)
+    if known in _secrets:
+        return _secrets[known]
     path = root / SECRET_NAME
     try:
         data = read_private(path)
@@ -151,7 +152,7 @@ def secret() -> bytes:
         raise _refuse(path, f"the cache's key is readable by others (mode {mode:o}, must be 600)")
     if len(data) != _SECRET_BYTES:
         raise _refuse(path, f"the cache's key is {len(data)} bytes, not {_SECRET_BYTES}")
-    _secrets[(st.st_dev, st.st_ino)] = data
+    _secrets[known] = data
     return data
 
 

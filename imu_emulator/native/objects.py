@@ -33,7 +33,9 @@ import numpy as np
 
 from imu_emulator.files import trust
 
-_MAGIC = b"IMUK8"     # 8: sealed with the cache's HMAC; 7: memory read by intrinsics; 6: tuples of arguments; 5: the argument tuple read in place
+# 8: sealed with the cache's HMAC; 7: memory read by intrinsics; 6: tuples of arguments; 5: the argument tuple
+# read in place
+_MAGIC = b"IMUK8"
 _ENTRY = "entry_c"
 _DTYPES = ("float64", "float32", "int64", "uint64", "int32", "uint32", "int16", "uint16", "int8", "uint8")
 _symbols_added = False

@@ -3,9 +3,10 @@
 An entry is cache_dir()/<key>/: the generated source kernel.py (its first line an HMAC of the rest under the
 cache's secret, imu_emulator.files.trust), its machine code kernel.o (imu_emulator.native.objects: a warm run loads
 it without importing numba; sealed the same way) and numba's __pycache__ beside it. Nothing of an entry is loaded
-unless the cache and the entry are the running user's alone and the seal matches. The key hashes the whole validated scene (imu_emulator.scene.digest), the outputs and the
-bytes of every module of the generator; imu_emulator.runtime.kernels publishes an entry (directory rename) only
-after it compiled, and removes and regenerates an entry that fails its checksum or its compile.
+unless the cache and the entry are the running user's alone and the seal matches. The key hashes the whole
+validated scene (imu_emulator.scene.digest), the outputs and the bytes of every module of the generator;
+imu_emulator.runtime.kernels publishes an entry (directory rename) only after it compiled, and removes and
+regenerates an entry that fails its seal or its compile.
 """
 from __future__ import annotations
 

@@ -41,7 +41,19 @@ def _import(path: Path, key: str, source: str):
     except BaseException:
         sys.modules.pop(spec.name, None)
         raise
+    _confine_numba_cache(module, path.parent)
     return module
+
+
+def _confine_numba_cache(module, directory: Path) -> None:
+    """numba's cache index is pickled data numba loads: it may live only inside the entry (checked as the user's
+    alone), never in NUMBA_CACHE_DIR or the user-wide directory numba falls back to. A dispatcher whose cache is
+    elsewhere caches nothing (numba's private attributes, so looked up with care: absent, nothing is changed)."""
+    for value in list(vars(module).values()):
+        path = getattr(getattr(value, "_cache", None), "_cache_path", None)
+        if path is not None and Path(path) != directory / "__pycache__":
+            from numba.core.caching import NullCache
+            value._cache = NullCache()
 
 
 def _trial_call(kernel, scene: Scene, attitude: bool, truth: bool, increments: int) -> None:
