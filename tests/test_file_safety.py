@@ -181,14 +181,14 @@ def test_a_link_another_user_planted_in_a_sticky_dir_is_refused(shared, tmp_path
     if command == "generate -o":
         code, err = _cli(capsys, "generate", scene, "-o", link, "--quiet")
     else:
-        to = {"stream --to file:": [f"file:{link}"], "stream --stats-json": ["null", "--stats-json", link],
+        to = {"stream --to file:": [f"file:{link}"], "stream --stats-json": [f"file:{tmp_path / 'x.bin'}", "--stats-json", link],
               "stream --link": ["pty", "--link", link]}[command]
         result = subprocess.run([sys.executable, "-m", "imu_emulator", "stream", scene, "--format", "mavlink-highres",
                                  "--speed", "0", "--to", *to], capture_output=True, text=True, cwd=REPO, timeout=300)
         code, err = result.returncode, result.stderr
-    _one_error_line(code, err, str(link), "owned by uid 65534")
-    assert target.read_text() == "root only\n" and stat.S_IMODE(target.stat().st_mode) == 0o600
+    assert target.read_bytes() == b"root only\n" and stat.S_IMODE(target.stat().st_mode) == 0o600, "written through"
     assert os.readlink(link) == str(target)
+    _one_error_line(code, err, str(link), "owned by uid 65534")
 
 
 def test_a_link_of_ones_own_is_replaced_itself_never_its_target(tmp_path):
