@@ -153,6 +153,8 @@ def _load_entry(entry: Path, key: str, scene: Scene, attitude: bool, truth: bool
             if _export_native(module, text, key, scene, attitude, truth, increments, entry):
                 kernel = _load_native(entry, key, text, scene, attitude, truth, increments) or kernel
         return kernel
+    except trust.UntrustedCache:
+        raise               # not the user's alone: nothing is removed, the user is told
     except Exception:   # planted, truncated, garbage or not compiling: regenerate (never trust it again)
         sys.modules.pop(_module_name(key), None)
         discard(entry)
