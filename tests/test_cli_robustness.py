@@ -184,17 +184,24 @@ def test_write_error_is_one_line_naming_the_file_and_leaves_nothing(tmp_path, na
     _no_temporaries(tmp_path)
 
 
-def test_output_replaces_a_file_keeping_its_permissions_and_writes_through_a_symlink(tmp_path, capsys):
+def test_output_replaces_a_file_keeping_its_permissions_and_a_symlink_itself(tmp_path, capsys):
+    """A file is replaced keeping its mode; a link is replaced by the file, its target left as it was (writing
+    through a link is what let another user's link steer the output: issue 23, tests/test_file_safety.py)."""
     real = tmp_path / "real.csv"
     real.write_text("old")
     real.chmod(0o640)
-    link = tmp_path / "link.csv"
-    link.symlink_to(real)
-    code, _, err = _cli(capsys, "generate", REPO / "examples/helix.toml", "-o", link, "--quiet")
+    code, _, err = _cli(capsys, "generate", REPO / "examples/helix.toml", "-o", real, "--quiet")
     assert code == 0, err
-    assert link.is_symlink() and real.stat().st_mode & 0o777 == 0o640
+    assert real.stat().st_mode & 0o777 == 0o640
     # README: one row per IMU per sample, round(T·f) = 1000 samples of the helix, plus the header.
     assert len(real.read_text().splitlines()) == 1001
+    link = tmp_path / "link.csv"
+    link.symlink_to(real)
+    real.write_text("old")
+    code, _, err = _cli(capsys, "generate", REPO / "examples/helix.toml", "-o", link, "--quiet")
+    assert code == 0, err
+    assert not link.is_symlink() and len(link.read_text().splitlines()) == 1001
+    assert real.read_text() == "old"
 
 
 # --- warnings -----------------------------------------------------------------------------------

@@ -30,12 +30,14 @@ def _mixed(key, scale, values, out, n):
     return n, total, tmp[0]
 
 
-def test_exported_function_equals_numba_dispatcher(tmp_path):
+def test_exported_function_equals_numba_dispatcher(tmp_path, monkeypatch):
+    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))     # whose secret seals the object
     values = np.linspace(-1.0, 2.0, 10)
     args = (np.uint64(2**63 + 12345), np.float32(1.5), values, np.zeros(10), 8)
     path = tmp_path / "mixed.o"
-    assert objects.export(_mixed, args, path, {"note": "x"})
-    function, meta = objects.load(path)
+    assert objects.export(_mixed, args, path, {"note": "x"}, "functions/mixed.o")
+    assert objects.load(path, "functions/other.o") is None       # sealed for another place: not linked
+    function, meta = objects.load(path, "functions/mixed.o")
     assert meta == {"note": "x"}
     expected_out, got_out = np.zeros(10), np.zeros(10)
     expected = _mixed(args[0], args[1], values, expected_out, 8)
@@ -51,11 +53,12 @@ def test_exported_function_equals_numba_dispatcher(tmp_path):
 
 @pytest.mark.parametrize("damage", [lambda b: b[: len(b) // 2], lambda b: b[:-50] + bytes([b[-50] ^ 1]) + b[-49:],
                                     lambda b: b"garbage"])
-def test_damaged_object_does_not_load(tmp_path, damage):
+def test_damaged_object_does_not_load(tmp_path, monkeypatch, damage):
+    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
     path = tmp_path / "mixed.o"
-    assert objects.export(_mixed, (np.uint64(1), np.float32(1.0), np.zeros(3), np.zeros(3), 3), path, {})
+    assert objects.export(_mixed, (np.uint64(1), np.float32(1.0), np.zeros(3), np.zeros(3), 3), path, {}, "m.o")
     path.write_bytes(damage(path.read_bytes()))
-    assert objects.load(path) is None
+    assert objects.load(path, "m.o") is None
 
 
 def _run(code: str, cache: Path, native: bool = True) -> list:
@@ -65,7 +68,7 @@ def _run(code: str, cache: Path, native: bool = True) -> list:
     return json.loads(done.stdout.splitlines()[-1])     # after what the command itself printed
 
 
-def test_deferred_function_runs_without_numba_once_cached(tmp_path):
+def test_deferred_function_runs_without_numba_once_cached(tmp_path, monkeypatch):
     code = ("import sys, json; from imu_emulator.numerics.counter_rng import normals; "
             "print(json.dumps([normals(2**64 - 5, 7, 6).tolist(), 'numba' in sys.modules]))")
     first, second = _run(code, tmp_path), _run(code, tmp_path)
@@ -76,7 +79,8 @@ def test_deferred_function_runs_without_numba_once_cached(tmp_path):
     (path,) = (tmp_path / "functions").glob("*.o")
     path.write_bytes(path.read_bytes()[:100])
     again = _run(code, tmp_path)
-    assert again == first and objects.load(path) is not None
+    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path))
+    assert again == first and objects.load(path, f"functions/{path.name}") is not None
 
 
 def test_warm_stream_imports_no_numba_and_sends_the_same_bytes(tmp_path):
@@ -104,14 +108,15 @@ def _scaled_sum(values, k, x):
 @pytest.mark.parametrize("case", ["plain", "numpy_scalars", "negative_two_digit_int", "int_beyond_two_digits",
                                   "int_for_float", "not_contiguous", "other_dtype",
                                   "equal_dtype_another_object", "byte_swapped"])
-def test_entry_reads_arguments_in_place_or_converts_them(tmp_path, case):
+def test_entry_reads_arguments_in_place_or_converts_them(tmp_path, monkeypatch, case):
     """The entry reads the argument tuple in place (numpy's array struct, scalars' values) and refuses what it was
     not compiled for, which the caller converts: either way the numbers are numba's dispatcher's (the oracle, run
     on a copy of the same arguments)."""
     compiled_for = (np.zeros((2, 3)), 5, 2.0)
     path = tmp_path / "f.o"
-    assert objects.export(_scaled_sum, compiled_for, path, {})
-    function = objects.load(path)[0]
+    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))     # whose secret seals the object
+    assert objects.export(_scaled_sum, compiled_for, path, {}, "f.o")
+    function = objects.load(path, "f.o")[0]
     base = np.arange(12.0).reshape(4, 3)
     args = {"plain": (base[:2].copy(), 7, 0.5), "numpy_scalars": (base[:2].copy(), np.int64(-3), np.float64(1.25)),
             "negative_two_digit_int": (base[:2].copy(), -(2**40 + 9), 1.0),
@@ -144,14 +149,15 @@ def _picked(sources, which, out):
 
 @pytest.mark.parametrize("case", ["plain", "element_not_contiguous", "element_of_another_dtype", "list_for_tuple",
                                   "shorter_tuple"])
-def test_tuple_of_arrays_is_passed_or_converted_as_numba_would(tmp_path, case):
+def test_tuple_of_arrays_is_passed_or_converted_as_numba_would(tmp_path, monkeypatch, case):
     """A tuple of arrays (numba's UniTuple) is read in place element by element; a tuple the code was not compiled
     for is refused by the entry, and converted if it can be (written back in place): the numbers and the written
     arrays are numba's dispatcher's (the oracle, run on copies)."""
     compiled_for = ((np.zeros((3, 2)), np.zeros((1, 2)), np.zeros((4, 1))), np.zeros(5, dtype=np.int64), np.zeros(5))
     path = tmp_path / "picked.o"
-    assert objects.export(_picked, compiled_for, path, {})
-    function = objects.load(path)[0]
+    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
+    assert objects.export(_picked, compiled_for, path, {}, "picked.o")
+    function = objects.load(path, "picked.o")[0]
     which = np.array([0, 1, 2, 0, 2], dtype=np.int64)
     wide = np.zeros((4, 3))
     wide[:, 1] = [7.0, 8.0, 9.0, 10.0]

@@ -72,7 +72,7 @@ def test_machine_code_equals_numba_dispatcher_bit_for_bit(cache, monkeypatch, sc
     assert isinstance(fast.kernel, native.NativeFunction)          # not the numba fallback
     assert (kernel_module.cached_kernel(scene, True, True, increments)[0] / kernel_module.NATIVE).exists()
     kernel_module._loaded.clear()
-    monkeypatch.setattr(native, "load", lambda path: None)       # the oracle: numba runs the same source
+    monkeypatch.setattr(native, "load", lambda path, label: None)       # the oracle: numba runs the same source
     slow = Simulation(scene, truth=True, increments=increments)
     assert not isinstance(slow.kernel, native.NativeFunction)
     n = min(scene.n_samples, 600)
@@ -120,7 +120,8 @@ def test_damaged_machine_code_is_compiled_again(cache, damage):
     again = Simulation(scene)
     assert isinstance(again.kernel, native.NativeFunction)          # rewritten, then loaded
     assert np.array_equal(good.accel, again.block(0, 500).accel)
-    assert native.load(path) is not None and path.read_bytes() != blob[: len(blob) // 2]
+    assert native.load(path, f"kernels/{entry.name}/{kernel_module.NATIVE}") is not None
+    assert path.read_bytes() != blob[: len(blob) // 2]
 
 
 def test_native_kernel_refuses_wrong_arguments(cache):

@@ -285,7 +285,6 @@ def main(argv=None) -> int:
                         help="fit without the low-pass of both records (AlignOptions.lowpass = None), to see its effect")
     parser.add_argument("--plot", help="also draw the errors of every seed to this image (needs matplotlib)")
     args = parser.parse_args(argv)
-    os.environ.setdefault("IMU_EMULATOR_CACHE", "/tmp/imu-emulator-bench-align")
     print(f"# {args.seeds} seeds, {DURATION_S:g} s at {RATE_HZ:g} Hz; load average {os.getloadavg()[0]:.2f} "
           f"on {os.cpu_count()} CPUs (shared machine: times vary)")
     print("| case | model | rotation err max / RMS (°) | injected misalignment max (°) | Δt err max / RMS (ms) "

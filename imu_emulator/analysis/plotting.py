@@ -184,6 +184,7 @@ def draw(data: PlotData, output: str | Path):
             if m == n_imu - 1 and row == 1:
                 ax.set_xlabel("t (s)")
     fig.tight_layout()
-    fig.savefig(output, dpi=90)
+    from imu_emulator.output.atomic import save_figure
+    save_figure(fig, output, dpi=90)
     plt.close(fig)
     return fig

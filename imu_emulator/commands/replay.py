@@ -7,6 +7,8 @@ import json
 import sys
 from pathlib import Path
 
+from imu_emulator.output.atomic import save_figure, write_text
+
 AXES = "xyz"
 MIN_PART_SAMPLES = 20       # a part between gaps shorter than this is left out (and named)
 
@@ -152,8 +154,8 @@ def cmd_replay(args) -> int:
     if report is None:
         return 0
     if recorded is None:
-        (report / "report.md").write_text(f"# Replay of {log.name}\n\nThe log holds no recorded IMU to compare "
-                                          "with; only the emulated IMU was written.\n")
+        write_text(report / "report.md", f"# Replay of {log.name}\n\nThe log holds no recorded IMU to compare "
+                                   "with; only the emulated IMU was written.\n")
         print(f"note: {log.name} holds no recorded IMU; no fidelity figures", file=sys.stderr)
         return 0
     lowpass_hz = args.lowpass_hz or 0.4 * min(_rate(scene.trajectory.t), _rate(scene.attitude.t))
@@ -163,8 +165,8 @@ def cmd_replay(args) -> int:
                "position_source": scene.trajectory.source, "attitude_source": scene.attitude.source,
                "derivative": scene.trajectory.derivative, "rate_hz": scene.rate_hz, "frame": scene.frame,
                "comparisons": [r.figures() for r in results]}
-    (report / "report.json").write_text(json.dumps(figures, indent=2) + "\n")
-    (report / "report.md").write_text(_markdown(figures))
+    write_text(report / "report.json", json.dumps(figures, indent=2) + "\n")
+    write_text(report / "report.md", _markdown(figures))
     _plots(results, report)
     if not args.quiet:
         print(_markdown(figures), file=sys.stderr)
@@ -216,5 +218,5 @@ def _plots(results, report: Path) -> None:
         axes[2, 0].set_xlabel("s from start")
         axes[2, 1].set_xlabel("s from start")
         fig.tight_layout()
-        fig.savefig(report / f"{r.quantity}.png", dpi=110)
+        save_figure(fig, report / f"{r.quantity}.png", dpi=110)
         plt.close(fig)

@@ -6,7 +6,8 @@ with `@jit(...)` instead of `@numba.njit(...)`: the name holds a `Deferred`.
 
 - Called from Python, a Deferred runs its machine code (also once numba is imported, so that every function
   called from Python gets its object file on the first run that calls it): the object file for these
-  argument types under the cache directory (IMU_EMULATOR_CACHE, like the kernels), keyed on the bytes of every
+  argument types under the cache directory (IMU_EMULATOR_CACHE, like the kernels, trusted and sealed as they are:
+  imu_emulator.files.trust), keyed on the bytes of every
   module of the function's package, numba's version and the argument types; if there is none (or it is damaged),
   numba compiles it once and writes it. Arguments that cannot be passed that way (structured arrays, objects),
   results that are arrays, and IMU_EMULATOR_NATIVE=0 take numba's dispatcher (tuples of arrays and numbers
@@ -25,6 +26,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
+
+from imu_emulator.files import trust
 
 _pending: list["Deferred"] = []
 # IMU_EMULATOR_NATIVE=0: numba's dispatcher only (read once: a per-call lookup cost a microsecond per call;
@@ -77,16 +80,17 @@ class Deferred:
             return None
         signature = json.dumps(kinds)
         if signature not in self._native:
-            path = _cache_root() / f"{self._key(signature)}.o"
+            path = trust.trusted_dir("functions") / f"{self._key(signature)}.o"
+            label = f"functions/{path.name}"
             refused = path.with_suffix(".numba")    # a marker: this numba cannot export it, do not try again
-            loaded = None if refused.exists() else objects.load(path)
+            loaded = None if refused.exists() else objects.load(path, label)
             if loaded is None and not refused.exists():
                 realize()
-                if objects.export(self.dispatcher, args, path, {}):
-                    loaded = objects.load(path)
-                else:
-                    refused.parent.mkdir(parents=True, exist_ok=True)
-                    refused.touch()
+                with trust.private_umask():
+                    if objects.export(self.dispatcher, args, path, {}, label):
+                        loaded = objects.load(path, label)
+                    else:
+                        refused.touch()
             self._native[signature] = None if loaded is None else loaded[0]
         self._native[quick] = self._native[signature]
         return self._native[signature]
@@ -126,11 +130,6 @@ def jit(py_func=None, **options):
     if py_func is None:
         return lambda f: Deferred(f, options)
     return Deferred(py_func, options)
-
-
-def _cache_root() -> Path:
-    root = os.environ.get("IMU_EMULATOR_CACHE")
-    return (Path(root) if root else Path.home() / ".cache" / "imu-emulator") / "functions"
 
 
 def _fingerprint(package: str) -> str:

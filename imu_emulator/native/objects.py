@@ -18,11 +18,12 @@ C helpers and its reference-counting functions are loaded without the numba pack
 the caller does not pass may be declared (`scratch` shapes): the loader allocates them per call.
 
 If anything fails (another numba's private API, a platform llvmlite cannot link for, a damaged file), `export`
-returns False, `load` returns None and the caller keeps numba's dispatcher.
+returns False, `load` returns None and the caller keeps numba's dispatcher. The file is sealed with the cache's
+HMAC for the place `label` names (imu_emulator.files.trust): machine code this cache did not write there, or in a
+file not the user's alone, is never linked.
 """
 from __future__ import annotations
 
-import hashlib
 import importlib.util
 import json
 import os
@@ -30,7 +31,11 @@ from pathlib import Path
 
 import numpy as np
 
-_MAGIC = b"IMUK7"     # 7: memory read by intrinsics; 6: tuples of arguments; 5: the argument tuple read in place
+from imu_emulator.files import trust
+
+# 8: sealed with the cache's HMAC; 7: memory read by intrinsics; 6: tuples of arguments; 5: the argument tuple
+# read in place
+_MAGIC = b"IMUK8"
 _ENTRY = "entry_c"
 _DTYPES = ("float64", "float32", "int64", "uint64", "int32", "uint32", "int16", "uint16", "int8", "uint8")
 _symbols_added = False
@@ -278,9 +283,9 @@ def _contiguous(value):
     return value
 
 
-def export(function, args: tuple, path: Path, meta: dict) -> bool:
+def export(function, args: tuple, path: Path, meta: dict, label: str) -> bool:
     """Compile `function` (a numba dispatcher) for the types of `args` behind a C entry, and write its object
-    code with `meta` (JSON) to `path` atomically. False if this numba cannot."""
+    code with `meta` (JSON) to `path` atomically, sealed for `label`. False if this numba cannot."""
     try:
         import numba
         from numba import types
@@ -308,7 +313,9 @@ def export(function, args: tuple, path: Path, meta: dict) -> bool:
     body = len(header).to_bytes(4, "little") + header + code
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}-{os.urandom(4).hex()}")
-    tmp.write_bytes(_MAGIC + hashlib.sha256(body).digest() + body)
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+    with open(fd, "wb") as f:
+        f.write(_MAGIC + trust.digest(label, body) + body)
     os.replace(tmp, path)     # a concurrent reader sees the whole file or none
     return True
 
@@ -477,15 +484,16 @@ def _jit_engine():
     return llvm.create_mcjit_compiler(llvm.parse_assembly(""), machine)
 
 
-def load(path: Path) -> tuple[NativeFunction, dict] | None:
-    """The function `export` wrote to `path` and its `meta`, or None if there is none, it is damaged or it
-    cannot be linked here."""
+def load(path: Path, label: str) -> tuple[NativeFunction, dict] | None:
+    """The function `export` wrote to `path` for `label` and its `meta`, or None if there is none, it is damaged,
+    this cache did not seal it for `label`, or it cannot be linked here. UntrustedCache if the file is not the
+    user's alone."""
     try:
-        blob = path.read_bytes()
-    except OSError:
+        blob = trust.read_private(path)
+    except FileNotFoundError:
         return None
     body = blob[len(_MAGIC) + 32:]
-    if blob[:len(_MAGIC)] != _MAGIC or blob[len(_MAGIC):len(_MAGIC) + 32] != hashlib.sha256(body).digest():
+    if blob[:len(_MAGIC)] != _MAGIC or not trust.matches(label, body, blob[len(_MAGIC):len(_MAGIC) + 32]):
         return None
     try:
         import llvmlite.binding as llvm

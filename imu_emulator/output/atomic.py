@@ -1,9 +1,11 @@
 """Output files that appear whole or not at all.
 
-The file is created at once under a temporary name in its directory (so a path that cannot be written fails
-before any work is done), written, then renamed over the target on `close` or removed on `discard`: a run
-that fails half-way leaves neither a half-written file nor a stale temporary one. Every OSError becomes
-one OutputError line naming the path.
+The file is created at once under a temporary name in the directory given (so a path that cannot be written fails
+before any work is done), written, then renamed over the path on `close` or removed on `discard`: a run
+that fails half-way leaves neither a half-written file nor a stale temporary one (and a part left by a killed run
+is removed by the next). The temporary file is created O_EXCL | O_NOFOLLOW and the rename replaces a symbolic link
+at the path itself, never its target; a link another user placed in a shared directory is refused
+(imu_emulator.files.create). Every OSError becomes one OutputError line naming the path.
 """
 from __future__ import annotations
 
@@ -12,6 +14,7 @@ import stat
 from pathlib import Path
 
 from imu_emulator.errors import ImuEmulatorError
+from imu_emulator.files.create import create_part, is_direct, refuse_foreign, remove_stale_parts
 
 
 class OutputError(ImuEmulatorError):
@@ -41,19 +44,18 @@ class AtomicOutput(FinishOnExit):
 
     def __init__(self, path, mode: str = "w"):
         self.path = Path(path)
-        # A device, FIFO or pipe (/dev/stdout) cannot be replaced by a rename: it is written directly.
-        self.direct = self.path.exists() and not self.path.is_file()
-        # Write through a symlink to where it points, as a plain open() would.
-        self.target = self.path if self.direct else Path(os.path.realpath(self.path))
-        self.temp = None if self.direct else self.target.with_name(
-            f".{self.target.name}.{os.urandom(4).hex()}.part")     # as secrets.token_hex(4), without its imports
+        self.temp = None
         try:
+            refuse_foreign(self.path)
+            self.direct = is_direct(self.path)
             if self.direct:
-                fd = os.open(self.path, os.O_WRONLY | os.O_TRUNC)
+                fd = os.open(self.path, os.O_WRONLY | os.O_TRUNC | os.O_CLOEXEC)
             else:
-                fd = os.open(self.temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-                if self.target.exists():    # replacing a file keeps its permissions
-                    os.fchmod(fd, stat.S_IMODE(self.target.stat().st_mode))
+                remove_stale_parts(self.path)
+                fd, self.temp = create_part(self.path)
+                replaced = os.lstat(self.path) if os.path.lexists(self.path) else None
+                if replaced is not None and stat.S_ISREG(replaced.st_mode):    # replacing a file keeps its mode
+                    os.fchmod(fd, stat.S_IMODE(replaced.st_mode))
         except OSError as exc:
             raise output_error(self.path, exc, "cannot create") from None
         self.file = open(fd, mode, **({} if "b" in mode else {"newline": "", "encoding": "utf-8"}))
@@ -69,7 +71,7 @@ class AtomicOutput(FinishOnExit):
         try:
             self.file.close()
             if not self.direct:
-                os.replace(self.temp, self.target)
+                os.replace(self.temp, self.path)     # a link at the path is replaced, not followed
         except OSError as exc:
             self.discard()
             raise output_error(self.path, exc) from None
@@ -88,3 +90,17 @@ class AtomicOutput(FinishOnExit):
                 os.unlink(self.temp)
             except FileNotFoundError:
                 pass
+
+
+def write_text(path, text: str) -> None:
+    """A whole small file (a report), written as every output is."""
+    with AtomicOutput(path) as out:
+        out.write(text)
+
+
+def save_figure(fig, path, **options) -> None:
+    """A matplotlib figure, written as every output is (savefig(path) would write through any link); the format
+    is the path's suffix, as savefig would pick it."""
+    path = Path(path)
+    with AtomicOutput(path, "wb") as out:
+        fig.savefig(out.file, format=path.suffix[1:] or None, **options)

@@ -1,10 +1,12 @@
-"""The kernel cache on disk: where it lives, the key of an entry, and an entry's checksum.
+"""The kernel cache on disk: where it lives, the key of an entry, and an entry's seal.
 
-An entry is cache_dir()/<key>/: the generated source kernel.py (its first line the checksum of the rest), its
-machine code kernel.o (imu_emulator.native.objects: a warm run loads it without importing numba) and numba's
-__pycache__ beside it. The key hashes the whole validated scene (imu_emulator.scene.digest), the outputs and the
-bytes of every module of the generator; imu_emulator.runtime.kernels publishes an entry (directory rename) only
-after it compiled, and removes and regenerates an entry that fails its checksum or its compile.
+An entry is cache_dir()/<key>/: the generated source kernel.py (its first line an HMAC of the rest under the
+cache's secret, imu_emulator.files.trust), its machine code kernel.o (imu_emulator.native.objects: a warm run loads
+it without importing numba; sealed the same way) and numba's __pycache__ beside it. Nothing of an entry is loaded
+unless the cache and the entry are the running user's alone and the seal matches. The key hashes the whole
+validated scene (imu_emulator.scene.digest), the outputs and the bytes of every module of the generator;
+imu_emulator.runtime.kernels publishes an entry (directory rename) only after it compiled, and removes and
+regenerates an entry that fails its seal or its compile.
 """
 from __future__ import annotations
 
@@ -20,14 +22,19 @@ from pathlib import Path
 from imu_emulator.codegen.generate import CODEGEN_VERSION
 from imu_emulator.codegen.signature import RUNTIME_IMPORTS
 from imu_emulator.effects import EFFECTS
+from imu_emulator.files import trust
 from imu_emulator.scene.digest import KEY_EXCLUDES, canonical  # noqa: F401 (KEY_EXCLUDES: what the key leaves out)
 from imu_emulator.scene.model import Scene
 
 
 def cache_dir() -> Path:
-    root = os.environ.get("IMU_EMULATOR_CACHE")
-    path = Path(root) if root else Path.home() / ".cache" / "imu-emulator"
-    return path / "kernels"
+    """Where the entries are (for showing; kernels_dir() checks and creates it)."""
+    return trust.cache_root() / "kernels"
+
+
+def kernels_dir() -> Path:
+    """The entries' directory, created private if missing; UntrustedCache unless the cache is the user's alone."""
+    return trust.trusted_dir("kernels")
 
 
 def generator_modules() -> list[Path]:
@@ -84,21 +91,33 @@ def scene_key(scene: Scene, attitude: bool, truth: bool, increments: int = 0) ->
     return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:32]
 
 
-_CHECK = "# sha256 "
+_SEAL = "# hmac-sha256 "
 
 
-def with_checksum(source: str) -> str:
-    """An entry's kernel.py: the checksum line, then the source."""
-    return _CHECK + hashlib.sha256(source.encode()).hexdigest() + "\n" + source
+def _label(key: str) -> str:
+    return f"kernels/{key}/kernel.py"
 
 
-def valid_entry(path: Path) -> bool:
+def sealed(key: str, source: str) -> str:
+    """An entry's kernel.py: the seal line (this cache's HMAC of the source, for this key), then the source."""
+    return _SEAL + trust.digest(_label(key), source.encode()).hex() + "\n" + source
+
+
+def entry_source(path: Path, key: str) -> str | None:
+    """The text of an entry's kernel.py if this cache sealed it for this key, else None (edited, damaged, planted
+    or copied from another cache: never executed). UntrustedCache if the file is not the user's alone."""
     try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError):
-        return False
+        text = trust.read_private(path).decode()
+    except (FileNotFoundError, UnicodeDecodeError):
+        return None
     first, _, rest = text.partition("\n")
-    return first == _CHECK + hashlib.sha256(rest.encode()).hexdigest()
+    if not first.startswith(_SEAL):
+        return None
+    try:
+        mac = bytes.fromhex(first[len(_SEAL):])
+    except ValueError:
+        return None
+    return text if trust.matches(_label(key), rest.encode(), mac) else None
 
 
 def discard(directory: Path) -> None:

@@ -16,7 +16,8 @@ import numpy as np
 
 from imu_emulator.codegen.generate import generate_source
 from imu_emulator.codegen.signature import RUNTIME_IMPORTS, trial, trial_arguments
-from imu_emulator.runtime.cache import cache_dir, discard, scene_key, valid_entry, with_checksum
+from imu_emulator.files import trust
+from imu_emulator.runtime.cache import cache_dir, discard, entry_source, kernels_dir, scene_key, sealed
 from imu_emulator.scene.model import Scene
 
 _loaded: dict[str, object] = {}
@@ -27,17 +28,32 @@ def _module_name(key: str) -> str:
     return f"imu_emulator_kernel_{key}"
 
 
-def _import(path: Path, key: str):
+def _import(path: Path, key: str, source: str):
+    """The module of the entry's source, run from the text whose seal was checked (not read again from the file,
+    and never from a .pyc someone could have put beside it); its functions name `path` as their file, where
+    numba keeps its cache index."""
     # numba's on-disk cache refers to the module by name when it reloads a compiled kernel.
     spec = importlib.util.spec_from_file_location(_module_name(key), path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module
     try:
-        spec.loader.exec_module(module)
+        exec(compile(source, str(path), "exec"), module.__dict__)
     except BaseException:
         sys.modules.pop(spec.name, None)
         raise
+    _confine_numba_cache(module, path.parent)
     return module
+
+
+def _confine_numba_cache(module, directory: Path) -> None:
+    """numba's cache index is pickled data numba loads: it may live only inside the entry (checked as the user's
+    alone), never in NUMBA_CACHE_DIR or the user-wide directory numba falls back to. A dispatcher whose cache is
+    elsewhere caches nothing (numba's private attributes, so looked up with care: absent, nothing is changed)."""
+    for value in list(vars(module).values()):
+        path = getattr(getattr(value, "_cache", None), "_cache_path", None)
+        if path is not None and Path(path) != directory / "__pycache__":
+            from numba.core.caching import NullCache
+            value._cache = NullCache()
 
 
 def _trial_call(kernel, scene: Scene, attitude: bool, truth: bool, increments: int) -> None:
@@ -46,7 +62,8 @@ def _trial_call(kernel, scene: Scene, attitude: bool, truth: bool, increments: i
     trial(kernel, scene, attitude, truth, increments)
 
 
-def _export_native(module, scene: Scene, attitude: bool, truth: bool, increments: int, directory: Path) -> bool:
+def _export_native(module, text: str, key: str, scene: Scene, attitude: bool, truth: bool, increments: int,
+                   directory: Path) -> bool:
     """Write the machine code of the generated `kernel_body` (compiled for the Simulation's argument types, plus
     its scratch) to directory/NATIVE; False if this numba cannot (the entry then runs on numba's dispatcher)."""
     from imu_emulator.native import objects as native
@@ -54,8 +71,8 @@ def _export_native(module, scene: Scene, attitude: bool, truth: bool, increments
         return False
     scratch = [(module.N_PHASE, module.CHUNK)]
     args = trial_arguments(scene, attitude, truth, increments) + tuple(np.empty(shape) for shape in scratch)
-    meta = {"scratch": scratch, "source": _source_check(directory)}
-    return native.export(module.kernel_body, args, directory / NATIVE, meta)
+    meta = {"scratch": scratch, "source": _seal_line(text)}
+    return native.export(module.kernel_body, args, directory / NATIVE, meta, _seal_label(key))
 
 
 def _native_enabled() -> bool:
@@ -64,20 +81,24 @@ def _native_enabled() -> bool:
     return os.environ.get("IMU_EMULATOR_NATIVE") != "0"
 
 
-def _source_check(directory: Path) -> str:
-    """The checksum line of the entry's source: the machine code names the source it was compiled from."""
-    with open(directory / "kernel.py") as f:
-        return f.readline().rstrip("\n")
+def _seal_line(text: str) -> str:
+    """The seal line of the entry's source: the machine code names the source it was compiled from."""
+    return text.partition("\n")[0]
 
 
-def _load_native(directory: Path, scene: Scene, attitude: bool, truth: bool, increments: int):
+def _seal_label(key: str) -> str:
+    """What the machine code's HMAC is bound to: the entry's key."""
+    return f"kernels/{key}/{NATIVE}"
+
+
+def _load_native(directory: Path, key: str, text: str, scene: Scene, attitude: bool, truth: bool, increments: int):
     """The entry's kernel as machine code (no numba import), tried on no sample; None if there is none, it is
-    damaged or it was compiled from another source."""
+    damaged, not sealed by this cache for this key, or it was compiled from another source."""
     from imu_emulator.native import objects as native
     if not _native_enabled():
         return None
-    loaded = native.load(directory / NATIVE)
-    if loaded is None or loaded[1].get("source") != _source_check(directory):
+    loaded = native.load(directory / NATIVE, _seal_label(key))
+    if loaded is None or loaded[1].get("source") != _seal_line(text):
         return None
     _trial_call(loaded[0], scene, attitude, truth, increments)
     return loaded[0]
@@ -92,47 +113,65 @@ def _realize_runtime() -> None:
     lazy_jit.realize()
 
 
-def _numba_kernel(path: Path, key: str, scene: Scene, attitude: bool, truth: bool, increments: int):
+def _numba_kernel(path: Path, key: str, text: str, scene: Scene, attitude: bool, truth: bool, increments: int):
     """The generated module's numba kernel (loaded from numba's cache beside it, or compiled), tried."""
     _realize_runtime()
-    module = _import(path, key)
+    module = _import(path, key, text)
     _trial_call(module.kernel, scene, attitude, truth, increments)
     return module
 
 
 def compile_kernel(scene: Scene, attitude: bool = True, truth: bool = False, increments: int = 0):
     """The kernel function for this scene's motion, effects and outputs (cached in memory and on disk).
-    Loaded as machine code without numba when the entry holds it (imu_emulator.native.objects), else numba's."""
+    Loaded as machine code without numba when the entry holds it (imu_emulator.native.objects), else numba's.
+    UntrustedCache if the cache or the entry is not the running user's alone (imu_emulator.files.trust)."""
     key = scene_key(scene, attitude, truth, increments)
     if key in _loaded:
         return _loaded[key]
-    root = cache_dir()
-    root.mkdir(parents=True, exist_ok=True)
+    root = kernels_dir()
     entry = root / key
-    if entry.exists():
-        try:
-            if not valid_entry(entry / "kernel.py"):
-                raise ValueError("checksum")
-            kernel = _load_native(entry, scene, attitude, truth, increments)
-            if kernel is None:   # no machine code, or damaged: numba's, and write the machine code again
-                module = _numba_kernel(entry / "kernel.py", key, scene, attitude, truth, increments)
-                kernel = module.kernel
-                if _export_native(module, scene, attitude, truth, increments, entry):
-                    kernel = _load_native(entry, scene, attitude, truth, increments) or kernel
-            _loaded[key] = kernel
-            return kernel
-        except Exception:   # truncated, garbage or not compiling: regenerate (never trust it again)
-            sys.modules.pop(_module_name(key), None)
-            discard(entry)
+    with trust.private_umask():
+        kernel = _load_entry(entry, key, scene, attitude, truth, increments) if os.path.lexists(entry) else None
+        if kernel is None:
+            kernel = _generate(root, entry, key, scene, attitude, truth, increments)
+    _loaded[key] = kernel
+    return kernel
+
+
+def _load_entry(entry: Path, key: str, scene: Scene, attitude: bool, truth: bool, increments: int):
+    """The published entry's kernel, or None after discarding an entry that is not sealed by this cache for this
+    key (before running any of it) or that fails to load or compile."""
+    trust.check_tree(entry)        # the user's alone, numba's pickled index included, or refused
+    text = entry_source(entry / "kernel.py", key)
+    try:
+        if text is None:
+            raise ValueError("seal")
+        kernel = _load_native(entry, key, text, scene, attitude, truth, increments)
+        if kernel is None:   # no machine code, or damaged: numba's, and write the machine code again
+            module = _numba_kernel(entry / "kernel.py", key, text, scene, attitude, truth, increments)
+            kernel = module.kernel
+            if _export_native(module, text, key, scene, attitude, truth, increments, entry):
+                kernel = _load_native(entry, key, text, scene, attitude, truth, increments) or kernel
+        return kernel
+    except trust.UntrustedCache:
+        raise               # not the user's alone: nothing is removed, the user is told
+    except Exception:   # planted, truncated, garbage or not compiling: regenerate (never trust it again)
+        sys.modules.pop(_module_name(key), None)
+        discard(entry)
+        return None
+
+
+def _generate(root: Path, entry: Path, key: str, scene: Scene, attitude: bool, truth: bool, increments: int):
+    """Generate, compile in a private staging directory, publish by renaming it to the key's name."""
     _realize_runtime()
-    source = generate_source(scene, attitude, truth, increments)
+    text = sealed(key, generate_source(scene, attitude, truth, increments))
     staging = Path(tempfile.mkdtemp(prefix=f".tmp-{key}-", dir=root))
     kernel = None
     try:
-        (staging / "kernel.py").write_text(with_checksum(source))
-        module = _import(staging / "kernel.py", key)
-        if _export_native(module, scene, attitude, truth, increments, staging):   # compiles kernel_body once
-            kernel = _load_native(staging, scene, attitude, truth, increments)
+        (staging / "kernel.py").write_text(text)
+        module = _import(staging / "kernel.py", key, text)
+        if _export_native(module, text, key, scene, attitude, truth, increments, staging):   # compiles once
+            kernel = _load_native(staging, key, text, scene, attitude, truth, increments)
         if kernel is None:
             _trial_call(module.kernel, scene, attitude, truth, increments)
         try:
@@ -144,8 +183,7 @@ def compile_kernel(scene: Scene, attitude: bool = True, truth: bool = False, inc
         sys.modules.pop(_module_name(key), None)
     if kernel is None:
         # Load from the published path, so numba's cache index lives beside the entry, not in the staging dir.
-        kernel = _import(entry / "kernel.py", key).kernel
-    _loaded[key] = kernel
+        kernel = _import(entry / "kernel.py", key, text).kernel
     return kernel
 
 

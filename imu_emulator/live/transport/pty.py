@@ -1,13 +1,18 @@
 """A virtual serial port: the emulator holds the master, firmware under test opens the slave path."""
 from __future__ import annotations
 
+import errno
 import os
 import select
 import termios
 import time
 import tty
 
+from pathlib import Path
+
 from imu_emulator.errors import TargetError
+from imu_emulator.files import locks
+from imu_emulator.files.create import part_name, refuse_foreign
 from imu_emulator.live.transport.base import TargetOptions, Transport, output_queue
 from imu_emulator.live.transport.fdwriter import FdPacketWriter, read_available
 
@@ -29,12 +34,11 @@ class PtyPair:
         os.set_blocking(self.master, False)
         self._hangup = select.poll()
         self._hangup.register(self.master, 0)       # POLLHUP is always reported
-        self.link = link
+        self.link, self._lock = link, None
         if link:
             try:
-                if os.path.islink(link):
-                    os.unlink(link)
-                os.symlink(self.path, link)
+                self._lock = locks.hold(Path(link))
+                _replace_link(Path(link), self.path)
             except OSError as exc:
                 self.close()
                 raise TargetError(f"pty: cannot create link {link}: {exc.strerror}") from None
@@ -59,12 +63,31 @@ class PtyPair:
             os.close(slave)
 
     def close(self) -> None:
-        if self.link and os.path.islink(self.link) and os.readlink(self.link) == self.path:
-            os.unlink(self.link)
+        if self._lock is not None:
+            if os.path.islink(self.link) and os.readlink(self.link) == self.path:
+                os.unlink(self.link)
+            self._lock.release()
+            self._lock = None
         try:
             os.close(self.master)
         except OSError:
             pass
+
+
+def _replace_link(link: Path, target: str) -> None:
+    """A link (a stable name for the pty) made under a temporary name and renamed over `link`: an old link there
+    is replaced, not followed; a file that is not a link is kept (it is not ours to replace); another user's link
+    in a shared directory is refused (imu_emulator.files.create)."""
+    refuse_foreign(link)
+    if os.path.lexists(link) and not os.path.islink(link):
+        raise FileExistsError(errno.EEXIST, "exists and is not a symbolic link: not replaced")
+    temp = part_name(link)
+    os.symlink(target, temp)
+    try:
+        os.replace(temp, link)
+    except OSError:
+        os.unlink(temp)
+        raise
 
 
 # Closing the master discards what the reader has not read yet: at the end of a run we wait for it, until it
