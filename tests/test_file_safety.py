@@ -270,6 +270,8 @@ def test_a_second_stream_in_one_process_on_a_held_path_gets_a_clear_error(tmp_pa
     from imu_emulator.live.transport.pty import PtyPair
     path = tmp_path / "imu0"
     first = PtyPair(str(path)) if kind == "pty --link" else RawFileTransport(str(path))
+    if kind == "pty --link":
+        first.publish()                     # what a stream does once it can answer
     before = os.readlink(path) if kind == "pty --link" else None
     try:
         with pytest.raises(TargetError, match="in use by another running stream"):

@@ -93,3 +93,31 @@ def test_formats_and_targets_are_listed():
     targets = _cli("targets").stdout
     for syntax in ("pty", "serial:DEVICE[@BAUD]", "can:INTERFACE:CHANNEL[@BITRATE]", "udp:HOST:PORT", "file:PATH"):
         assert syntax in targets
+
+
+def test_the_link_appears_only_once_the_stream_can_answer(tmp_path, capsys, monkeypatch):
+    """Issue 23, item 8: --link appeared when the port opened, before the warm-up (on a cold cache, minutes), so a
+    driver that opened it at once waited for answers. The link must not exist during the warm-up and must exist
+    when the send loop starts; it is gone after the run."""
+    from imu_emulator.cli import main
+    from imu_emulator.live.streamer import Streamer
+    link = tmp_path / "imu0"
+    seen = {}
+    warm_up, send_loop = Streamer._warm_up, Streamer._send_loop
+
+    def recording_warm_up(self):
+        seen["during warm-up"] = os.path.lexists(link)
+        return warm_up(self)
+
+    def recording_send_loop(self, *args):
+        seen["when the loop starts"] = os.path.lexists(link)
+        return send_loop(self, *args)
+
+    monkeypatch.setattr(Streamer, "_warm_up", recording_warm_up)
+    monkeypatch.setattr(Streamer, "_send_loop", recording_send_loop)
+    scene = write_scene(tmp_path, rate=200)
+    code = main(["stream", str(scene), "--format", "mavlink-highres", "--to", "pty", "--link", str(link),
+                 "--count", "20", "--quiet"])
+    assert code == 0, capsys.readouterr().err
+    assert seen == {"during warm-up": False, "when the loop starts": True}
+    assert not os.path.lexists(link)

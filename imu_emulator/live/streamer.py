@@ -87,8 +87,9 @@ class Streamer:
             for stream in self.streams:
                 stream.open()
             self._warm_up()
-            # Announced once warm: a driver that opens the port at once finds a device that answers.
+            # Links made and announced once warm: a driver that opens the port at once finds a device that answers.
             for stream in self.streams:
+                stream.transport.publish()
                 print(f"{stream.config.imu} {stream.config.format} -> {stream.transport.describe()}", flush=True)
             paced = self.options.speed > 0
             start = time.monotonic_ns() + _LEAD_NS

@@ -84,6 +84,10 @@ class Transport:
         """Bytes the link holds that the other end has not taken yet, when the kernel says (None otherwise)."""
         return None
 
+    def publish(self) -> None:
+        """Once the stream is ready to answer: make the target visible under the name a driver opens (a pty's
+        --link). Nothing for links whose name exists from the start."""
+
     def finish(self) -> None:
         """At the end of a run, before link_report and close: let the other end take what was sent (bounded)."""
 

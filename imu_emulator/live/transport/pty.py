@@ -37,11 +37,19 @@ class PtyPair:
         self.link, self._lock = link, None
         if link:
             try:
-                self._lock = locks.hold(Path(link))
-                _replace_link(Path(link), self.path)
+                self._lock = locks.hold(Path(link))     # taken now: a second stream on the link fails at once
             except OSError as exc:
                 self.close()
                 raise TargetError(f"pty: cannot create link {link}: {exc.strerror}") from None
+
+    def publish(self) -> None:
+        """Make the link: only once the stream can answer (publish() runs after the warm-up), so a driver that
+        opens the link the moment it appears gets answers (issue 23, item 8: it appeared before a cold warm-up)."""
+        if self.link and self._lock is not None:
+            try:
+                _replace_link(Path(self.link), self.path)
+            except OSError as exc:
+                raise TargetError(f"pty: cannot create link {self.link}: {exc.strerror}") from None
 
     def reader_present(self) -> bool:
         """True while some process has the slave open."""
@@ -121,6 +129,9 @@ class PtyTransport(Transport):
             if not present:
                 self.pty.discard_unread()
         return present
+
+    def publish(self) -> None:
+        self.pty.publish()
 
     def send(self, payload: bytes) -> bool:
         if not self._reader_present():
