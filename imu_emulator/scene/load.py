@@ -78,6 +78,28 @@ def _check_nesting(raw: Mapping) -> None:
             pending.extend((v, f"{where}[{i}]", depth + 1) for i, v in enumerate(value))
 
 
+def _deep_line(text: str) -> str:
+    """"line N (key K)" where brackets first nest beyond MAX_NESTING, for the message when tomllib's recursion
+    fails (then there is no parsed value to name the key from). Brackets inside quoted strings are skipped."""
+    depth, quote = 0, None
+    for number, line in enumerate(text.splitlines(), start=1):
+        for char in line:
+            if quote:
+                quote = None if char == quote else quote
+            elif char in "\"'":
+                quote = char
+            elif char == "#":
+                break
+            elif char in "[{":
+                depth += 1
+                if depth > MAX_NESTING:
+                    key = line.split("=", 1)[0].strip() if "=" in line else ""
+                    return f"line {number}" + (f" (key {shown_key(key)})" if key else "")
+            elif char in "]}":
+                depth = max(depth - 1, 0)
+    return "a value"
+
+
 def load_scene(path: str | Path) -> Scene:
     """Read and validate a TOML scene file."""
     path = Path(path)
@@ -96,8 +118,8 @@ def load_scene(path: str | Path) -> Scene:
         raise SceneError(f"{path}: not valid TOML: {exc}") from None
     except RecursionError:
         # tomllib recurses once per level of nested arrays and inline tables: a few hundred exhaust the stack
-        raise SceneError(f"{path}: not valid TOML here: arrays or inline tables nested beyond the reader's "
-                         f"stack (a scene nests at most {MAX_NESTING} deep)") from None
+        raise SceneError(f"{path}: {_deep_line(text)}: arrays or inline tables nested too deeply to read (a scene "
+                         f"nests at most {MAX_NESTING} levels)") from None
     try:
         return from_dict(raw, base_dir=path.parent, path=str(path))
     except SceneError as exc:
