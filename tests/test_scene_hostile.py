@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from imu_emulator import scene_from_dict
-from imu_emulator.codegen.generate import _read_before_assigned, generate_source
+from imu_emulator.codegen.generate import generate_source
 
 ROOT = Path(__file__).resolve().parent.parent
 LIMIT_S = 120        # a run that loads and refuses a scene takes ~2 s (imports); the hangs took minutes or for ever
@@ -102,6 +102,7 @@ def test_names_assigned_then_read_in_one_branch_are_locals():
     """An IMU function's arguments are the names it reads before assigning them, in execution order: `w` is
     assigned and then read inside one `if` (bias_instability's interpolation weights), so it is no argument,
     while `s` and `state` are (the old walk took `w` for an argument the caller did not have: NameError)."""
+    from imu_emulator.codegen.generate import _read_before_assigned
     code = "if s > 0:\n    w = s * 0.5\n    y = state[0] * w\nz = w + y\nq += 1"
     assert _read_before_assigned(ast.parse(code), set()) == ["s", "state", "q"]
 
