@@ -180,6 +180,38 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
         motion=body, navigation=navigation, attitude=attitude_lines, per_imu=per_imu_lines, truth=truth_lines))
 
 
+class _ReadsBeforeAssigned(ast.NodeVisitor):
+    """Names read before any assignment, in execution order: an assignment's value before its targets, an `if`'s
+    test before its branches. (Walking a whole statement's loads before its stores took a name assigned and then
+    read inside one `if` -- bias_instability's interpolation weights -- for an argument the caller does not have.)"""
+
+    def __init__(self, assigned: set[str]):
+        self.assigned, self.reads = set(assigned), []
+
+    def visit_Name(self, node):
+        if isinstance(node.ctx, ast.Store):
+            self.assigned.add(node.id)
+        elif node.id not in self.assigned and node.id not in self.reads:
+            self.reads.append(node.id)
+
+    def visit_Assign(self, node):
+        self.visit(node.value)
+        for target in node.targets:
+            self.visit(target)
+
+    def visit_AugAssign(self, node):
+        self.visit(node.value)
+        if isinstance(node.target, ast.Name):
+            self.visit(ast.Name(node.target.id, ast.Load()))
+        self.visit(node.target)
+
+
+def _read_before_assigned(tree: ast.AST, assigned: set[str]) -> list[str]:
+    visitor = _ReadsBeforeAssigned(assigned)
+    visitor.visit(tree)
+    return visitor.reads
+
+
 def _imu_function(m: int, lines: list[str], slots: list[tuple[int, str]], module_names: set[str]):
     """IMU m's stages 2-4 as a function of its own, and the line that calls it once per sample.
 
@@ -187,15 +219,7 @@ def _imu_function(m: int, lines: list[str], slots: list[tuple[int, str]], module
     (64 IMUs: 40 s; 100 did not finish); one function per IMU is typed and optimized on its own. Its arguments
     are the names its lines read before assigning them (shared motion, arrays, sample indices), found from the
     code; its state slots are read at its start and written back at its end."""
-    state_vars = {var for _, var in slots}
-    tree = ast.parse("\n".join(lines))
-    assigned, reads = set(state_vars), []
-    for statement in tree.body:
-        loads = [n.id for n in ast.walk(statement) if isinstance(n, ast.Name) and isinstance(n.ctx, ast.Load)]
-        for name in loads:
-            if name not in assigned and name not in reads:
-                reads.append(name)
-        assigned |= {n.id for n in ast.walk(statement) if isinstance(n, ast.Name) and isinstance(n.ctx, ast.Store)}
+    reads = _read_before_assigned(ast.parse("\n".join(lines)), {var for _, var in slots})
     args = [name for name in reads if name not in module_names and not hasattr(builtins, name)]
     if slots and "state" not in args:
         args.append("state")

@@ -62,7 +62,7 @@ def _symbolic(parts: list[tuple[str, object]], scene: Scene) -> MotionCode:
 
     t = sympy.Symbol("t", real=True)
     names = [name for name, _ in parts]
-    exprs = [sympy.sympify(e).replace(sympy.DiracDelta, lambda *a: sympy.Integer(0)) for _, e in parts]
+    exprs = [expressions.drop_impulses(sympy.sympify(e)) for _, e in parts]
     exprs, constants, n_phases = phases.reduce_phases(exprs, t, scene)
     # Fold numeric constants (pi**3 etc.) to 30 digits now, not per sample in the kernel.
     exprs = [sympy.N(e, 30) for e in exprs]

@@ -241,6 +241,15 @@ def to_sympy(tree: ast.Expression, params: Mapping[str, float], t_symbol):
     return _fold(tree, constant, name, lambda fn, args: getattr(sympy, FUNCTIONS[fn][0])(*args))
 
 
+def drop_impulses(expr):
+    """The derivative away from kinks and steps: DiracDelta (d/dt sign(t)) and the unevaluated d/dt of sign(u(t))
+    sympy leaves when u is not t itself (abs(log(t) - 1) twice differentiated) are zero except at isolated
+    instants, where a sampled signal never lands exactly."""
+    import sympy
+    return expr.replace(sympy.DiracDelta, lambda *a: sympy.Integer(0)).replace(
+        lambda e: isinstance(e, sympy.Derivative) and isinstance(e.expr, sympy.sign), lambda e: sympy.Integer(0))
+
+
 def check_symbolic(expr, where: str, source: str, what: str = "its value") -> None:
     """SceneError when sympy's form of an expression (or a derivative: `what`) is not a real finite
     function of t: complex (I), undefined (nan) or infinite (oo, zoo) -- e.g. tan(pi/2) = zoo, or t/(t - t).
@@ -250,6 +259,11 @@ def check_symbolic(expr, where: str, source: str, what: str = "its value") -> No
                          (sympy.I, "is complex")):
         if expr.has(atom) or expr.has(-atom):
             raise SceneError(f"{where}: {what} {reason} for every t (in {source!r})")
+    unevaluated = drop_impulses(expr).atoms(sympy.Derivative)
+    if unevaluated:
+        # the kernel printer has no form for a derivative sympy could not take
+        raise SceneError(f"{where}: {what} has no closed form ({min(map(str, unevaluated))} stays unevaluated; "
+                         f"in {source!r})")
 
 
 class _Code(str):

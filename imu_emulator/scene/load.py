@@ -12,14 +12,19 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from imu_emulator.errors import SceneError
+from imu_emulator.errors import DataError, SceneError
 from imu_emulator.numerics import expressions
 from imu_emulator.scene import sources
 from imu_emulator.scene.checks import check_time_resolution, choice, no_unknown, number, shown_key, subtable
+from imu_emulator.scene.files import MAX_SCENE_BYTES, read_regular
 from imu_emulator.scene.earth import GEODETIC_KEYS, attitude_reference, earth_keys
 from imu_emulator.scene.imus import imu_specs
 from imu_emulator.scene.model import (ATTITUDE_MODES, FRAMES, MAX_ANGLE_DEG, MAX_DURATION_S, MAX_GRAVITY_MPS2,
                                       RATE_RANGE_HZ, SEED_LIMIT, Expressions, SampledData, Scene)
+
+# Deepest nesting of tables and arrays a scene may have (a matrix parameter in an IMU table is 4 levels): the
+# checks, the digest and the cache key recurse over values.
+MAX_NESTING = 16
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -33,6 +38,7 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
     the time span after both (sampled input sets it), the Earth keys after the frame and the effects."""
     if not isinstance(raw, Mapping):
         raise SceneError("scene: expected a table at the top level")
+    _check_nesting(raw)
     no_unknown(raw, {"scene", "params", "trajectory", "attitude", "imu", "effects", "stream"}, "scene file")
     warnings: list[str] = []
     head = subtable(raw, "scene")
@@ -57,13 +63,52 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
                  origin=origin, gravity_model=gravity_model, attitude_reference=reference)
 
 
+def _check_nesting(raw: Mapping) -> None:
+    """Refuse values nested beyond MAX_NESTING, naming the key, without recursing (the value may be deeper than
+    Python's stack)."""
+    pending = [(raw, "", 0)]
+    while pending:
+        value, where, depth = pending.pop()
+        if depth > MAX_NESTING:
+            raise SceneError(f"{where}: nested more than {MAX_NESTING} levels deep")
+        if isinstance(value, Mapping):
+            pending.extend((v, f"{where}.{shown_key(k)}" if where else shown_key(k), depth + 1)
+                           for k, v in value.items())
+        elif isinstance(value, (list, tuple)):
+            pending.extend((v, f"{where}[{i}]", depth + 1) for i, v in enumerate(value))
+
+
+def _deep_line(text: str) -> str:
+    """"line N (key K)" where brackets first nest beyond MAX_NESTING, for the message when tomllib's recursion
+    fails (then there is no parsed value to name the key from). Brackets inside quoted strings are skipped."""
+    depth, quote = 0, None
+    for number, line in enumerate(text.splitlines(), start=1):
+        for char in line:
+            if quote:
+                quote = None if char == quote else quote
+            elif char in "\"'":
+                quote = char
+            elif char == "#":
+                break
+            elif char in "[{":
+                depth += 1
+                if depth > MAX_NESTING:
+                    key = line.split("=", 1)[0].strip() if "=" in line else ""
+                    return f"line {number}" + (f" (key {shown_key(key)})" if key else "")
+            elif char in "]}":
+                depth = max(depth - 1, 0)
+    return "a value"
+
+
 def load_scene(path: str | Path) -> Scene:
     """Read and validate a TOML scene file."""
     path = Path(path)
     try:
-        text = path.read_bytes().decode("utf-8")
+        text = read_regular(path, MAX_SCENE_BYTES).decode("utf-8")
     except OSError as exc:
         raise SceneError(f"{path}: cannot read scene file: {exc.strerror}") from None
+    except DataError as exc:
+        raise SceneError(f"{path}: cannot read scene file: {exc}") from None
     except UnicodeDecodeError as exc:
         raise SceneError(f"{path}: not UTF-8 text (byte {exc.start} is {exc.object[exc.start]:#04x}); "
                          "TOML scene files are UTF-8") from None
@@ -71,6 +116,10 @@ def load_scene(path: str | Path) -> Scene:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{path}: not valid TOML: {exc}") from None
+    except RecursionError:
+        # tomllib recurses once per level of nested arrays and inline tables: a few hundred exhaust the stack
+        raise SceneError(f"{path}: {_deep_line(text)}: arrays or inline tables nested too deeply to read (a scene "
+                         f"nests at most {MAX_NESTING} levels)") from None
     try:
         return from_dict(raw, base_dir=path.parent, path=str(path))
     except SceneError as exc:

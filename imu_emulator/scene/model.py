@@ -26,6 +26,7 @@ MAX_LEVER_ARM_M = 1e3
 MAX_ANGLE_DEG = 1e4            # mounting angles, initial heading
 MAX_TRACK_ANGLE_RAD = 1e9      # track angles may be unwrapped over long runs
 MAX_FREQUENCY_HZ = 1e6         # circle shape
+SPEED_RANGE_MPS = (1e-6, 1e5)   # shapes' speed_mps: a radius or a duration divides by it, so no subnormal speeds
 MAX_TIME_OFFSET_S = 1e6        # [[imu]] time_offset_s: a clock offset, not a second epoch
 MAX_IMUS = 256                 # beyond codegen.generate.INLINE_IMUS, an IMU is a kernel function: ~0.3 s CPU each
 

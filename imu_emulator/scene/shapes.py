@@ -18,7 +18,7 @@ import numpy as np
 from imu_emulator.errors import SceneError
 from imu_emulator.scene.checks import choice, no_unknown, number
 from imu_emulator.scene.checks import vector3 as bounded_vector3
-from imu_emulator.scene.model import MAX_FREQUENCY_HZ, MAX_POSITION_M, Expressions
+from imu_emulator.scene.model import MAX_FREQUENCY_HZ, MAX_POSITION_M, SPEED_RANGE_MPS, Expressions
 
 # Step of the dense sampling of piecewise shapes: fine enough that the quintic spline refitted to the samples
 # follows the exact curve to ~1e-9 of its size between junctions.
@@ -38,6 +38,15 @@ class Shape:
 def _vector3(table, key, where):
     """A position-like triple within the scene's bounds (harden-input's MAX_POSITION_M)."""
     return bounded_vector3(table, key, where, MAX_POSITION_M, " m")
+
+
+def _speed(table, where, required=True):
+    """speed_mps within SPEED_RANGE_MPS: radii and durations divide by it (5e-324 m/s made a zero radius)."""
+    v = number(table, "speed_mps", where, required=required, positive=True)
+    low, high = SPEED_RANGE_MPS
+    if not low <= v <= high:
+        raise SceneError(f"{where}.speed_mps: {v!r} is out of range ({low:g} to {high:g} m/s)")
+    return v
 
 
 def _expr(*texts: str) -> Expressions:
@@ -106,7 +115,7 @@ def _coordinated_turn(table, where, frame, g):
     zeroes the lateral specific force is tan(roll) = -a_y / f_z with f_z = +g (ENU) or -g (NED).
     """
     no_unknown(table, {"shape", "speed_mps", "bank_deg", "height_m", "center_m", "initial_heading_deg"}, where)
-    v = number(table, "speed_mps", where, required=True, positive=True)
+    v = _speed(table, where)
     bank = number(table, "bank_deg", where, required=True)
     if not 0 < abs(bank) < 89:
         raise SceneError(f"{where}.bank_deg: must be non-zero and within ±89°, got {bank}")
@@ -114,6 +123,9 @@ def _coordinated_turn(table, where, frame, g):
     heading = math.radians(number(table, "initial_heading_deg", where, default=0.0))
     cx, cy, cz = _vector3(table, "center_m", where)
     r = v * v / (g * math.tan(math.radians(abs(bank))))
+    if not 0 < r <= MAX_POSITION_M:
+        raise SceneError(f"{where}: speed_mps = {v!r} at bank_deg = {bank!r} makes a turn radius of {r:g} m, "
+                         f"outside (0, {MAX_POSITION_M:g}] m")
     right = bank > 0
     # Body y is +90° from x in the navigation x-y plane in both frames (left in ENU, right in NED), so a turn
     # towards +y (counterclockwise in x-y, rate w > 0) is a left turn in ENU and a right turn in NED.
@@ -135,7 +147,7 @@ def _racetrack(table, where, frame, g):
     no_unknown(table, {"shape", "straight_m", "radius_m", "speed_mps", "laps", "height_m", "center_m"}, where)
     length = number(table, "straight_m", where, required=True, positive=True)
     r = number(table, "radius_m", where, required=True, positive=True)
-    v = number(table, "speed_mps", where, required=True, positive=True)
+    v = _speed(table, where)
     laps = number(table, "laps", where, default=1.0, positive=True)
     h = number(table, "height_m", where, default=0.0)
     cx, cy, cz = _vector3(table, "center_m", where)
@@ -209,7 +221,7 @@ def _waypoints(table, where, frame, g):
         if not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
             raise SceneError(f"{where}.times_s: must be finite and strictly increasing, got {times.tolist()}")
     else:
-        speed = number(table, "speed_mps", where, positive=True)
+        speed = _speed(table, where)
         chords = np.linalg.norm(np.diff(points, axis=0), axis=1)
         if np.any(chords == 0):
             i = int(np.argmax(chords == 0)) + 1

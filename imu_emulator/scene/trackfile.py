@@ -21,6 +21,7 @@ file's rows and columns.
 from __future__ import annotations
 
 import dataclasses
+import io
 import warnings
 import zipfile
 from dataclasses import dataclass
@@ -30,6 +31,7 @@ import numpy as np
 
 from imu_emulator.numerics.derivatives import SampledSeries, unwrap_angles, validate_samples
 from imu_emulator.errors import DataError
+from imu_emulator.scene.files import MAX_TRACK_BYTES, read_regular
 
 POSITION_COLUMNS = ("x", "y", "z")
 GEODETIC_COLUMNS = ("lat_deg", "lon_deg", "height_m")   # instead of x, y, z: WGS-84 geodetic (deg, deg, m)
@@ -163,7 +165,7 @@ def read_csv_rows(path: Path, expected_header: str) -> tuple[int, str, list[str]
     (line number, text), blank lines and '#' comments skipped; DataError for an empty file or one that is
     not UTF-8. Shared with imulog, so that every CSV we read follows the same rules."""
     try:
-        text = path.read_bytes().decode("utf-8-sig")
+        text = read_regular(path, MAX_TRACK_BYTES).decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise DataError(f"{path.name}: not UTF-8 text (byte {exc.start} is {exc.object[exc.start]:#04x})") from None
     rows = [(number, line) for number, line in enumerate(text.splitlines(), start=1)
@@ -176,7 +178,7 @@ def read_csv_rows(path: Path, expected_header: str) -> tuple[int, str, list[str]
 
 def read_npz_arrays(path: Path) -> dict[str, np.ndarray]:
     try:
-        with np.load(path, allow_pickle=False) as archive:
+        with np.load(io.BytesIO(read_regular(path, MAX_TRACK_BYTES)), allow_pickle=False) as archive:
             return {name: archive[name] for name in archive.files}
     except (ValueError, EOFError, zipfile.BadZipFile, AttributeError) as exc:
         # AttributeError: np.load of a bare .npy returns an array, which is no context manager

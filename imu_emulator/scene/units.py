@@ -35,8 +35,14 @@ kelvin = [temperature] = K = degC
 
 ppm = 1e-6
 """
-# pint has no sqrt() in unit strings; datasheets write sqrt(Hz), sqrt(h) or √Hz.
-_SQRT = re.compile(r"(?:sqrt\(\s*([^()]*?)\s*\)|√\s*\(\s*([^()]*?)\s*\)|√\s*([A-Za-zµμ]+))")
+# The longest text read as a value with units, and the deepest nesting of parentheses and sqrt(): datasheet
+# forms are a few words long; the bounds keep a scene file from making the parser (or pint) work for minutes.
+MAX_TEXT = 100
+MAX_DEPTH = 4
+# Exponents are small integers ("m/s^2", "(deg/s)**2", "s^-1"): "9**9**9" would be a 369-million-digit number.
+MAX_EXPONENT = 4
+_TOKEN = re.compile(r"\s*(?:(?P<number>(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)|(?P<word>[A-Za-zµμ°%][A-Za-z0-9_µμ°%]*)"
+                    r"|(?P<op>\*\*|[*/^()√-]))")
 
 
 @lru_cache(maxsize=1)
@@ -47,8 +53,114 @@ def registry():
     return reg
 
 
-def _rewrite(text: str) -> str:
-    return _SQRT.sub(lambda m: f"(({m.group(1) or m.group(2) or m.group(3)})**0.5)", text)
+_SUPERSCRIPT = re.compile(r"(⁻?)([¹²³⁴])")
+
+
+def _tokens(text: str) -> list[tuple[str, str]]:
+    tokens, at = [], 0
+    text = _SUPERSCRIPT.sub(lambda m: "^" + "-" * bool(m.group(1)) + str("¹²³⁴".index(m.group(2)) + 1), text.rstrip())
+    while at < len(text):
+        match = _TOKEN.match(text, at)
+        if not match:
+            raise ValueError(f"unexpected {text[at:].lstrip()[:1]!r}")
+        kind = match.lastgroup
+        tokens.append((kind, match.group(kind)))
+        at = match.end()
+    return tokens
+
+
+class _Reader:
+    """A value with units by a small grammar, evaluated with pint's unit objects but never pint's expression
+    parser (which evaluates arbitrary arithmetic such as "10**10**10"):
+        product := power (("*" | "/" | juxtaposition) power)*
+        power   := atom (("^" | "**") ["-"] INTEGER)?          (|INTEGER| <= MAX_EXPONENT)
+        atom    := ["-"] NUMBER | WORD | "(" product ")" | "sqrt" "(" product ")" | "√" atom
+    Juxtaposition multiplies ("0.1 %/(2000 deg/s)"), and * / juxtaposition associate left to right, as in pint."""
+
+    def __init__(self, text: str, reg):
+        self.tokens, self.at, self.depth, self.reg = _tokens(text), 0, 0, reg
+
+    def peek(self):
+        return self.tokens[self.at] if self.at < len(self.tokens) else (None, None)
+
+    def take(self, value=None):
+        kind, token = self.peek()
+        if kind is None or (value is not None and token != value):
+            raise ValueError(f"expected {value!r}" if value else "unexpected end")
+        self.at += 1
+        return kind, token
+
+    def read(self):
+        value = self.product()
+        if self.at != len(self.tokens):
+            raise ValueError(f"unexpected {self.peek()[1]!r}")
+        return value
+
+    def product(self):
+        value = self.power()
+        while True:
+            kind, token = self.peek()
+            if token in ("*", "/"):
+                self.at += 1
+                right = self.power()
+                value = value * right if token == "*" else value / right
+            elif kind in ("number", "word") or token in ("(", "√"):
+                value = value * self.power()
+            else:
+                return value
+
+    def power(self):
+        value = self.atom()
+        if self.peek()[1] in ("^", "**"):
+            self.at += 1
+            sign = -1 if self.peek()[1] == "-" and self.take("-") else 1
+            kind, token = self.take()
+            if kind != "number" or not token.isdigit() or int(token) > MAX_EXPONENT:
+                raise ValueError(f"exponents are integers up to {MAX_EXPONENT}, got {token!r}")
+            value = value ** (sign * int(token))
+        return value
+
+    def atom(self):
+        kind, token = self.take()
+        if token == "-":
+            kind, token = self.take()
+            if kind != "number":
+                raise ValueError("'-' only before a number")
+            return -float(token)
+        if kind == "number":
+            return float(token)
+        if token == "sqrt" and self.peek()[1] == "(":
+            return self.nested(lambda: self.take("(") and self.closed()) ** 0.5
+        if token == "√":
+            return self.nested(self.atom) ** 0.5
+        if token == "(":
+            return self.nested(self.closed)
+        if kind == "word":
+            try:
+                return self.reg.Quantity(1.0, self.reg.Unit(token))
+            except Exception:
+                raise ValueError(f"unknown unit {token!r}") from None
+        raise ValueError(f"unexpected {token!r}")
+
+    def closed(self):
+        value = self.product()
+        self.take(")")
+        return value
+
+    def nested(self, read):
+        self.depth += 1
+        if self.depth > MAX_DEPTH:
+            raise ValueError(f"more than {MAX_DEPTH} nested parentheses")
+        value = read()
+        self.depth -= 1
+        return value
+
+
+def _quantity(text: str):
+    """Text -> pint Quantity (or float), bounded in length, nesting and exponents."""
+    if len(text) > MAX_TEXT:
+        raise ValueError(f"longer than {MAX_TEXT} characters")
+    return _Reader(text, registry()).read()
 
 
 def to_unit(value, unit: str, where: str) -> float:
@@ -64,12 +176,15 @@ def to_unit(value, unit: str, where: str) -> float:
         import pint
         reg = registry()
         try:
-            quantity = reg.Quantity(_rewrite(value.strip()))
-            number = float(quantity.to(reg.Unit(_rewrite(unit))).magnitude)
+            ratio = reg.Quantity(_quantity(value.strip())) / reg.Quantity(_quantity(unit))
+            number = float(ratio.to(reg.dimensionless).magnitude)
         except pint.DimensionalityError:
             raise SceneError(f"{where}: {value!r} has the wrong dimension (expected a value in {unit})") from None
-        except Exception:
-            raise SceneError(f"{where}: cannot read {value!r} as a value with units (e.g. '5 deg/h', "
+        except Exception as exc:
+            # the reason from the grammar (ValueError) or pint (an unknown unit); the text itself may be long
+            shown = repr(value) if len(value) <= 60 else repr(value[:40]) + f"... ({len(value)} characters)"
+            reason = f": {exc}" if isinstance(exc, ValueError) else ""
+            raise SceneError(f"{where}: cannot read {shown} as a value with units{reason} (e.g. '5 deg/h', "
                              f"'120 ug/sqrt(Hz)'; expected a value in {unit})") from None
     else:
         number = float(value)

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from imu_emulator.errors import DataError
+from imu_emulator.scene.files import MAX_LOG_BYTES, check_regular
 
 SUFFIXES = {".ulg": "ulog", ".bin": "dataflash", ".mcap": "ros2bag"}
 GAP_FACTOR = 10.0
@@ -66,12 +67,14 @@ def load_log(path, position_source: str | None = None, attitude_source: str | No
     """Position and attitude of the vehicle from a log (gaps are checked by `window`, once the replayed
     span is known: a gap outside it does not matter)."""
     path = Path(path)
+    check_regular(path, MAX_LOG_BYTES)
     return _module(path).read_motion(path, position_source, attitude_source)
 
 
 def load_recorded_imu(path, source: str | None = None) -> RecordedImu | None:
     """The vehicle's own IMU from the log, or None when the log has none."""
     path = Path(path)
+    check_regular(path, MAX_LOG_BYTES)
     return _module(path).read_imu(path, source)
 
 
