@@ -11,7 +11,6 @@ runs FUZZ inputs per device (default 1000, about 10 s in all; FUZZ=100000 for a 
 import math
 import os
 import struct
-import time
 
 import can
 import numpy as np
@@ -20,6 +19,7 @@ from hypothesis import given, settings, strategies as st
 
 import firmware_protocols
 from firmware_protocols import Samples
+from device_support import best_cpu
 
 def _mavlink_commands():
     from pymavlink.dialects.v20 import common as mavlink2
@@ -254,19 +254,10 @@ def test_device_command_fuzzer_long():
     assert ran == FUZZ_INPUTS * (len(COMMAND_MAKERS) + len(CAN))
 
 
-def _cpu(run, data) -> float:
-    times = []
-    for _ in range(3):
-        start = time.process_time()
-        run(data)
-        times.append(time.process_time() - start)
-    return max(min(times), 1e-3)
-
-
 @pytest.mark.parametrize("name, flood", [(n, f) for n in sorted(SYNC_BYTES) for f in SYNC_BYTES[n]])
 def test_sync_byte_floods_cost_time_linear_in_their_size(name, flood):
     """CPU of a 4n flood over an n flood: 4 when linear, 16 when quadratic; < 8 leaves room for noise."""
     def run(data):
         firmware_protocols.create_device(name, 100.0).receive(data)
     n = max(1, 8_192 // len(flood))
-    assert _cpu(run, flood * 4 * n) / _cpu(run, flood * n) < 8
+    assert best_cpu(run, flood * 4 * n) / best_cpu(run, flood * n) < 8

@@ -3,8 +3,6 @@ MAV_RESULT for SET_MESSAGE_INTERVAL values common.xml does not allow, MIP's NACK
 a reply that cannot fit and a field listed twice, one $VNERR per malformed VectorNav line; floods of a sync byte
 cost time linear in their size; replies wait for room ahead of samples instead of being dropped."""
 import math
-import time
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -15,6 +13,7 @@ from imu_emulator.live.config import StreamConfig
 from imu_emulator.live.stream import Stream
 
 mavlink2 = pytest.importorskip("pymavlink.dialects.v20.common")
+from device_support import command_long, cpu_ratio, gcs  # noqa: E402
 
 
 def _samples(n=8):
@@ -23,38 +22,15 @@ def _samples(n=8):
                    quat=np.tile([1.0, 0, 0, 0], (n, 1)), euler=np.zeros((n, 3)))
 
 
-def cpu_ratio(run, small: bytes, large: bytes) -> float:
-    """CPU time of run(large) over run(small), each the best of three (a ratio: no absolute time is asserted)."""
-    def best(data):
-        times = []
-        for _ in range(3):
-            start = time.process_time()
-            run(data)
-            times.append(time.process_time() - start)
-        return max(min(times), 1e-3)
-    return best(large) / best(small)
-
-
 # - MAVLink -
 
-def _gcs():
-    mav = mavlink2.MAVLink(None, srcSystem=255, srcComponent=190)
-    mav.robust_parsing = True
-    return mav
-
-
-def _command(*params, command=511):
-    params = list(params) + [0.0] * (7 - len(params))
-    return mavlink2.MAVLink_command_long_message(1, 1, command, 0, *params).pack(_gcs())
-
-
 def _acks(replies):
-    mav = _gcs()
+    mav = gcs()
     return [(m.command, m.result) for r in replies for m in mav.parse_buffer(r) or [] if m.get_type() == "COMMAND_ACK"]
 
 
 def _imu_messages(device, samples, n=4):
-    mav = _gcs()
+    mav = gcs()
     return sum(m.get_type() == "HIGHRES_IMU"
                for i in range(n) for m in mav.parse_buffer(device.output(samples, i)) or [])
 
@@ -68,10 +44,10 @@ def test_set_message_interval_values_common_xml_does_not_allow_are_denied(msgid,
     turned the stream off, 1e30 broke the packing of MESSAGE_INTERVAL."""
     device = firmware_protocols.create_device("mavlink-highres", 100.0)
     samples = _samples()
-    assert _acks(device.receive(_command(msgid, interval))) == [(511, mavlink2.MAV_RESULT_DENIED)]
+    assert _acks(device.receive(command_long(msgid, interval))) == [(511, mavlink2.MAV_RESULT_DENIED)]
     assert _imu_messages(device, samples) == 4          # the stream goes on unchanged
-    interval_reply = device.receive(_command(105, command=510)) + device.receive(_command(0, command=510))
-    got = [(m.message_id, m.interval_us) for r in interval_reply for m in _gcs().parse_buffer(r) or []
+    interval_reply = device.receive(command_long(105, command=510)) + device.receive(command_long(0, command=510))
+    got = [(m.message_id, m.interval_us) for r in interval_reply for m in gcs().parse_buffer(r) or []
            if m.get_type() == "MESSAGE_INTERVAL"]
     assert got == [(105, 10_000), (0, 1_000_000)]
 
@@ -79,9 +55,9 @@ def test_set_message_interval_values_common_xml_does_not_allow_are_denied(msgid,
 def test_minus_one_disables_and_zero_restores_the_default_rate():
     device = firmware_protocols.create_device("mavlink-highres", 100.0)
     samples = _samples()
-    assert _acks(device.receive(_command(105, -1))) == [(511, mavlink2.MAV_RESULT_ACCEPTED)]
+    assert _acks(device.receive(command_long(105, -1))) == [(511, mavlink2.MAV_RESULT_ACCEPTED)]
     assert _imu_messages(device, samples) == 0
-    assert _acks(device.receive(_command(105, 0))) == [(511, mavlink2.MAV_RESULT_ACCEPTED)]
+    assert _acks(device.receive(command_long(105, 0))) == [(511, mavlink2.MAV_RESULT_ACCEPTED)]
     assert _imu_messages(device, samples) == 4
 
 
@@ -92,7 +68,7 @@ def test_a_datagram_left_unfinished_does_not_swallow_the_next_datagrams_commands
     garbage = bytes([0xFD, 0xFF, 0, 0, 0, 255, 190, 76, 0, 0]) + b"\x55" * 20
     assert device.receive(garbage, whole=True) == []
     for interval in (20_000, 30_000, 40_000):
-        assert _acks(device.receive(_command(105, interval), whole=True)) == [(511, mavlink2.MAV_RESULT_ACCEPTED)]
+        assert _acks(device.receive(command_long(105, interval), whole=True)) == [(511, mavlink2.MAV_RESULT_ACCEPTED)]
     assert device.imu.divider == 4
     assert device.stats.ignored_bytes == len(garbage)
 
@@ -105,7 +81,7 @@ def test_a_flood_of_mavlink_start_bytes_costs_time_linear_in_its_size(flood):
         device.receive(data)
         # The flood's tail may look like the start of a long frame: a command hidden behind it is found once
         # that false frame's claimed length has arrived (the driver resending), as any MAVLink parser does.
-        assert (511, 0) in _acks(device.receive(_command(105, 20_000) * 8))
+        assert (511, 0) in _acks(device.receive(command_long(105, 20_000) * 8))
     # The rescan was a memchr, so its quadratic term shows late: on 168021a this ratio measured 6.5-7.2, with
     # the fix 3.9-4.2 (4 is linear); the bound sits between.
     assert cpu_ratio(run, flood * 131_072, flood * 524_288) < 5.5

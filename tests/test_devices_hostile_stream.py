@@ -12,21 +12,11 @@ import pytest
 from test_stream_support import Emulator, read_for, write_scene
 
 mavlink2 = pytest.importorskip("pymavlink.dialects.v20.common")
-
-
-def _gcs():
-    mav = mavlink2.MAVLink(None, srcSystem=255, srcComponent=190)
-    mav.robust_parsing = True
-    return mav
-
-
-def _command(*params, command=511):
-    params = list(params) + [0.0] * (7 - len(params))
-    return mavlink2.MAVLink_command_long_message(1, 1, command, 0, *params).pack(_gcs())
+from device_support import command_long, gcs  # noqa: E402
 
 
 def _kinds(data):
-    return [m for m in _gcs().parse_buffer(data) or [] if m.get_type() != "BAD_DATA"]
+    return [m for m in gcs().parse_buffer(data) or [] if m.get_type() != "BAD_DATA"]
 
 
 def _acks(data):
@@ -53,14 +43,14 @@ def test_mavlink_over_a_pty_denies_hostile_intervals_survives_a_flood_and_keeps_
         assert read_for(fd, 30, stop_after=1)
         hostile = b""
         for msgid, interval in HOSTILE_511:
-            _write_all(fd, _command(msgid, interval))
+            _write_all(fd, command_long(msgid, interval))
             hostile += read_for(fd, 0.3)
         for _ in range(32):                                   # 2 MB took 411 s on 168021a; 256 KiB here
             _write_all(fd, b"\xfd" * 8192)
             read_for(fd, 0.01)
         answered = b""
         for attempt in range(20):                             # a driver resends until it hears an answer
-            _write_all(fd, _command(105, 20_000))
+            _write_all(fd, command_long(105, 20_000))
             answered += read_for(fd, 0.3)
             if (511, 0) in _acks(answered):
                 break
@@ -94,8 +84,8 @@ def test_mavlink_over_udp_answers_the_commands_after_a_garbage_datagram(tmp_path
                 return got
 
             garbage = converse(bytes([0xFD, 0xFF, 0, 0, 0, 255, 190, 76, 0, 0]) + b"\x55" * 20)
-            valid = [converse(_command(105, interval)) for interval in (20_000, 30_000, 40_000)]
-            hostile = converse(_command(math.inf, 1000))
+            valid = [converse(command_long(105, interval)) for interval in (20_000, 30_000, 40_000)]
+            hostile = converse(command_long(math.inf, 1000))
             code, err = emu.interrupt()
     assert code == 0, err
     assert not _acks(garbage)
@@ -152,7 +142,7 @@ def test_replies_on_a_full_link_wait_for_room_and_all_arrive(tmp_path):
         read_for(fd, 1.0)
         answers = b""
         for k in range(10):
-            _write_all(fd, _command(105, 10_000 * (1 + k % 2)))
+            _write_all(fd, command_long(105, 10_000 * (1 + k % 2)))
             answers += read_for(fd, 0.3)
         answers += read_for(fd, 1.0)
         os.close(fd)

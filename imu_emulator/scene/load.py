@@ -82,7 +82,7 @@ def _deep_line(text: str) -> str:
     """"line N (key K)" where brackets first nest beyond MAX_NESTING, for the message when tomllib's recursion
     fails (then there is no parsed value to name the key from). Brackets inside quoted strings are skipped."""
     depth, quote = 0, None
-    for number, line in enumerate(text.splitlines(), start=1):
+    for line_no, line in enumerate(text.splitlines(), start=1):
         for char in line:
             if quote:
                 quote = None if char == quote else quote
@@ -94,7 +94,7 @@ def _deep_line(text: str) -> str:
                 depth += 1
                 if depth > MAX_NESTING:
                     key = line.split("=", 1)[0].strip() if "=" in line else ""
-                    return f"line {number}" + (f" (key {shown_key(key)})" if key else "")
+                    return f"line {line_no}" + (f" (key {shown_key(key)})" if key else "")
             elif char in "]}":
                 depth = max(depth - 1, 0)
     return "a value"

@@ -5,8 +5,6 @@ finds the kinds, parses specs and opens the right one.
 """
 from __future__ import annotations
 
-import importlib
-
 from imu_emulator import extensions
 from imu_emulator.errors import TargetError
 from imu_emulator.live.transport import kinds
