@@ -39,6 +39,25 @@ class Samples:
     position_llh:   (n, 3) geodetic latitude, longitude (deg), height above the WGS-84 ellipsoid (m)  (optional)
     velocity_ned:   (n, 3) velocity north, east, down, m/s                  (optional)
     linear_accel_ned: (n, 3) acceleration without gravity, north, east, down, m/s^2  (optional)
+    position_llh, velocity_ned, quat, euler are the unit's own estimate when the scene names one (truth plus its
+    errors), else the truth. Its uncertainties and status:
+    attitude_sigma_rad: (n, 3) roll, pitch, yaw 1-sigma, rad                   (optional)
+    position_sigma_m:   (n, 3) north, east, down 1-sigma, m                    (optional)
+    velocity_sigma_mps: (n, 3) north, east, down 1-sigma, m/s                  (optional)
+    ins_mode:       (n,) 0 not tracking, 1 aligning, 2 tracking (healthy)      (optional)
+    differential_pressure_pa: (n,) pitot minus static pressure, pascal          (optional)
+    The GNSS receiver's measurement, as the receiver last reported it (held between fixes):
+    gnss_llh:       (n, 3) antenna latitude, longitude (deg), height above the ellipsoid (m)   (optional)
+    gnss_velocity_ned: (n, 3) antenna velocity north, east, down, m/s           (optional)
+    gnss_fix:       (n,) 0 no fix, 2 2D, 3 3D                                   (optional)
+    gnss_satellites: (n,) satellites used                                       (optional)
+    gnss_hdop, gnss_vdop: (n,) dilutions of precision                           (optional)
+    gnss_horizontal_accuracy_m, gnss_vertical_accuracy_m, gnss_speed_accuracy_mps: (n,) 1-sigma   (optional)
+    gnss_new:       (n,) 1 where a new solution became available at this sample, else 0   (optional)
+    gnss_age_s:     (n,) time since the solution's time of validity (latency + hold), s   (optional)
+    Vectors (accel, gyro, mag, delta_theta, delta_velocity) are in the part's own body axes forward-right-down
+    (FRD) as it sits upright facing forward; quat/euler rotate FRD -> NED. A format whose manual declares
+    other axes converts at its edge.
     Formats that need an optional field which is None use a documented default (usually zeros,
     identity quaternion, 25 degC, 101325 Pa) rather than failing.
     """
@@ -58,6 +77,22 @@ class Samples:
     position_llh: np.ndarray | None = None
     velocity_ned: np.ndarray | None = None
     linear_accel_ned: np.ndarray | None = None
+    attitude_sigma_rad: np.ndarray | None = None
+    position_sigma_m: np.ndarray | None = None
+    velocity_sigma_mps: np.ndarray | None = None
+    ins_mode: np.ndarray | None = None
+    differential_pressure_pa: np.ndarray | None = None
+    gnss_llh: np.ndarray | None = None
+    gnss_velocity_ned: np.ndarray | None = None
+    gnss_fix: np.ndarray | None = None
+    gnss_satellites: np.ndarray | None = None
+    gnss_hdop: np.ndarray | None = None
+    gnss_vdop: np.ndarray | None = None
+    gnss_horizontal_accuracy_m: np.ndarray | None = None
+    gnss_vertical_accuracy_m: np.ndarray | None = None
+    gnss_speed_accuracy_mps: np.ndarray | None = None
+    gnss_new: np.ndarray | None = None
+    gnss_age_s: np.ndarray | None = None
 
     def __post_init__(self):
         self.time_ns = np.ascontiguousarray(self.time_ns, dtype=np.int64).reshape(-1)
@@ -115,6 +150,11 @@ _FIELD_WIDTHS = {
     "temperature_c": 0, "pressure_pa": 0, "delta_theta": 3, "delta_velocity": 3, "delta_time_s": 0,
     "attitude_change": 4,
     "position_llh": 3, "velocity_ned": 3, "linear_accel_ned": 3,
+    "attitude_sigma_rad": 3, "position_sigma_m": 3, "velocity_sigma_mps": 3, "ins_mode": 0,
+    "differential_pressure_pa": 0,
+    "gnss_llh": 3, "gnss_velocity_ned": 3, "gnss_fix": 0, "gnss_satellites": 0, "gnss_hdop": 0, "gnss_vdop": 0,
+    "gnss_horizontal_accuracy_m": 0, "gnss_vertical_accuracy_m": 0, "gnss_speed_accuracy_mps": 0, "gnss_new": 0,
+    "gnss_age_s": 0,
 }
 
 
