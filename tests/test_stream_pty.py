@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from test_stream_support import (Emulator, check_highres_against_scene, mavlink_parse, open_pty_reader, read_for,
-                                 reference, write_scene)
+                                 read_until_closed, reference, write_scene)
 
 
 def _seq_steps(messages):
@@ -55,6 +55,30 @@ def test_reader_that_pauses_costs_whole_packets_only_and_streaming_resumes(tmp_p
     assert len(resumed) > 300, "packets did not arrive again after the reader resumed"
     check_highres_against_scene(messages, scene, accel, gyro)
     assert max(_seq_steps(messages)) > 1   # the gap: whole packets dropped while nobody read
+
+
+def test_packets_a_slow_reader_leaves_unread_when_it_closes_are_counted(tmp_path):
+    """Issue 23 item 9 (xsens-go lost 166 of 553 packets counted as sent): a reader that reads slowly, then closes
+    with the pty full, and a second reader that reads to the end. Every packet counted as sent either arrived
+    whole or is counted lost: sent = received + lost, exactly."""
+    scene_path = write_scene(tmp_path, rate=200, duration=10.0)
+    stats = tmp_path / "stats.json"
+    with Emulator(scene_path, "--format", "mavlink-highres", "--device", "off", "--to", "pty", "--duration", "4",
+                  "--stats-json", stats) as emu:
+        first = open_pty_reader(emu.targets[0])
+        data = read_for(first, 0.2)
+        time.sleep(0.6)                 # 200 Hz x 61 B: the pty's ~20 kB would fill in ~1.7 s; ~120 packets wait
+        os.close(first)                 # what it has not read stays behind
+        time.sleep(0.3)
+        second = open_pty_reader(emu.targets[0])
+        later = read_until_closed(second)
+        code, err = emu.wait()
+    assert code == 0, err
+    stream = json.loads(stats.read_text())["streams"][0]
+    received = len(mavlink_parse(data)[0]) + len(mavlink_parse(later)[0])
+    lost = stream["link"]["unread_lost"]["packets"]
+    assert lost > 20 and stream["sent"] == received + lost
+    assert f"({lost} of them never read: lost)" in err
 
 
 def test_pacing_median_lateness_and_arrival_rate(tmp_path):

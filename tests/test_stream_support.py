@@ -183,3 +183,21 @@ def dronecan_rawimu(frames, fd: bool = False):
             if transfer.data_type_id == dronecan.uavcan.equipment.ahrs.RawIMU.default_dtid:
                 transfers.append(transfer)
     return transfers
+
+
+def read_until_closed(fd, timeout=60.0) -> bytes:
+    """Everything until the emulator closes its side (EIO), as a driver reading a port would."""
+    chunks = []
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        ready, _, _ = select.select([fd], [], [], 1.0)
+        if ready:
+            try:
+                data = os.read(fd, 65536)
+            except OSError:
+                break
+            if not data:
+                break
+            chunks.append(data)
+    os.close(fd)
+    return b"".join(chunks)

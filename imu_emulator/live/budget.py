@@ -70,6 +70,8 @@ def link_text(link: dict) -> str:
         parts.append("interface " + (", ".join(f"{name} +{n}" for name, n in moved.items()) or "counters unchanged"))
     if "queue_max_bytes" in link:
         parts.append(f"queue up to {link['queue_max_bytes']} B")
-    if link.get("unread_at_close_bytes"):
-        parts.append(f"{link['unread_at_close_bytes']} B or more unread by the reader when the link closed")
+    if link.get("unread_lost"):
+        lost = link["unread_lost"]
+        parts.append(f"{lost['packets']} packets ({lost['bytes']} B) sent but left unread, lost "
+                     f"({lost['readers']} times a reader closed or stopped reading with packets unread)")
     return "; ".join(parts)

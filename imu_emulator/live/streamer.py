@@ -152,8 +152,10 @@ class Streamer:
     def _print_summary(self, summary: dict) -> None:
         print(status_line(self._status_text("done"), sys.stderr.isatty())[0], file=sys.stderr, flush=True)
         for s in summary["streams"]:
-            print(f"  {s['imu']} {s['format']} -> {s['target']}: sent {s['sent']}, dropped {s['dropped']}, "
-                  f"saturated {s['saturated']}", file=sys.stderr, flush=True)
+            unread = s["link"].get("unread_lost", {}).get("packets", 0)
+            print(f"  {s['imu']} {s['format']} -> {s['target']}: sent {s['sent']}"
+                  + (f" ({unread} of them never read: lost)" if unread else "")
+                  + f", dropped {s['dropped']}, saturated {s['saturated']}", file=sys.stderr, flush=True)
             if "device" in s:
                 d = s["device"]
                 print(f"    device: {d['commands']} commands answered, {d['errors']} error replies, "

@@ -65,6 +65,11 @@ class FdPacketWriter:
         self._write_tail()
         return True
 
+    @property
+    def pending_bytes(self) -> int:
+        """Bytes of the last packet not yet written (its head is on the line)."""
+        return len(self._tail)
+
     def discard_pending(self) -> None:
         """Forget the unfinished packet and the modelled line's backlog (the reader they were for is gone)."""
         self._tail = b""

@@ -7,6 +7,7 @@ import select
 import termios
 import time
 import tty
+from collections import deque
 
 from pathlib import Path
 
@@ -55,20 +56,33 @@ class PtyPair:
         """True while some process has the slave open."""
         return not self._hangup.poll(0)
 
-    def discard_unread(self) -> None:
-        """Throw away what a reader that went away left unread, and what waits to reach its queue, so the
-        next reader starts with fresh packets."""
+    def take_unread(self) -> int:
+        """Read out what a reader that went away left unread (so the next reader starts with fresh packets), and
+        say how many bytes that was: they were counted as sent, and now they are lost. Reading them ourselves
+        rather than flushing (tcflush) is what gives the number: FIONREAD on the slave sees at most the line
+        discipline's 4095 bytes, while up to about 20 kB wait in the pty (tools/bench_pty_loss.py, issue 23
+        item 9: a slow reader that closed lost 166 packets nobody counted). The last writes reach the slave
+        through a kernel work queue, so the slave must stay empty for _SETTLE_S before we believe it."""
         try:
-            termios.tcflush(self.master, termios.TCOFLUSH)
             slave = os.open(self.path, _OPEN_FLAGS)
         except OSError:
-            return
+            return 0
+        taken = 0
         try:
+            quiet_since = time.monotonic()
+            while time.monotonic() - quiet_since < _SETTLE_S:
+                data = read_available(slave)
+                if data:
+                    taken += len(data)
+                    quiet_since = time.monotonic()
+                else:
+                    time.sleep(0.001)
             termios.tcflush(slave, termios.TCIFLUSH)
         except OSError:
             pass
         finally:
             os.close(slave)
+        return taken
 
     def close(self) -> None:
         if self._lock is not None:
@@ -98,6 +112,42 @@ def _replace_link(link: Path, target: str) -> None:
         raise
 
 
+class UnreadLosses:
+    """Packets the pty accepted (counted as sent) that no reader read: left in the pty when the reader closed,
+    or when the run ended with the reader no longer reading. A byte count becomes packets by the sizes of the
+    last packets written: every packet with a byte among the unread ones is lost (a packet partly read is of no
+    use to a parser), and so is a packet whose tail never went out."""
+
+    def __init__(self, remembered: int = 8192):
+        # The pty holds about 20 kB; 8192 sizes cover it for packets of 3 bytes and more.
+        self._sizes = deque(maxlen=remembered)
+        self.packets = 0
+        self.bytes = 0
+        self.departures = 0          # readers that went away with packets unread
+
+    def written(self, size: int) -> None:
+        self._sizes.append(size)
+
+    def lose(self, unread: int, unsent_tail: int) -> None:
+        """`unread` bytes taken out of the pty unread, the last packet's `unsent_tail` bytes never written."""
+        if not unread and not unsent_tail:
+            return
+        self.departures += 1
+        self.bytes += unread + unsent_tail
+        covered, lost = 0, 0
+        # The newest packet's written part is its size less the tail still pending.
+        while self._sizes and covered < unread + unsent_tail:
+            covered += self._sizes.pop()
+            lost += 1
+        self.packets += max(lost, 1)
+        self._sizes.clear()           # what came before was read: never counted twice
+
+    def report(self) -> dict:
+        if not self.packets:
+            return {}
+        return {"unread_lost": {"packets": self.packets, "bytes": self.bytes, "readers": self.departures}}
+
+
 # Closing the master discards what the reader has not read yet: at the end of a run we wait for it, until it
 # has taken nothing for this long (so a run with nobody reading ends at once, or nearly).
 _DRAIN_IDLE_S = 0.2
@@ -116,6 +166,7 @@ class PtyTransport(Transport):
         self.pty = PtyPair(options.link)
         self.writer = FdPacketWriter(self.pty.master, pace_baud=options.pace_baud, blocking=options.blocking)
         self._reader = False
+        self.unread = UnreadLosses()
 
     def _reader_present(self) -> bool:
         present = self.pty.reader_present()
@@ -124,11 +175,16 @@ class PtyTransport(Transport):
             present = self.pty.reader_present()
         if present != self._reader:
             self._reader = present
+            if not present:
+                self._count_unread()
             # A packet half written when the reader left must not start the next reader's stream.
             self.writer.discard_pending()
-            if not present:
-                self.pty.discard_unread()
         return present
+
+    def _count_unread(self) -> None:
+        """What the reader left unread is lost with it: taken out, counted (packets and bytes), never re-sent."""
+        self.unread.lose(self.pty.take_unread(), self.writer.pending_bytes)
+        self.writer.discard_pending()
 
     def publish(self) -> None:
         self.pty.publish()
@@ -137,7 +193,10 @@ class PtyTransport(Transport):
         if not self._reader_present():
             self.writer.refusals["no-reader"] += 1
             return False
-        return self.writer.send(payload)
+        if not self.writer.send(payload):
+            return False
+        self.unread.written(len(payload))
+        return True
 
     def recv(self) -> bytes:
         return read_available(self.pty.master)
@@ -150,6 +209,9 @@ class PtyTransport(Transport):
         buffer, so at most 4095 however much more waits behind it; 0 when the reader took everything), so we
         open it for the while: during the run that would count as a reader."""
         if not self.pty.reader_present():
+            if self._reader:        # it left after the last send, with what it had not read
+                self._reader = False
+                self._count_unread()
             return
         try:
             slave = os.open(self.pty.path, _OPEN_FLAGS)
@@ -168,12 +230,13 @@ class PtyTransport(Transport):
                     break
         finally:
             os.close(slave)
-        self.unread_at_close = last or 0
+        if last:
+            # The reader stopped taking them: closing the master would discard them uncounted, so we take them.
+            self._count_unread()
 
     def link_report(self) -> dict:
         report = super().link_report()
-        if getattr(self, "unread_at_close", 0):
-            report["unread_at_close_bytes"] = self.unread_at_close   # lost when the master closes
+        report.update(self.unread.report())
         return report
 
     @property
