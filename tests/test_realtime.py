@@ -363,3 +363,44 @@ def test_a_status_line_rewritten_shorter_leaves_no_tail():
     shown = _terminal(["".join(status_line(long, tty=True)), "".join(status_line(short, tty=True))])
     assert shown == short
     assert status_line(short, tty=False) == (short, "\n")        # logs and pipes: one plain line each
+
+
+# --- replies while the producer is late (issue 23 item 7) ---------------------------------------------------
+
+def test_commands_are_answered_while_the_sender_waits_for_a_late_block():
+    """The send loop waits for the producer's next block (at start-up, or when the simulation falls behind under
+    load); a driver's command arriving then is answered at once, once, not when the block comes (on 35a2177 the
+    reply waited for the block: later than a driver's timeout when the producer is slow)."""
+    import multiprocessing
+
+    from imu_emulator.live.config import StreamConfig
+    from imu_emulator.live.inputs import Inputs
+    from imu_emulator.live.stream import build_streams
+
+    stream, = build_streams([StreamConfig("imu", "vectornav-binary", "pty")], ("imu",), 100.0)
+    stream.open()
+    receiver, sender = multiprocessing.Pipe(duplex=False)
+    fd = os.open(stream.transport.pty.path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)     # a driver: reads, writes
+    try:
+        late_ns = 600_000_000
+        threading.Timer(late_ns / 1e9, lambda: sender.send("the block")).start()
+        os.write(fd, b"$VNRRG,01*XX\r\n")
+        replies = []
+
+        def driver():
+            got = read_for(fd, 0.5 * late_ns / 1e9, stop_after=20)
+            replies.append((time.monotonic_ns(), got))
+
+        reader = threading.Thread(target=driver)
+        started = time.monotonic_ns()
+        reader.start()
+        assert Inputs([stream], lambda text: None).next_block(receiver) == "the block"
+        block_at = time.monotonic_ns()
+        reader.join()
+        (answered_at, got), = replies
+        assert got == b"$VNRRG,01,VN-100T-CR*32\r\n"           # answered once
+        assert answered_at < block_at and block_at - started >= late_ns * 0.9
+        assert stream.replies_sent == 1 and stream.device.stats.commands == 1
+    finally:
+        os.close(fd)
+        stream.close()

@@ -1,9 +1,11 @@
 """Benchmark: how fast the emulated device answers while it streams, and what answering costs the stream.
 
 Runs `imu-emulator stream` (VectorNav binary, 1 kHz by default) on a pty and plays a driver from this
-process: in runs "quiet" it only reads; in runs "commands" it also sends `$VNRRG,01` every 10 ms and times
-each reply from the write to the read that delivers its last byte. Runs alternate (quiet, commands, quiet,
-...) so that machine load hits both alike. Prints per run: reply latency p50/p99/max, the stream's lateness
+process: in runs "quiet" it only reads; in runs "commands" it also sends `$VNRRG,xx` every 10 ms and times
+each reply from the write to the read that delivers its last byte (registers 01, 03, 04 in turn: a reply to
+another register than the oldest unanswered one is counted as mismatched — the wrong value a driver would
+take — and a reply nobody asked for as surplus; every reply is pooled over the runs for p50/p99/max). Runs
+alternate (quiet, commands, quiet, ...) so that machine load hits both alike. Prints per run: reply latency p50/p99/max, the stream's lateness
 p50/p99 (from the emulator's --stats-json), the emulator's CPU time per second of wall time (from
 /proc/<pid>/stat), and finally the cost of one sample's device output in-process (thread CPU time).
 
@@ -53,7 +55,7 @@ ctypes.CDLL(None).prctl(29, 1, 0, 0, 0)
 os.set_blocking(master, False)
 os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
 period, end = 1_000_000, time.monotonic_ns() + int(float(sys.argv[1]) * 1e9)
-reply, packet, deadline, buf = b"$VNRRG,01,VN-100T-CR*32\r\n", b"\xfa" + bytes(41), time.monotonic_ns(), b""
+packet, deadline, buf = b"\xfa" + bytes(41), time.monotonic_ns(), b""
 while time.monotonic_ns() < end:
     wait = deadline - time.monotonic_ns()
     if wait <= 0:
@@ -71,11 +73,14 @@ while time.monotonic_ns() < end:
         while b"\n" in buf:
             line, buf = buf.split(b"\n", 1)
             try:
-                os.write(master, reply)
+                os.write(master, b"$VNRRG," + line[7:9] + b",X*00\r\n")   # the register asked for
             except BlockingIOError:
                 pass
 """
 _READER_FIFO = True
+# The registers asked for in turn (model, serial number, firmware): a reply to another register than the one asked
+# is counted as mismatched, a reply to nothing asked as surplus.
+REGISTERS = (b"01", b"03", b"04")
 
 
 def command(body: bytes) -> bytes:
@@ -105,9 +110,10 @@ def one_run(scene: Path, rate: float, seconds: float, kind: str, repo: Path = RE
     if _READER_FIFO:     # after the fork: the emulator sets its own scheduling
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
     fd = os.open(path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
-    request = command(b"VNRRG,01")
-    marker = re.compile(rb"\$VNRRG,01,[^*]*\*[0-9A-F]{2}\r\n")
-    pending, latencies = [], []
+    marker = re.compile(rb"\$VNRRG,(\d\d),[^*]*\*[0-9A-F]{2}\r\n")
+    pending, latencies = [], []         # (register, time written) of the commands not answered yet, oldest first
+    mismatched = surplus = 0
+    asked = 0
     buf = bytearray()
     # Wait for the stream to run before timing anything.
     while not select.select([fd], [], [], 10)[0]:
@@ -118,8 +124,10 @@ def one_run(scene: Path, rate: float, seconds: float, kind: str, repo: Path = RE
     while time.monotonic() < end:
         now = time.monotonic()
         if with_commands and now >= next_command:
-            os.write(fd, request)
-            pending.append(time.monotonic_ns())
+            register = REGISTERS[asked % len(REGISTERS)]
+            asked += 1
+            os.write(fd, command(b"VNRRG," + register))
+            pending.append((register, time.monotonic_ns()))
             next_command += 0.010
         timeout = max(0.0, min(next_command if with_commands else end, end) - time.monotonic())
         if select.select([fd], [], [], timeout)[0]:
@@ -129,8 +137,14 @@ def one_run(scene: Path, rate: float, seconds: float, kind: str, repo: Path = RE
                 continue
             arrived = time.monotonic_ns()
             for match in list(marker.finditer(buf)):
-                if pending:
-                    latencies.append((arrived - pending.pop(0)) / 1000)
+                if not pending:
+                    surplus += 1          # an answer nobody asked for: a command answered twice
+                    continue
+                register, written = pending.pop(0)
+                # A driver takes the next reply as the answer to its oldest question: another register's reply
+                # is the wrong value VectorNav's library would return (the serial number read as "2").
+                mismatched += match.group(1) != register
+                latencies.append((arrived - written) / 1000)
             last = None
             for match in marker.finditer(buf):
                 last = match
@@ -148,12 +162,42 @@ def one_run(scene: Path, rate: float, seconds: float, kind: str, repo: Path = RE
     stats.unlink()
     out = {"kind": kind, "late_p50_us": late["p50_us"],
            "late_p99_us": late["p99_us"], "missed": late["missed"], "cpu_per_s": cpu,
-           "unanswered": len(pending)}
-    if latencies:
-        lat = np.array(latencies)
-        out.update(replies=len(lat), reply_p50_us=float(np.percentile(lat, 50)),
-                   reply_p99_us=float(np.percentile(lat, 99)), reply_max_us=float(lat.max()))
+           "asked": asked, "unanswered": len(pending), "mismatched": mismatched, "surplus": surplus}
+    out["replies"] = len(latencies)
+    out.update(_quantiles(latencies))
+    out["latencies_us"] = latencies
     return out
+
+
+# Fewer replies than this give no p99 (the 99th percentile of fewer than 100 values is the maximum or a guess).
+_MIN_FOR_P99 = 100
+
+
+def _quantiles(latencies: list) -> dict:
+    """p50/p99/max of reply latencies in us; a quantile the count cannot support is left out, never None."""
+    if not latencies:
+        return {}
+    lat = np.array(latencies)
+    out = {"reply_p50_us": float(np.percentile(lat, 50)), "reply_max_us": float(lat.max())}
+    if len(lat) >= _MIN_FOR_P99:
+        out["reply_p99_us"] = float(np.percentile(lat, 99))
+    return out
+
+
+def _latency_text(runs: list) -> str:
+    """Reply latency over every reply of these runs pooled, and what went wrong with the replies."""
+    pooled = [x for r in runs for x in r.get("latencies_us", [])]
+    q = _quantiles(pooled)
+    asked = sum(r["asked"] for r in runs)
+    if not q:
+        text = f"no reply to {asked} commands"
+    else:
+        p99 = f"{q['reply_p99_us']:.0f} us" if "reply_p99_us" in q else f"n/a (only {len(pooled)} replies)"
+        text = (f"reply latency over {len(pooled)} replies: p50 {q['reply_p50_us']:.0f} us, p99 {p99}, "
+                f"max {q['reply_max_us']:.0f} us")
+    return (text + f"; of {asked} commands {sum(r['unanswered'] for r in runs)} unanswered, "
+            f"{sum(r['mismatched'] for r in runs)} answered with another register's reply, "
+            f"{sum(r['surplus'] for r in runs)} surplus replies")
 
 
 def output_cost(rate: float, repeats: int = 20000) -> dict:
@@ -173,6 +217,13 @@ def output_cost(rate: float, repeats: int = 20000) -> dict:
             device.output(samples, k % n)
         out[name] = (time.thread_time_ns() - t0) / repeats / 1000
     return out
+
+
+def _cpu_model() -> str:
+    for line in Path("/proc/cpuinfo").read_text().splitlines():
+        if line.startswith("model name"):
+            return line.split(":", 1)[1].strip()
+    return "unknown CPU"
 
 
 def main() -> None:
@@ -199,25 +250,22 @@ def main() -> None:
                 run = one_run(scene, args.rate, args.seconds, kind,
                               args.baseline if kind == "commands@base" else REPO)
                 runs.append(run)
-                print(json.dumps({k: round(v, 1) if isinstance(v, float) else v for k, v in run.items()}),
-                      flush=True)
+                print(json.dumps({k: round(v, 1) if isinstance(v, float) else v for k, v in run.items()
+                                  if k != "latencies_us"}), flush=True)
     def listed(sel, key):
         return ", ".join(f"{r[key]:.0f}" for r in sel)
 
     print(f"load average at end: {' '.join(Path('/proc/loadavg').read_text().split()[:3])}")
+    print(f"CPU: {_cpu_model()}, {os.cpu_count()} cores")
     for kind in kinds:
         sel = [r for r in runs if r["kind"] == kind]
         if kind == "floor":
-            print(f"{kind:9}: bare pty echo at 1 kHz, reply latency p50 "
-                  f"{np.median([r['reply_p50_us'] for r in sel]):.0f} us, p99 "
-                  f"{np.median([r['reply_p99_us'] for r in sel]):.0f} us (per run p99: {listed(sel, 'reply_p99_us')})")
+            print(f"{kind:9}: bare pty echo at 1 kHz, {_latency_text(sel)}")
             continue
         line = (f"{kind:9}: stream lateness p99 median of runs {np.median([r['late_p99_us'] for r in sel]):.0f} us "
                 f"(runs: {listed(sel, 'late_p99_us')}), emulator CPU {np.median([r['cpu_per_s'] for r in sel]) * 100:.0f} %")
         if kind.startswith("commands"):
-            line += (f"; reply latency p50 {np.median([r['reply_p50_us'] for r in sel]):.0f} us, p99 "
-                     f"{np.median([r['reply_p99_us'] for r in sel]):.0f} us (median of runs; per run p99: "
-                     f"{listed(sel, 'reply_p99_us')}), unanswered {sum(r['unanswered'] for r in sel)}")
+            line += "; " + _latency_text(sel)
         print(line)
     costs = output_cost(args.rate)
     print("one sample's device output, thread CPU: " + ", ".join(f"{k} {v:.1f} us" for k, v in costs.items()))

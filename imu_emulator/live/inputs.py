@@ -10,6 +10,10 @@ if TYPE_CHECKING:
     from imu_emulator.live.stream import Stream
 
 
+# Links without a descriptor (polled) are looked at this often while the sender waits for the producer.
+_UNWATCHED_POLL_S = 0.001
+
+
 class Inputs:
     """The links' incoming side: which descriptors to watch, and what to do with what arrives. Bytes or
     frames go to the stream's device and its replies out at once; a link without a device has its input
@@ -46,6 +50,24 @@ class Inputs:
             ready, _, _ = select.select(self.fds, (), (), 0)
             self.ready(ready)
         self.poll_unwatched()
+
+    def next_block(self, blocks):
+        """The producer's next block (`blocks`: the pipe's receiving Connection), the links served while it is
+        not there yet: a driver's command never waits for the simulation (at start-up, or when the producer falls
+        behind under load), so it is answered within the period it arrived in (issue 23 item 7: replies later
+        than a driver's timeout turn into wrong values in VectorNav's library)."""
+        if not (self.fds or self.unwatched):
+            return blocks.recv()
+        pipe = blocks.fileno()
+        watched = [pipe] + self.fds
+        while not blocks.poll(0):
+            ready, _, _ = select.select(watched, (), (), _UNWATCHED_POLL_S if self.unwatched else None)
+            for fd in ready:
+                if fd != pipe and not self.ready([fd]):
+                    # Readable with nothing to read: a hang-up (a pty nobody has open). Not watched until the block.
+                    watched.remove(fd)
+            self.poll_unwatched()
+        return blocks.recv()
 
     def serve(self, stream: Stream) -> bool:
         transport = stream.transport

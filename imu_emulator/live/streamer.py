@@ -200,7 +200,7 @@ class Streamer:
         done = 0
         items = None
         while True:
-            block = blocks.recv()
+            block = inputs.next_block(blocks)
             if block is None:
                 break
             if isinstance(block, ProducerFailure):
