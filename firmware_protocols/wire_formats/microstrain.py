@@ -109,15 +109,15 @@ FILTER_FIELDS = {
 }
 GNSS_FIELDS = {
     # lat, lon, height above ellipsoid, height above MSL (= ellipsoid here), horizontal and vertical
-    # accuracy (m), valid flags (0x1F: all five; 0 without a fix)
+    # accuracy (m), valid flags (0x1F: all five; 0 without a fix, as for the velocity's 0x3F)
     "position_llh": Field(0x03, "gnss_llh", 3, kind=KIND_F64,
                           tail=((KIND_F64, None), (KIND_F32, "gnss_quality:0"), (KIND_F32, "gnss_quality:1"),
                                 (KIND_U16, "gnss_quality:3"))),
-    # north, east, down, speed, ground speed, heading (deg), speed accuracy (m/s), heading accuracy (deg), valid
+    # north, east, down, speed, ground speed, heading (deg, 0..360), speed accuracy (m/s), heading accuracy (deg), valid
     "velocity_ned": Field(0x05, "gnss_velocity_ned", 3,
                           tail=((KIND_F32, "gnss_speed:0"), (KIND_F32, "gnss_speed:1"), (KIND_F32, "gnss_speed:2"),
                                 (KIND_F32, "gnss_quality:2"), (KIND_F32, "gnss_speed:3"),
-                                (KIND_U16, "gnss_quality:3"))),
+                                (KIND_U16, "gnss_quality:5"))),
     # gdop, pdop, hdop, vdop, tdop, ndop, edop, valid flags (those known: see _derive)
     "dop": Field(0x07, "gnss_dop", 7, tail=((KIND_U16, "gnss_quality:4"),)),
     # fix type (0 3D, 1 2D, 3 none), satellites used, fix flags, valid flags (all three)
@@ -161,7 +161,7 @@ def _derive(samples: Samples, names: set, filter_states: tuple, filter_state: in
             samples.field_or("gnss_horizontal_accuracy_m", _GNSS_DEFAULTS["gnss_horizontal_accuracy_m"]),
             samples.field_or("gnss_vertical_accuracy_m", _GNSS_DEFAULTS["gnss_vertical_accuracy_m"]),
             samples.field_or("gnss_speed_accuracy_mps", _GNSS_DEFAULTS["gnss_speed_accuracy_mps"]),
-            np.where(fixed, 0x1F, 0), np.full(n, 0x0E if known_dop else 0x7F)))
+            np.where(fixed, 0x1F, 0), np.full(n, 0x0E if known_dop else 0x7F), np.where(fixed, 0x3F, 0)))
         out["gnss_fix_info"] = np.column_stack((code, samples.field_or("gnss_satellites",
                                                                        _GNSS_DEFAULTS["gnss_satellites"])))
         if known_dop:          # p^2 = h^2 + v^2; the others are not known: 0 and not flagged valid
@@ -177,7 +177,7 @@ def _derive(samples: Samples, names: set, filter_states: tuple, filter_state: in
         # heading accuracy: the angle the speed's 1-sigma subtends at the ground speed
         heading_sigma = np.degrees(np.arctan2(out["gnss_quality"][:, 2], ground))
         out["gnss_speed"] = np.column_stack((np.linalg.norm(velocity, axis=1), ground,
-                                             np.degrees(np.arctan2(velocity[:, 1], velocity[:, 0])), heading_sigma))
+                                             np.degrees(np.arctan2(velocity[:, 1], velocity[:, 0])) % 360.0, heading_sigma))
     if {"filter_state", "filter_valid"} & names:
         mode = np.clip(samples.field_or("ins_mode", 2.0), 0, 2).astype(np.int64)
         state = np.asarray(filter_states, dtype=np.float64)[mode]
