@@ -22,6 +22,12 @@ any data the command returns. Commands:
                 read answers 0x85), 30 device settings (save / load / default: acknowledged)
     Functions: 1 apply, 2 read, 3 save, 4 load saved, 5 load default.
 
+At start the device streams the `fields` of set 0x80 at every sample, or what a preset names (PRESETS: the sets,
+fields and rates ArduPilot's MicroStrain5 / MicroStrain7 drivers expect of a unit configured beforehand; they
+send no command). The data sets are 0x80 IMU, 0x81 GNSS, 0x91 / 0x92 GNSS receivers 1 / 2 (a GQ7's) and 0x82
+filter; the filter state follows the samples' ins_mode in the numbering of the model's family (`filter_family`:
+a model name containing GX5 numbers like a 3DM-GX5-45, others like a GQ7).
+
 The base rate of every data set is the scene's sample rate (the emulator has no other), so a decimation d
 sends the field every d-th sample; fields of one set due at the same sample share one packet, in the
 configured order. Data flow only while the device is not idle and the set's stream is enabled. A

@@ -1,4 +1,5 @@
-"""MicroStrain (HBK / LORD) MIP packets, IMU "sensor data" descriptor set 0x80: encoder and stream decoder.
+"""MicroStrain (HBK / LORD) MIP packets: IMU "sensor data" set 0x80, GNSS sets 0x81 / 0x91 / 0x92 and filter set 0x82
+(encoder; the stream decoder reads 0x80 into SI fields and passes the other sets' fields raw).
 
 Frame: `75 65 descriptor_set payload_len field... checksum_a checksum_b`, each field
 `field_len (incl. itself and the descriptor) descriptor data(big-endian)`. payload_len is one byte, so a
@@ -29,6 +30,12 @@ src/mip/definitions/data_sensor.h):
   0x04 time initialized, 0x08 time of week valid, 0x10 week number valid; default 0x1C (no PPS line
   exists in an emulator). Weeks outside u16 saturate (counted).
 Values beyond float32 range saturate to +-3.4e38 and are counted in `encoder.saturated`.
+
+GNSS and filter sets (`descriptor_set`, tables GNSS_FIELDS and FILTER_FIELDS below): the GNSS fields carry the
+receiver's solution (Samples.gnss_*: fix, satellites, accuracies, DOPs), the filter fields the unit's estimate
+(position_llh, velocity_ned, quat, euler and their *_sigma) with the filter state its model family reports for
+Samples.ins_mode. Fields the block lacks take the documented defaults (a healthy receiver under open sky, a
+tracking filter, PX4 SITL's home position).
 """
 from __future__ import annotations
 
@@ -356,7 +363,7 @@ _OPTIONS = {
 register(FormatInfo(
     name="microstrain-mip",
     kind="serial",
-    description="MicroStrain MIP sensor data (descriptor set 0x80), big-endian, Fletcher-16",
+    description="MicroStrain MIP sensor (0x80), GNSS (0x81, 0x91, 0x92) or filter (0x82) data, big-endian, Fletcher-16",
     encoder=MipEncoder,
     decoder=MipDecoder,
     bytes_per_sample=MipEncoder().bytes_per_sample,
