@@ -345,3 +345,23 @@ def test_pymscl_reads_the_filter_set_as_the_estimate(family, states):
         assert [p[f"est{a}Uncert"].as_float() for a in ("Roll", "Pitch", "Yaw")] == f32(s.attitude_sigma_rad[i])
         assert p["estFilterState"].as_uint16() == states[i]
         assert p["estLatitude"].valid() == p["estRollUncert"].valid() == (s.ins_mode[i] == 2)
+
+
+def test_our_decoder_reads_the_gnss_and_filter_sets_back():
+    """The decoder's "values" of the GNSS and filter sets equal what the encoder was given (float32 on the wire)."""
+    from firmware_protocols.wire_formats.microstrain import FILTER_FIELDS, GNSS_FIELDS
+    s = _gnss_and_filter_samples()
+    data = (MipEncoder(tuple(GNSS_FIELDS), descriptor_set=0x91).encode(s).data
+            + MipEncoder(tuple(FILTER_FIELDS), descriptor_set=0x82).encode(s).data)
+    packets = MipDecoder().feed(data)
+    assert [p.fields["descriptor_set"] for p in packets] == [0x91] * 3 + [0x82] * 3
+    for i, p in enumerate(packets[:3]):
+        v = p.fields["values"]
+        assert v["position_llh"][:4] == (*s.gnss_llh[i], s.gnss_llh[i][2])
+        assert list(v["velocity_ned"][:3]) == f32(s.gnss_velocity_ned[i])
+        assert v["fix_info"][:2] == ({3: 0, 2: 1, 0: 3}[int(s.gnss_fix[i])], s.gnss_satellites[i])
+    for i, p in enumerate(packets[3:]):
+        v = p.fields["values"]
+        assert v["position_llh"] == (*s.position_llh[i], int(s.ins_mode[i] == 2))
+        assert list(v["position_uncertainty"][:3]) == f32(s.position_sigma_m[i])
+        assert v["status"] == ((4, 1, 1)[i], 1, 0)

@@ -40,6 +40,7 @@ tracking filter, PX4 SITL's home position).
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass, replace
 from itertools import accumulate
 
@@ -99,7 +100,6 @@ FILTER_FAMILIES = {
     "gq7": (1, 1, 4),     # GQ7_INIT, GQ7_INIT, GQ7_FULL_NAV
     "gx5": (0, 1, 2),     # startup, initialization, running with a valid solution
 }
-FILTER_STATE_FULL_NAV = 4
 _VALID = ((KIND_U16, "filter_valid:0"),)
 FILTER_FIELDS = {
     "position_llh": Field(0x01, "position_llh", 3, kind=KIND_F64, tail=_VALID),
@@ -289,8 +289,9 @@ def mip_checksum_ok(frame: bytes) -> bool:
 
 class MipDecoder:
     """Bytes -> Packets. Set 0x80 becomes kind "mip-sensor" with SI fields; any other descriptor set
-    (command replies, filter data) becomes kind "mip" with its set and raw (descriptor, data) fields.
-    Never raises."""
+    (command replies, GNSS and filter data) becomes kind "mip" with its set and raw (descriptor, data) fields,
+    and for the GNSS and filter sets also "values": {field name: its numbers as on the wire, valid flags
+    included}. Never raises."""
 
     def __init__(self, gps_week_offset: int = 0):
         self.gps_week_offset = as_int(gps_week_offset)
@@ -309,6 +310,8 @@ class MipDecoder:
                 kind = "mip-sensor"
             else:
                 fields = {"descriptor_set": frame[2], "fields": raw_fields}
+                if frame[2] in DATA_SETS:
+                    fields["values"] = _set_values(DATA_SETS[frame[2]], raw_fields)
                 kind = "mip"
             if malformed:
                 fields["malformed"] = True
@@ -334,6 +337,22 @@ class MipDecoder:
             else:
                 out.setdefault("unknown", {})[descriptor] = data
         return out
+
+
+_STRUCT_CODE = {KIND_U8: "B", KIND_U16: "H", KIND_F32: "f", KIND_F64: "d"}
+
+
+def _set_values(table: dict, raw_fields) -> dict:
+    """{name: numbers} of the fields of a GNSS or filter set whose size matches the table's layout."""
+    out = {}
+    for name, f in table.items():
+        kinds = ((KIND_F64, KIND_U16, KIND_U16) if f.source == "time_ns"
+                 else (f.kind,) * f.count + tuple(kind for kind, _ in f.tail))
+        layout = struct.Struct(">" + "".join(_STRUCT_CODE[k] for k in kinds))
+        for descriptor, data in raw_fields:
+            if descriptor == f.descriptor and len(data) == layout.size:
+                out[name] = layout.unpack(data)
+    return out
 
 
 def _split_fields(payload: bytes):
