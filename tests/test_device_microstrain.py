@@ -165,3 +165,6 @@ def test_presets_configure_the_sets_and_say_when_the_scene_is_too_slow():
         MipDevice(100, preset="px4")
     with pytest.raises(ValueError, match="preset and fields"):
         MipDevice(100, preset="ardupilot", fields="accel")
+    # an option the user names wins over the preset's
+    named = MipDevice(100, preset="ardupilot", model_name="3DM-GQ7-GNSS/INS")
+    assert b"3DM-GQ7-GNSS/INS" in b"".join(named.receive(mip(0x01, [(0x03, b"")])))

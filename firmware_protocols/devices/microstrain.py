@@ -43,9 +43,9 @@ import struct
 
 from firmware_protocols.base import Samples
 from firmware_protocols.devices.base import Device, SinceLastOutput, single
-from firmware_protocols.wire_formats.microstrain import (DATA_SETS, DEFAULT_FIELDS, FILTER_FAMILIES, FILTER_SET,
-                                                         GNSS_RECEIVER_1, GNSS_RECEIVER_2, GNSS_SET, SENSOR_DATA_SET,
-                                                         MipEncoder, fletcher16, mip_checksum_ok, mip_length)
+from firmware_protocols.wire_formats.microstrain import (DATA_SETS, DEFAULT_FIELDS, FILTER_SET, GNSS_RECEIVER_1,
+                                                         GNSS_RECEIVER_2, GNSS_SET, SENSOR_DATA_SET, MipEncoder,
+                                                         fletcher16, mip_checksum_ok, mip_length)
 from firmware_protocols.packing import FrameScanner
 from firmware_protocols.registry import attach_device
 
@@ -55,6 +55,10 @@ ACK_OK, NACK_UNKNOWN, NACK_CHECKSUM, NACK_PARAM, NACK_FAILED = 0, 1, 2, 3, 4
 APPLY, READ, SAVE, LOAD, DEFAULT = 1, 2, 3, 4, 5
 _LEGACY_FORMAT = {0x08: SENSOR_DATA_SET, 0x09: GNSS_SET, 0x0A: FILTER_SET}
 _LEGACY_REPLY = {SENSOR_DATA_SET: 0x80, GNSS_SET: 0x81, FILTER_SET: 0x82}
+_BASE_COMMANDS = (0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07, 0x7E)
+_DM_COMMANDS = (0x06, 0x07, 0x08, 0x09, 0x0A, 0x0E, 0x0F, 0x11, 0x30)
+_MAX_PAYLOAD = 255           # a MIP packet's payload length is one byte
+_ACK_LEN = 4                 # 04 F1 <command> <code>
 
 # What ArduPilot's MicroStrain drivers expect a unit to stream at power-on: they send no command at all
 # (AP_ExternalAHRS_MicroStrain5.cpp / _MicroStrain7.cpp, ArduPilot/ardupilot 8d81ecff / 07874551; parser
@@ -65,6 +69,7 @@ _LEGACY_REPLY = {SENSOR_DATA_SET: 0x80, GNSS_SET: 0x81, FILTER_SET: 0x82}
 # (_decimation). IMU and filter at 50 Hz, twice the 25 Hz the MicroStrain7 driver's comment names, so that a
 # packet is never older than the 40 / 44 ms allowed; GNSS at the receiver's rate: 2 Hz on a GQ7 (the driver's
 # "GPS: 2Hz"), 4 Hz on a GX5-45 (its maximum; MicroStrain5 wants strictly less than 500 ms between packets).
+# The GQ7's two receivers both report the one GNSS solution the samples carry.
 _AP_IMU = ("accel", "gyro", "mag", "pressure")
 _AP_GNSS = ("gps_timestamp", "fix_info", "position_llh", "velocity_ned", "dop")
 PRESETS = {
@@ -89,10 +94,6 @@ PRESETS = {
 def _decimation(rate_hz: float, wanted_hz: float) -> int:
     """Every d-th sample, d the largest with rate / d >= wanted (1 when the scene is slower than wanted)."""
     return max(1, int(rate_hz // wanted_hz))
-_BASE_COMMANDS = (0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07, 0x7E)
-_DM_COMMANDS = (0x06, 0x07, 0x08, 0x09, 0x0A, 0x0E, 0x0F, 0x11, 0x30)
-_MAX_PAYLOAD = 255           # a MIP packet's payload length is one byte
-_ACK_LEN = 4                 # 04 F1 <command> <code>
 
 
 def _count_fields(payload: bytes, k: int) -> int:
@@ -117,7 +118,7 @@ def _text(value: str) -> bytes:
 class MipDevice(Device):
     carries_increments = True    # a driver may configure the integrated outputs at any time
     def __init__(self, rate_hz: float, fields=DEFAULT_FIELDS, gps_week_offset: int = 0, gps_flags: int = 0x1C,
-                 model_name: str = "3DM-GQ7", model_number: str = "6284-4220", serial_number: str = "6284.12345",
+                 model_name: str | None = None, model_number: str | None = None, serial_number: str = "6284.12345",
                  firmware_version: int = 1100, filter_family: str | None = None, filter_state: int | None = None,
                  preset: str | None = None):
         super().__init__(rate_hz)
@@ -128,7 +129,8 @@ class MipDevice(Device):
             if fields is not DEFAULT_FIELDS:
                 raise ValueError("preset and fields: give one or the other")
             settings = PRESETS[preset][0]
-            model_name, model_number = settings["model_name"], settings["model_number"]
+            model_name = model_name or settings["model_name"]          # what the user names wins
+            model_number = model_number or settings["model_number"]
             filter_family = filter_family or settings["filter_family"]
             for descriptor_set, (names, wanted_hz) in settings["sets"].items():
                 startup[descriptor_set] = [(name, _decimation(rate_hz, wanted_hz)) for name in names]
@@ -139,6 +141,7 @@ class MipDevice(Device):
             if isinstance(fields, str):
                 fields = [f.strip() for f in fields.split(",") if f.strip()]
             startup[SENSOR_DATA_SET] = [(name, 1) for name in fields]
+        model_name, model_number = model_name or "3DM-GQ7", model_number or "6284-4220"
         # the filter's state codes are the model family's (GX5 and GQ7 number them differently)
         filter_family = filter_family or ("gx5" if "GX5" in str(model_name).upper() else "gq7")
         self._options = {"gps_week_offset": gps_week_offset, "gps_flags": gps_flags, "filter_state": filter_state,
@@ -348,8 +351,9 @@ class MipDevice(Device):
 
 
 attach_device("microstrain-mip", lambda rate_hz, **options: MipDevice(rate_hz, **options),
-              {"model_name": "device information: model name (default 3DM-GQ7)",
-               "model_number": "device information: model number", "serial_number": "device information",
+              {"model_name": "device information: model name (default the preset's, else 3DM-GQ7)",
+               "model_number": "device information: model number (default the preset's, else 6284-4220)",
+               "serial_number": "device information",
                "firmware_version": "device information: firmware version number (default 1100)",
                "filter_family": "filter state codes: gq7 or gx5 (default: gx5 for a GX5 model name, else gq7)",
                "filter_state": "a constant filter state (0x82, 0x10) instead of the one ins_mode gives",
