@@ -168,3 +168,28 @@ def test_presets_configure_the_sets_and_say_when_the_scene_is_too_slow():
     # an option the user names wins over the preset's
     named = MipDevice(100, preset="ardupilot", model_name="3DM-GQ7-GNSS/INS")
     assert b"3DM-GQ7-GNSS/INS" in b"".join(named.receive(mip(0x01, [(0x03, b"")])))
+
+
+def test_a_preset_device_takes_garbage_and_damaged_commands_and_keeps_every_set_streaming():
+    """Random bytes and valid MIP commands with random bytes flipped, interleaved with output, never raise; the
+    GNSS and filter sets (fed NaN-free samples without navigation fields: their documented defaults) keep going."""
+    from firmware_protocols import Samples
+    from firmware_protocols.devices.microstrain import MipDevice
+    rng = np.random.default_rng(24)
+    device = MipDevice(100, preset="ardupilot")
+    n = 400
+    samples = Samples(np.arange(n, dtype=np.int64) * 10_000_000, np.tile([0.0, 0.0, -G], (n, 1)), np.zeros((n, 3)))
+    # reads and pings only: a flipped byte that still passes Fletcher-16 could at most read another set
+    valid = [mip(0x0C, [(0x0F, bytes([2, s]))]) for s in (0x80, 0x82, 0x91, 0x92)] + [mip(0x01, [(0x01, b"")])]
+    out = bytearray()
+    for i in range(n):
+        command = bytearray(valid[rng.integers(len(valid))])
+        for _ in range(rng.integers(0, 3)):
+            command[rng.integers(len(command))] = rng.integers(256)
+        noise = rng.integers(0, 256, rng.integers(0, 40), dtype=np.uint8).tobytes()
+        for reply in device.receive(noise + bytes(command)):
+            assert isinstance(reply, bytes)
+        out += device.output(samples, i)
+    sets = [s for s, _ in packets(bytes(out))]
+    assert {0x80, 0x82, 0x91, 0x92} <= set(sets)
+    assert device.stats.errors > 0 and device.stats.commands > 0
