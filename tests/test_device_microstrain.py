@@ -179,7 +179,7 @@ def test_a_preset_device_takes_garbage_and_damaged_commands_and_keeps_every_set_
     device = MipDevice(100, preset="ardupilot")
     n = 400
     samples = Samples(np.arange(n, dtype=np.int64) * 10_000_000, np.tile([0.0, 0.0, -G], (n, 1)), np.zeros((n, 3)))
-    # reads and pings only: a flipped byte that still passes Fletcher-16 could at most read another set
+    # reads and pings only, so the preset's configuration stands (a damaged copy fails Fletcher-16 but by chance)
     valid = [mip(0x0C, [(0x0F, bytes([2, s]))]) for s in (0x80, 0x82, 0x91, 0x92)] + [mip(0x01, [(0x01, b"")])]
     out = bytearray()
     for i in range(n):
