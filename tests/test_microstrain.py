@@ -287,7 +287,7 @@ def _gnss_and_filter_samples():
         position_llh=np.column_stack((47 + rng.random(n), 8 + rng.random(n), 400 + 100 * rng.random(n))),
         velocity_ned=rng.normal(size=(n, 3)) * 5, quat=_unit(rng.normal(size=(n, 4))),
         position_sigma_m=rng.random((n, 3)) * 3, velocity_sigma_mps=rng.random((n, 3)) * 0.2,
-        attitude_sigma_rad=rng.random((n, 3)) * 0.05, ins_mode=[2, 1, 0])
+        attitude_sigma_rad=rng.random((n, 3)) * 0.05, ins_mode=[2, 1, 0], gnss_age_s=[0.12, 0.0, 1.5])
 
 
 def _unit(q):
@@ -320,7 +320,8 @@ def test_pymscl_reads_the_gnss_set_as_the_receivers_solution():
         fixed = s.gnss_fix[i] >= 2
         assert p["latitude"].valid() == p["northVelocity"].valid() == p["headingAccuracy"].valid() == fixed
         assert p["gpsTimeWeekNum"].as_uint16() == 2300
-        assert p["gpsTimeTow"].as_double() == (s.time_ns[i] % WEEK_NS) / 1e9
+        # the solution's time of validity: the sample time less its age
+        assert p["gpsTimeTow"].as_double() == ((s.time_ns[i] - round(s.gnss_age_s[i] * 1e9)) % WEEK_NS) / 1e9
 
 
 @pytest.mark.parametrize("family, states", [("gq7", (4, 1, 1)), ("gx5", (2, 1, 0))])

@@ -39,6 +39,7 @@ tracking filter, PX4 SITL's home position).
 """
 from __future__ import annotations
 
+import copy
 import math
 import struct
 from dataclasses import dataclass, replace
@@ -129,8 +130,10 @@ GNSS_FIELDS = {
     "dop": Field(0x07, "gnss_dop", 7, tail=((KIND_U16, "gnss_quality:4"),)),
     # fix type (0 3D, 1 2D, 3 none), satellites used, fix flags, valid flags (all three)
     "fix_info": Field(0x0B, "gnss_fix_info", 2, kind=KIND_U8, tail=((KIND_U16, 0.0), (KIND_U16, 0x07))),
-    "gps_time": Field(0x09, "time_ns", 3),               # the 3DM-GX5's GNSS GPS time (week, time of week)
-    "gps_timestamp": Field(0xD3, "time_ns", 3),          # the shared GPS timestamp (GQ7 and later firmware)
+    # GPS time (time of week, week) of the solution, the sample time less Samples.gnss_age_s: the 3DM-GX5's GNSS GPS
+    # time field, and the shared GPS timestamp (GQ7 and later firmware)
+    "gps_time": Field(0x09, "time_ns", 3),
+    "gps_timestamp": Field(0xD3, "time_ns", 3),
 }
 DATA_SETS = {SENSOR_DATA_SET: FIELDS, GNSS_SET: GNSS_FIELDS, FILTER_SET: FILTER_FIELDS,
              GNSS_RECEIVER_1: GNSS_FIELDS, GNSS_RECEIVER_2: GNSS_FIELDS}
@@ -253,6 +256,7 @@ class MipEncoder:
         defaults.update(position_llh=_DEFAULT_LLH, velocity_ned=(0.0, 0.0, 0.0), gnss_llh=_DEFAULT_LLH,
                         gnss_velocity_ned=(0.0, 0.0, 0.0))
         self._packer = FixedPacketPacker(bytes(packet) + b"\x00\x00", columns, CHECKSUM_FLETCHER16, defaults)
+        self._solution_time = table is GNSS_FIELDS and any(table[name].source == "time_ns" for name in self.fields)
         self._derived = set(self._packer.slots) & {"gnss_llh", "gnss_velocity_ned", "gnss_quality", "gnss_fix_info",
                                                    "gnss_speed", "gnss_dop", "filter_state", "filter_valid"}
 
@@ -262,6 +266,11 @@ class MipEncoder:
 
     def encode(self, samples: Samples) -> SerialBatch:
         extra = None
+        if self._solution_time and samples.gnss_age_s is not None:
+            # a GNSS set's GPS time is its solution's time of validity: the sample time less the solution's age
+            samples.require_finite(["gnss_age_s"])
+            samples = copy.copy(samples)
+            samples.time_ns = samples.time_ns - np.rint(samples.gnss_age_s * 1e9).astype(np.int64)
         if self._derived:
             samples.require_finite(["gnss_llh", "gnss_velocity_ned", "gnss_fix", "gnss_satellites", "gnss_hdop",
                                     "gnss_vdop", "gnss_horizontal_accuracy_m", "gnss_vertical_accuracy_m",
