@@ -134,3 +134,62 @@ def test_nacks_and_the_filter_and_gnss_sets_ardupilot_needs(tmp_path):
         north, east, down, speed, ground, heading = struct.unpack_from(">6f", fields[2][1])
         assert abs(ground - np.hypot(north, east)) < 1e-4
         assert abs(speed - np.linalg.norm([north, east, down])) < 1e-4
+
+
+def test_presets_configure_the_sets_and_say_when_the_scene_is_too_slow():
+    """The device as a driver would read its configuration back (message format, 0x0C 0x0F function 2): the preset's
+    fields at the decimation that gives at least the preset's rate; bad preset options are refused by name."""
+    from firmware_protocols.devices.microstrain import MipDevice
+    device = MipDevice(200, preset="ardupilot")
+    assert device.notes == []
+
+    def read_format(descriptor_set: int) -> list:
+        (reply_set, fields), = packets(b"".join(device.receive(mip(0x0C, [(0x0F, bytes([2, descriptor_set]))]))))
+        assert reply_set == 0x0C and fields[0] == (0xF1, bytes([0x0F, 0]))
+        data = fields[1][1]
+        assert fields[1][0] == 0x8F and data[0] == descriptor_set
+        return [struct.unpack_from(">BH", data, 2 + 3 * j) for j in range(data[1])]
+
+    # 200 Hz scene: IMU and filter every 4th sample (50 Hz), each GNSS receiver every 100th (2 Hz)
+    assert read_format(0x80) == [(0x04, 4), (0x05, 4), (0x06, 4), (0x17, 4)]
+    assert read_format(0x91) == read_format(0x92) == [(0xD3, 100), (0x0B, 100), (0x03, 100), (0x05, 100), (0x07, 100)]
+    assert read_format(0x82) == [(d, 4) for d in (0xD3, 0x10, 0x01, 0x02, 0x03, 0x08, 0x09)]
+    assert read_format(0x81) == []
+    info = b"".join(device.receive(mip(0x01, [(0x03, b"")])))
+    assert b"3DM-GQ7" in info
+    gx5 = MipDevice(100, preset="ardupilot-gx5")
+    assert b"3DM-GX5-45" in b"".join(gx5.receive(mip(0x01, [(0x03, b"")])))
+    slow = MipDevice(20, preset="ardupilot")
+    assert any("0x80 wants 50 Hz" in note and "20 Hz" in note for note in slow.notes)
+    with pytest.raises(ValueError, match="preset: unknown 'px4'.*ardupilot, ardupilot-gx5"):
+        MipDevice(100, preset="px4")
+    with pytest.raises(ValueError, match="preset and fields"):
+        MipDevice(100, preset="ardupilot", fields="accel")
+    # an option the user names wins over the preset's
+    named = MipDevice(100, preset="ardupilot", model_name="3DM-GQ7-GNSS/INS")
+    assert b"3DM-GQ7-GNSS/INS" in b"".join(named.receive(mip(0x01, [(0x03, b"")])))
+
+
+def test_a_preset_device_takes_garbage_and_damaged_commands_and_keeps_every_set_streaming():
+    """Random bytes and valid MIP commands with random bytes flipped, interleaved with output, never raise; the
+    GNSS and filter sets (fed NaN-free samples without navigation fields: their documented defaults) keep going."""
+    from firmware_protocols import Samples
+    from firmware_protocols.devices.microstrain import MipDevice
+    rng = np.random.default_rng(24)
+    device = MipDevice(100, preset="ardupilot")
+    n = 400
+    samples = Samples(np.arange(n, dtype=np.int64) * 10_000_000, np.tile([0.0, 0.0, -G], (n, 1)), np.zeros((n, 3)))
+    # reads and pings only, so the preset's configuration stands (a damaged copy fails Fletcher-16 but by chance)
+    valid = [mip(0x0C, [(0x0F, bytes([2, s]))]) for s in (0x80, 0x82, 0x91, 0x92)] + [mip(0x01, [(0x01, b"")])]
+    out = bytearray()
+    for i in range(n):
+        command = bytearray(valid[rng.integers(len(valid))])
+        for _ in range(rng.integers(0, 3)):
+            command[rng.integers(len(command))] = rng.integers(256)
+        noise = rng.integers(0, 256, rng.integers(0, 40), dtype=np.uint8).tobytes()
+        for reply in device.receive(noise + bytes(command)):
+            assert isinstance(reply, bytes)
+        out += device.output(samples, i)
+    sets = [s for s, _ in packets(bytes(out))]
+    assert {0x80, 0x82, 0x91, 0x92} <= set(sets)
+    assert device.stats.errors > 0 and device.stats.commands > 0

@@ -222,21 +222,14 @@ def test_fuzz_never_raises_never_yields_bad_checksum(parts, seed):
 
 # --- MicroStrain's own library reads our packets from a pty ------------------------------------
 
-def test_pymscl_reads_our_packets_from_a_pty():
+def mscl_packets(data: bytes, n: int) -> list:
+    """Our bytes written to a pty that MicroStrain's MSCL reads as an InertialNode: the data packets it parsed."""
     try:
         import mscl
     except ImportError as exc:           # pymscl publishes wheels for some platforms only
         pytest.skip(f"pymscl (MicroStrain's MSCL) does not import here: {exc}")
     master, slave = os.openpty()
     tty.setraw(slave)
-    n = 6
-    rng = np.random.default_rng(11)
-    accel, gyro, mag = rng.normal(size=(n, 3)), rng.normal(size=(n, 3)) * 0.1, rng.normal(size=(n, 3)) * 0.3
-    quat = rng.normal(size=(n, 4))
-    quat /= np.linalg.norm(quat, axis=1, keepdims=True)
-    time_ns = 100_000 * 10 ** 9 + np.arange(n, dtype=np.int64) * 5_000_000
-    samples = Samples(time_ns, accel, gyro, mag=mag, quat=quat, pressure_pa=np.linspace(90_000, 101_000, n))
-    data = MipEncoder(gps_week_offset=2345).encode(samples).data
     connection = mscl.Connection.Serial(os.ttyname(slave), 921600)
     try:
         node = mscl.InertialNode(connection)
@@ -252,6 +245,19 @@ def test_pymscl_reads_our_packets_from_a_pty():
             except OSError:
                 pass
     assert len(received) == n
+    return received
+
+
+def test_pymscl_reads_our_packets_from_a_pty():
+    n = 6
+    rng = np.random.default_rng(11)
+    accel, gyro, mag = rng.normal(size=(n, 3)), rng.normal(size=(n, 3)) * 0.1, rng.normal(size=(n, 3)) * 0.3
+    quat = rng.normal(size=(n, 4))
+    quat /= np.linalg.norm(quat, axis=1, keepdims=True)
+    time_ns = 100_000 * 10 ** 9 + np.arange(n, dtype=np.int64) * 5_000_000
+    samples = Samples(time_ns, accel, gyro, mag=mag, quat=quat, pressure_pa=np.linspace(90_000, 101_000, n))
+    data = MipEncoder(gps_week_offset=2345).encode(samples).data
+    received = mscl_packets(data, n)
     for i, packet in enumerate(received):
         assert packet.descriptorSet() == 0x80
         points = {p.channelName(): p for p in packet.data()}
@@ -265,3 +271,98 @@ def test_pymscl_reads_our_packets_from_a_pty():
         assert points["gpsCorrelTimestampWeekNum"].as_uint16() == 2345
         assert points["gpsCorrelTimestampTow"].as_double() == (time_ns[i] % WEEK_NS) / 1e9
         assert points["gpsCorrelTimestampFlags"].as_uint16() == 0x1C
+
+
+def _gnss_and_filter_samples():
+    """Three samples: a 3D fix, a 2D fix, no fix; the estimate tracking, aligning, not tracking."""
+    rng = np.random.default_rng(5)
+    n = 3
+    return Samples(
+        100_000 * 10 ** 9 + np.arange(n, dtype=np.int64) * 250_000_000, rng.normal(size=(n, 3)),
+        rng.normal(size=(n, 3)),
+        gnss_llh=np.column_stack((47 + rng.random(n), 8 + rng.random(n), 400 + 100 * rng.random(n))),
+        gnss_velocity_ned=rng.normal(size=(n, 3)) * 5, gnss_fix=[3, 2, 0], gnss_satellites=[11, 6, 2],
+        gnss_hdop=[0.8, 1.9, 9.0], gnss_vdop=[1.1, 2.5, 9.9], gnss_horizontal_accuracy_m=[0.7, 3.0, 50.0],
+        gnss_vertical_accuracy_m=[1.1, 5.0, 80.0], gnss_speed_accuracy_mps=[0.05, 0.3, 9.0],
+        position_llh=np.column_stack((47 + rng.random(n), 8 + rng.random(n), 400 + 100 * rng.random(n))),
+        velocity_ned=rng.normal(size=(n, 3)) * 5, quat=_unit(rng.normal(size=(n, 4))),
+        position_sigma_m=rng.random((n, 3)) * 3, velocity_sigma_mps=rng.random((n, 3)) * 0.2,
+        attitude_sigma_rad=rng.random((n, 3)) * 0.05, ins_mode=[2, 1, 0], gnss_age_s=[0.12, 0.0, 1.5])
+
+
+def _unit(q):
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def test_pymscl_reads_the_gnss_set_as_the_receivers_solution():
+    """data_gnss.h fields by MSCL: position, velocity (speed, ground speed, heading derived), DOPs, fix type
+    (MIP: 0 3D, 1 2D, 3 none), satellites, GPS time; valid flags cleared without a fix."""
+    from firmware_protocols.wire_formats.microstrain import GNSS_FIELDS
+    s = _gnss_and_filter_samples()
+    data = MipEncoder(tuple(GNSS_FIELDS), descriptor_set=0x81, gps_week_offset=2300).encode(s).data
+    for i, packet in enumerate(mscl_packets(data, len(s))):
+        assert packet.descriptorSet() == 0x81
+        p = {d.channelName(): d for d in packet.data()}
+        llh, v = s.gnss_llh[i], s.gnss_velocity_ned[i]
+        assert [p[k].as_double() for k in ("latitude", "longitude", "heightAboveElipsoid", "heightAboveMSL")] == \
+            [llh[0], llh[1], llh[2], llh[2]]
+        assert [p[k].as_float() for k in ("horizontalAccuracy", "verticalAccuracy", "speedAccuracy")] == f32(
+            [s.gnss_horizontal_accuracy_m[i], s.gnss_vertical_accuracy_m[i], s.gnss_speed_accuracy_mps[i]])
+        assert [p[f"{a}Velocity"].as_float() for a in ("north", "east", "down")] == f32(v)
+        assert p["speed"].as_float() == f32([np.linalg.norm(v)])[0]
+        assert p["groundSpeed"].as_float() == f32([np.hypot(v[0], v[1])])[0]
+        assert p["heading"].as_float() == f32([np.degrees(np.arctan2(v[1], v[0])) % 360.0])[0]
+        assert [p[k].as_float() for k in ("horizontalDOP", "verticalDOP")] == f32([s.gnss_hdop[i], s.gnss_vdop[i]])
+        assert p["positionDOP"].as_float() == f32([np.hypot(s.gnss_hdop[i], s.gnss_vdop[i])])[0]
+        assert p["positionDOP"].valid() and not p["geometricDOP"].valid()     # only h, v (and p) are known
+        assert p["gnssFixType"].as_uint8() == {3: 0, 2: 1, 0: 3}[int(s.gnss_fix[i])]
+        assert p["gnssFixSvCount"].as_uint8() == s.gnss_satellites[i]
+        fixed = s.gnss_fix[i] >= 2
+        assert p["latitude"].valid() == p["northVelocity"].valid() == p["headingAccuracy"].valid() == fixed
+        assert p["gpsTimeWeekNum"].as_uint16() == 2300
+        # the solution's time of validity: the sample time less its age
+        assert p["gpsTimeTow"].as_double() == ((s.time_ns[i] - round(s.gnss_age_s[i] * 1e9)) % WEEK_NS) / 1e9
+
+
+@pytest.mark.parametrize("family, states", [("gq7", (4, 1, 1)), ("gx5", (2, 1, 0))])
+def test_pymscl_reads_the_filter_set_as_the_estimate(family, states):
+    """data_filter.h fields by MSCL: the estimate, its 1-sigma uncertainties, and the filter state each family
+    reports for tracking / aligning / not tracking (GQ7 4 full navigation, 1 initialising; GX5 2 running with a
+    valid solution, 1 initialization, 0 startup); a solution is flagged valid only while tracking."""
+    from firmware_protocols.wire_formats.microstrain import FILTER_FIELDS
+    s = _gnss_and_filter_samples()
+    data = MipEncoder(tuple(FILTER_FIELDS), descriptor_set=0x82, filter_family=family).encode(s).data
+    for i, packet in enumerate(mscl_packets(data, len(s))):
+        assert packet.descriptorSet() == 0x82
+        p = {d.channelName(): d for d in packet.data()}
+        assert [p[k].as_double() for k in ("estLatitude", "estLongitude", "estHeightAboveElipsoid")] == \
+            list(s.position_llh[i])
+        assert [p[f"est{a}Velocity"].as_float() for a in ("North", "East", "Down")] == f32(s.velocity_ned[i])
+        q = p["estOrientQuaternion"].as_Vector()
+        assert [q.as_floatAt(k) for k in range(4)] == f32(s.quat[i])
+        assert [p[f"est{a}PositionUncert"].as_float() for a in ("North", "East", "Down")] == f32(s.position_sigma_m[i])
+        assert [p[f"est{a}VelocityUncert"].as_float() for a in ("North", "East", "Down")] == \
+            f32(s.velocity_sigma_mps[i])
+        assert [p[f"est{a}Uncert"].as_float() for a in ("Roll", "Pitch", "Yaw")] == f32(s.attitude_sigma_rad[i])
+        assert p["estFilterState"].as_uint16() == states[i]
+        assert p["estLatitude"].valid() == p["estRollUncert"].valid() == (s.ins_mode[i] == 2)
+
+
+def test_our_decoder_reads_the_gnss_and_filter_sets_back():
+    """The decoder's "values" of the GNSS and filter sets equal what the encoder was given (float32 on the wire)."""
+    from firmware_protocols.wire_formats.microstrain import FILTER_FIELDS, GNSS_FIELDS
+    s = _gnss_and_filter_samples()
+    data = (MipEncoder(tuple(GNSS_FIELDS), descriptor_set=0x91).encode(s).data
+            + MipEncoder(tuple(FILTER_FIELDS), descriptor_set=0x82).encode(s).data)
+    packets = MipDecoder().feed(data)
+    assert [p.fields["descriptor_set"] for p in packets] == [0x91] * 3 + [0x82] * 3
+    for i, p in enumerate(packets[:3]):
+        v = p.fields["values"]
+        assert v["position_llh"][:4] == (*s.gnss_llh[i], s.gnss_llh[i][2])
+        assert list(v["velocity_ned"][:3]) == f32(s.gnss_velocity_ned[i])
+        assert v["fix_info"][:2] == ({3: 0, 2: 1, 0: 3}[int(s.gnss_fix[i])], s.gnss_satellites[i])
+    for i, p in enumerate(packets[3:]):
+        v = p.fields["values"]
+        assert v["position_llh"] == (*s.position_llh[i], int(s.ins_mode[i] == 2))
+        assert list(v["position_uncertainty"][:3]) == f32(s.position_sigma_m[i])
+        assert v["status"] == ((4, 1, 1)[i], 1, 0)

@@ -371,3 +371,78 @@ def test_fuzz_never_raises_never_yields_bad_checksum(parts, flip_seed):
     for p in packets:
         assert p.raw[0] == 0xFA and sum(p.raw[1:]) % 256 == 0
     assert decoder.stats.packets == len(packets)
+
+
+# --- MagneticField, BaroPressure and GnssPvtData as ArduPilot reads them -------------------------------------
+# ArduPilot/ardupilot libraries/AP_ExternalAHRS/AP_ExternalAHRS_Xsens.cpp at 1056c40f8f57ad5fbb5620a7c293318f2b8471ab:
+# parse_mtdata2 (XDI u16, size u8; MAGNETIC_FIELD 0xC020 three big-endian floats when size 12, BAROMETRIC_PRESSURE
+# 0x3010 u32 when size 4), parse_gnss_pvt_data (size 94, the fields in this order) and convert_fix_type.
+_AP_PVT = struct.Struct(">IHBBBBBBIiBBBBiiiiIIiiiiiIIiHHHHHHH")
+_AP_PVT_NAMES = ("iTOW year month day hour min sec valid tAcc nano fixType flags numSv reserved lon lat height hMSL "
+                 "hAcc vAcc velN velE velD gSpeed headMot sAcc headAcc headVeh gDop pDop tDop vDop hDop nDop eDop").split()
+AP_FIX_NONE, AP_FIX_2D, AP_FIX_3D = 1, 2, 3       # AP_GPS_FixType
+
+
+def ap_parse_mtdata2(frame: bytes) -> dict:
+    assert frame[0] == 0xFA and frame[1] == 0xFF and frame[2] == 0x36 and sum(frame[1:]) & 0xFF == 0
+    payload, index, data = frame[4:4 + frame[3]], 0, {}
+    while index + 3 <= len(payload):
+        xdi, size = struct.unpack_from(">HB", payload, index)
+        index += 3
+        if xdi == 0xC020 and size == 12:
+            data["magneticField"] = struct.unpack_from(">3f", payload, index)
+        elif xdi == 0x3010 and size == 4:
+            data["barometricPressure"] = struct.unpack_from(">I", payload, index)[0]
+        elif xdi == 0x7010 and size == 94:
+            data["gnssPvtData"] = dict(zip(_AP_PVT_NAMES, _AP_PVT.unpack_from(payload, index)))
+        index += size
+    return data
+
+
+def ap_convert_fix_type(fix_type: int, flags: int) -> int:
+    if fix_type == 2:
+        return AP_FIX_2D
+    if fix_type in (3, 4):
+        return AP_FIX_3D if fix_type == 4 or not flags & 0b11000010 else None   # (DGPS / RTK: not sent here)
+    return AP_FIX_NONE
+
+
+def test_mag_baro_and_gnss_pvt_read_as_ardupilot_does():
+    """The samples' magnetic field (over mag_reference_gauss), static pressure and GNSS receiver solution, read back
+    by ArduPilot's parser: a 3D fix, a 2D fix and none, each with its own accuracies, DOPs and satellites."""
+    rng = np.random.default_rng(8)
+    n = 3
+    samples = Samples(
+        1_700_000_000 * 10 ** 9 + np.arange(n, dtype=np.int64) * 250_000_000, rng.normal(size=(n, 3)),
+        rng.normal(size=(n, 3)), mag=rng.normal(size=(n, 3)) * 0.3, pressure_pa=[101_325.4, 95_000.6, 89_874.2],
+        gnss_llh=np.column_stack((47 + rng.random(n), 8 + rng.random(n), 400 + 100 * rng.random(n))),
+        gnss_velocity_ned=rng.normal(size=(n, 3)) * 5, gnss_fix=[3, 2, 0], gnss_satellites=[14, 5, 1],
+        gnss_hdop=[0.7, 2.2, 9.0], gnss_vdop=[1.2, 3.1, 9.9], gnss_horizontal_accuracy_m=[0.6, 4.0, 60.0],
+        gnss_vertical_accuracy_m=[1.0, 6.0, 90.0], gnss_speed_accuracy_mps=[0.04, 0.5, 7.0],
+        position_llh=[[10.0, 20.0, 30.0]] * n)          # the estimate: GnssPvtData must not take it
+    reference = 0.49                                    # ArduPilot's comment: "1 a.u = 0.49Gauss"
+    encoder = XsensEncoder(("magnetic_field", "baro_pressure", "gnss_pvt_data"), mag_reference_gauss=reference)
+    batch = encoder.encode(samples)
+    for i in range(n):
+        data = ap_parse_mtdata2(batch.packet(i))
+        assert list(data["magneticField"]) == [float(np.float32(v / reference)) for v in samples.mag[i]]
+        assert data["barometricPressure"] == round(samples.pressure_pa[i])
+        pvt = data["gnssPvtData"]
+        llh, v = samples.gnss_llh[i], samples.gnss_velocity_ned[i]
+        assert (pvt["lat"], pvt["lon"]) == (round(llh[0] * 1e7), round(llh[1] * 1e7))
+        assert pvt["height"] == pvt["hMSL"] == round(llh[2] * 1e3)
+        assert (pvt["velN"], pvt["velE"], pvt["velD"]) == tuple(round(c * 1e3) for c in v)
+        assert ap_convert_fix_type(pvt["fixType"], pvt["flags"]) == {3: AP_FIX_3D, 2: AP_FIX_2D, 0: AP_FIX_NONE}[
+            int(samples.gnss_fix[i])]
+        assert pvt["flags"] & 1 == (samples.gnss_fix[i] >= 2)              # gnssFixOK
+        assert pvt["numSv"] == samples.gnss_satellites[i]
+        assert pvt["hAcc"] == round(samples.gnss_horizontal_accuracy_m[i] * 1e3)
+        assert pvt["vAcc"] == round(samples.gnss_vertical_accuracy_m[i] * 1e3)
+        assert pvt["sAcc"] == round(samples.gnss_speed_accuracy_mps[i] * 1e3)
+        assert (pvt["hDop"], pvt["vDop"]) == (round(samples.gnss_hdop[i] * 100), round(samples.gnss_vdop[i] * 100))
+        # the seven DOPs stay consistent: h^2 = n^2 + e^2, p^2 = h^2 + v^2, g^2 = p^2 + t^2, each rounded to the
+        # 0.01 wire step (so a side differs by at most 0.005 + 0.005 * sqrt 2 < 0.013)
+        d = {k: pvt[k] / 100 for k in ("gDop", "pDop", "tDop", "vDop", "hDop", "nDop", "eDop")}
+        assert d["hDop"] == pytest.approx(math.hypot(d["nDop"], d["eDop"]), abs=0.013)
+        assert d["pDop"] == pytest.approx(math.hypot(d["hDop"], d["vDop"]), abs=0.013)
+        assert d["gDop"] == pytest.approx(math.hypot(d["pDop"], d["tDop"]), abs=0.013)

@@ -22,6 +22,12 @@ any data the command returns. Commands:
                 read answers 0x85), 30 device settings (save / load / default: acknowledged)
     Functions: 1 apply, 2 read, 3 save, 4 load saved, 5 load default.
 
+At start the device streams the `fields` of set 0x80 at every sample, or what a preset names (PRESETS: the sets,
+fields and rates ArduPilot's MicroStrain5 / MicroStrain7 drivers expect of a unit configured beforehand; they
+send no command). The data sets are 0x80 IMU, 0x81 GNSS, 0x91 / 0x92 GNSS receivers 1 / 2 (a GQ7's) and 0x82
+filter; the filter state follows the samples' ins_mode in the numbering of the model's family (`filter_family`:
+a model name containing GX5 numbers like a 3DM-GX5-45, others like a GQ7).
+
 The base rate of every data set is the scene's sample rate (the emulator has no other), so a decimation d
 sends the field every d-th sample; fields of one set due at the same sample share one packet, in the
 configured order. Data flow only while the device is not idle and the set's stream is enabled. A
@@ -37,9 +43,9 @@ import struct
 
 from firmware_protocols.base import Samples
 from firmware_protocols.devices.base import Device, SinceLastOutput, single
-from firmware_protocols.wire_formats.microstrain import (DATA_SETS, DEFAULT_FIELDS, FILTER_SET, FILTER_STATE_FULL_NAV,
-                                                         GNSS_SET, SENSOR_DATA_SET, MipEncoder, fletcher16,
-                                                         mip_checksum_ok, mip_length)
+from firmware_protocols.wire_formats.microstrain import (DATA_SETS, DEFAULT_FIELDS, FILTER_SET, GNSS_RECEIVER_1,
+                                                         GNSS_RECEIVER_2, GNSS_SET, SENSOR_DATA_SET, MipEncoder,
+                                                         fletcher16, mip_checksum_ok, mip_length)
 from firmware_protocols.packing import FrameScanner
 from firmware_protocols.registry import attach_device
 
@@ -53,6 +59,41 @@ _BASE_COMMANDS = (0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07, 0x7E)
 _DM_COMMANDS = (0x06, 0x07, 0x08, 0x09, 0x0A, 0x0E, 0x0F, 0x11, 0x30)
 _MAX_PAYLOAD = 255           # a MIP packet's payload length is one byte
 _ACK_LEN = 4                 # 04 F1 <command> <code>
+
+# What ArduPilot's MicroStrain drivers expect a unit to stream at power-on: they send no command at all
+# (AP_ExternalAHRS_MicroStrain5.cpp / _MicroStrain7.cpp, ArduPilot/ardupilot 8d81ecff / 07874551; parser
+# MicroStrain_common.cpp 634f47ff). healthy() wants an IMU packet (0x80) younger than 40 ms (MicroStrain5) or
+# 44 ms (MicroStrain7), a GNSS packet younger than 500 / 550 ms and a filter packet (0x82) younger than 500 /
+# 44 ms; pre-arm wants a 3D fix and filter state 2 (GX5 "running, solution valid") or 3 / 4 (GQ7 AHRS / full
+# navigation). Rates in Hz; each set's decimation is the largest that keeps at least that rate
+# (_decimation). IMU and filter at 50 Hz, twice the 25 Hz the MicroStrain7 driver's comment names, so that a
+# packet is never older than the 40 / 44 ms allowed; GNSS at the receiver's rate: 2 Hz on a GQ7 (the driver's
+# "GPS: 2Hz"), 4 Hz on a GX5-45 (its maximum; MicroStrain5 wants strictly less than 500 ms between packets).
+# The GQ7's two receivers both report the one GNSS solution the samples carry.
+_AP_IMU = ("accel", "gyro", "mag", "pressure")
+_AP_GNSS = ("gps_timestamp", "fix_info", "position_llh", "velocity_ned", "dop")
+PRESETS = {
+    "ardupilot": ({"model_name": "3DM-GQ7", "model_number": "6284-4220", "filter_family": "gq7",
+                   "sets": {SENSOR_DATA_SET: (_AP_IMU, 50.0), GNSS_RECEIVER_1: (_AP_GNSS, 2.0),
+                            GNSS_RECEIVER_2: (_AP_GNSS, 2.0),
+                            FILTER_SET: (("gps_time", "status", "position_llh", "velocity_ned", "quaternion",
+                                          "position_uncertainty", "velocity_uncertainty"), 50.0)}},
+                  "a 3DM-GQ7 as ArduPilot's MicroStrain7 driver (EAHRS_TYPE 7) reads it: IMU 0x80 (accel, gyro, "
+                  "mag, pressure) 50 Hz, GNSS receivers 0x91 and 0x92 2 Hz, filter 0x82 (state 4 full navigation, "
+                  "position, velocity, quaternion, uncertainties) 50 Hz"),
+    "ardupilot-gx5": ({"model_name": "3DM-GX5-45", "model_number": "6251-4220", "filter_family": "gx5",
+                       "sets": {SENSOR_DATA_SET: (_AP_IMU + ("quaternion",), 50.0),
+                                GNSS_SET: (("gps_time", "fix_info", "position_llh", "velocity_ned", "dop"), 4.0),
+                                FILTER_SET: (("gps_time", "status", "position_llh", "velocity_ned"), 50.0)}},
+                      "a 3DM-GX5-45 as ArduPilot's MicroStrain5 driver (EAHRS_TYPE 2) reads it: IMU 0x80 (accel, "
+                      "gyro, mag, pressure, quaternion) 50 Hz, GNSS 0x81 4 Hz, filter 0x82 (state 2 running, "
+                      "position, velocity) 50 Hz"),
+}
+
+
+def _decimation(rate_hz: float, wanted_hz: float) -> int:
+    """Every d-th sample, d the largest with rate / d >= wanted (1 when the scene is slower than wanted)."""
+    return max(1, int(rate_hz // wanted_hz))
 
 
 def _count_fields(payload: bytes, k: int) -> int:
@@ -77,16 +118,40 @@ def _text(value: str) -> bytes:
 class MipDevice(Device):
     carries_increments = True    # a driver may configure the integrated outputs at any time
     def __init__(self, rate_hz: float, fields=DEFAULT_FIELDS, gps_week_offset: int = 0, gps_flags: int = 0x1C,
-                 model_name: str = "3DM-GQ7", model_number: str = "6284-4220", serial_number: str = "6284.12345",
-                 firmware_version: int = 1100, filter_state: int = FILTER_STATE_FULL_NAV):
+                 model_name: str | None = None, model_number: str | None = None, serial_number: str = "6284.12345",
+                 firmware_version: int = 1100, filter_family: str | None = None, filter_state: int | None = None,
+                 preset: str | None = None):
         super().__init__(rate_hz)
-        self._options = {"gps_week_offset": gps_week_offset, "gps_flags": gps_flags, "filter_state": filter_state}
-        MipEncoder(fields, **self._options)          # validates the fields and options now
-        if isinstance(fields, str):
-            fields = [f.strip() for f in fields.split(",") if f.strip()]
+        startup = {descriptor_set: [] for descriptor_set in DATA_SETS}
+        if preset is not None:
+            if preset not in PRESETS:
+                raise ValueError(f"preset: unknown {preset!r} (known: {', '.join(PRESETS)})")
+            if fields is not DEFAULT_FIELDS:
+                raise ValueError("preset and fields: give one or the other")
+            settings = PRESETS[preset][0]
+            model_name = model_name or settings["model_name"]          # what the user names wins
+            model_number = model_number or settings["model_number"]
+            filter_family = filter_family or settings["filter_family"]
+            for descriptor_set, (names, wanted_hz) in settings["sets"].items():
+                startup[descriptor_set] = [(name, _decimation(rate_hz, wanted_hz)) for name in names]
+                if rate_hz < wanted_hz:
+                    self.notes.append(f"preset {preset}: set {descriptor_set:#04x} wants {wanted_hz:g} Hz but the "
+                                      f"scene samples at {rate_hz:g} Hz; ArduPilot's healthy() may fail")
+        else:
+            if isinstance(fields, str):
+                fields = [f.strip() for f in fields.split(",") if f.strip()]
+            startup[SENSOR_DATA_SET] = [(name, 1) for name in fields]
+        model_name, model_number = model_name or "3DM-GQ7", model_number or "6284-4220"
+        # the filter's state codes are the model family's (GX5 and GQ7 number them differently)
+        filter_family = filter_family or ("gx5" if "GX5" in str(model_name).upper() else "gq7")
+        self._options = {"gps_week_offset": gps_week_offset, "gps_flags": gps_flags, "filter_state": filter_state,
+                         "filter_family": filter_family}
+        for descriptor_set, entries in startup.items():     # validates the fields and options now
+            if entries or descriptor_set == SENSOR_DATA_SET:
+                MipEncoder(tuple(name for name, _ in entries) or DEFAULT_FIELDS, descriptor_set=descriptor_set,
+                           **self._options)
         self.info = (struct.pack(">H", int(firmware_version)) + _text(model_name) + _text(model_number)
                      + _text(serial_number) + _text("") + _text("emulated"))
-        startup = {SENSOR_DATA_SET: [(name, 1) for name in fields], GNSS_SET: [], FILTER_SET: []}
         self._startup = self._saved = startup
         self.formats = {k: list(v) for k, v in startup.items()}
         self.enabled = {k: True for k in DATA_SETS}
@@ -95,7 +160,10 @@ class MipDevice(Device):
         self.increments = SinceLastOutput()
         self._encoders: dict = {}
         self._scanner = FrameScanner(b"\x75\x65", mip_length, mip_checksum_ok)   # as the decoder finds packets
-        self.bytes_per_sample = self._encoder(SENSOR_DATA_SET, tuple(fields)).bytes_per_sample
+        # the link budget's figure: every set's packet, each at its share of the samples
+        self.bytes_per_sample = max(1, round(sum(
+            self._encoder(descriptor_set, tuple(name for name, _ in entries)).bytes_per_sample
+            / min(d for _, d in entries) for descriptor_set, entries in startup.items() if entries)))
 
     def _encoder(self, descriptor_set: int, names: tuple) -> MipEncoder:
         key = (descriptor_set, names)
@@ -283,8 +351,12 @@ class MipDevice(Device):
 
 
 attach_device("microstrain-mip", lambda rate_hz, **options: MipDevice(rate_hz, **options),
-              {"model_name": "device information: model name (default 3DM-GQ7)",
-               "model_number": "device information: model number", "serial_number": "device information",
+              {"model_name": "device information: model name (default the preset's, else 3DM-GQ7)",
+               "model_number": "device information: model number (default the preset's, else 6284-4220)",
+               "serial_number": "device information",
                "firmware_version": "device information: firmware version number (default 1100)",
-               "filter_state": f"filter status (0x82, 0x10) state (default {FILTER_STATE_FULL_NAV}: full navigation)"},
-              navigation=True)
+               "filter_family": "filter state codes: gq7 or gx5 (default: gx5 for a GX5 model name, else gq7)",
+               "filter_state": "a constant filter state (0x82, 0x10) instead of the one ins_mode gives",
+               "preset": "start-up streams a flight stack expects: " + "; ".join(
+                   f"{name}: {text}" for name, (_, text) in PRESETS.items())},
+              {name: (settings, text) for name, (settings, text) in PRESETS.items()}, navigation=True)

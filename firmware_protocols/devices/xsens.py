@@ -21,8 +21,10 @@ byte sum from FF through the checksum is 0.
   bits choose each real item's precision (float32, FP12.20, FP16.32, float64) and, on orientation and
   velocity items, the frame. A frequency of 0xFFFF (or 0) means "with every packet"; other items go out
   every round(sample rate / frequency) samples; a packet is sent at each sample where some item is due and
-  carries those items (plus the every-packet ones) in the configured order. UtcTime and GnssPvtData come
-  from the sample time and the truth (firmware_protocols.gnss_time; options num_sats, gnss_fix, leap_seconds).
+  carries those items (plus the every-packet ones) in the configured order. UtcTime comes from the sample
+  time, GnssPvtData from the GNSS receiver's solution in the samples (gnss_*; without one, the reported position
+  and velocity with the options num_sats, gnss_fix, leap_seconds: wire_formats.xsens.receiver_pvt).
+  MagneticField and BaroPressure carry the samples' mag (over mag_reference_gauss) and pressure_pa.
   Items the emulator cannot produce (any XDI it does not know) are acknowledged but left out, and a note says
   which, so nothing is dropped silently. A malformed configuration (odd length) is XRV_INVALIDPARAM.
 - SetAlignmentRotation (0xEC: frame byte 0 sensor / 1 local, then a float32 quaternion w, x, y, z) is

@@ -49,6 +49,7 @@ Items, units on the wire, source in `Samples`:
 | magnetic_field     | 0xC020 | 3 reals, arbitrary units           | mag / mag_reference_gauss    |
 | temperature        | 0x0810 | 1 real, deg C                      | temperature_c (default 25)   |
 | status_word        | 0xE020 | u32                                | the `status_word` option     |
+| gnss_pvt_data      | 0x7010 | XsRawGnssPvtData, 94 bytes         | gnss_* (receiver_pvt)        |
 | lat_lon            | 0x5040 | 2 reals, degrees                   | position_llh[0:2] (default   |
 |                    |        |                                    | origin, see Samples)         |
 | altitude_ellipsoid | 0x5020 | 1 real, m above WGS-84             | position_llh[2]              |
@@ -176,6 +177,37 @@ _DEFAULTS = {"quat": (1.0, 0.0, 0.0, 0.0), "euler": (0.0, 0.0, 0.0), "pressure_p
 
 
 
+_RECEIVER_FIELDS = ("gnss_llh", "gnss_velocity_ned", "gnss_fix", "gnss_satellites", "gnss_hdop", "gnss_vdop",
+                    "gnss_horizontal_accuracy_m", "gnss_vertical_accuracy_m", "gnss_speed_accuracy_mps")
+
+
+def receiver_pvt(samples: Samples, settings: dict) -> np.ndarray:
+    """(n, 35) GnssPvtData rows: the GNSS receiver's solution (Samples.gnss_*) where the block carries it, else the
+    position and velocity the unit reports (position_llh, velocity_ned, or the default origin at rest) with the
+    `gnss` settings' figures. fixType is u-blox's (0 none, 2 2D, 3 3D: Samples.gnss_fix's own numbering); flags
+    bit 0 gnssFixOK is set with a fix. With hDOP and vDOP given, pDOP^2 = h^2 + v^2, north and east take
+    h / sqrt 2 each and gDOP^2 = p^2 + t^2 with the settings' tDOP, so the seven stay consistent."""
+    samples.require_finite(("position_llh", "velocity_ned") + _RECEIVER_FIELDS)
+    llh = samples.gnss_llh if samples.gnss_llh is not None else samples.field_or("position_llh",
+                                                                                  _DEFAULTS["position_llh"])
+    velocity = (samples.gnss_velocity_ned if samples.gnss_velocity_ned is not None
+                else samples.field_or("velocity_ned", _DEFAULTS["velocity_ned"]))
+    rows = gnss_pvt_rows(samples.time_ns, llh, velocity, settings)
+    if samples.gnss_fix is not None:
+        rows[:, 10] = samples.gnss_fix
+        rows[:, 11] = (samples.gnss_fix >= 2).astype(np.float64)
+    for column, name, scale in ((12, "gnss_satellites", 1.0), (18, "gnss_horizontal_accuracy_m", 1e3),
+                                (19, "gnss_vertical_accuracy_m", 1e3), (25, "gnss_speed_accuracy_mps", 1e3)):
+        if getattr(samples, name) is not None:
+            rows[:, column] = getattr(samples, name) * scale
+    if samples.gnss_hdop is not None and samples.gnss_vdop is not None:
+        h, v, t = samples.gnss_hdop, samples.gnss_vdop, settings["dop_t"]
+        p = np.hypot(h, v)
+        rows[:, 28:35] = np.column_stack((np.hypot(p, t), p, np.full(len(h), t), v, h, h / math.sqrt(2),
+                                          h / math.sqrt(2))) * 100.0
+    return rows
+
+
 class XsensEncoder:
     """Samples -> MTData2 packets, one per sample. Stateful: the packet counter continues across calls."""
 
@@ -277,9 +309,7 @@ class XsensEncoder:
         if self._wants_utc:
             extra["utc"] = utc_rows(samples.time_ns, self.gnss)
         if self._wants_pvt:
-            samples.require_finite(["position_llh", "velocity_ned"])
-            extra["gnss_pvt"] = gnss_pvt_rows(samples.time_ns, samples.field_or("position_llh", _DEFAULTS["position_llh"]),
-                                              samples.field_or("velocity_ned", _DEFAULTS["velocity_ned"]), self.gnss)
+            extra["gnss_pvt"] = receiver_pvt(samples, self.gnss)
         batch = self._packer.pack(samples, self.saturated, self.packet_counter, extra)
         self.packet_counter = (self.packet_counter + len(samples)) & 0xFFFF
         return batch
