@@ -299,7 +299,7 @@ BAD = [
     (command("VNRRG"), "VNERR,05"),             # truncated: no register
     (command("VNWRG,75,3,4,01"), "VNERR,05"),   # fewer fields than groups
     (command("VNWRG,75,3,4,01,0721,0001"), "VNERR,06"),
-    (command("VNWRG,75,3,4,08,0001"), "VNERR,07"),    # GPS group UTC: no data for it
+    (command("VNWRG,75,3,4,10,0008"), "VNERR,07"),    # Attitude Dcm: no data for it
     (command("VNWRG,05,12345"), "VNERR,07"),
     (command("VNWRG,06,2"), "VNERR,07"),        # VNQTN: not produced
     (command("VNASY,2"), "VNERR,07"),

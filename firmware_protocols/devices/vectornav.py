@@ -94,10 +94,27 @@ class _Reject(Exception):
         self.code = code
 
 
+def imu_rate_hz(model: str) -> float:
+    """The IMU rate a binary output's rate divisor divides on this model: 400 Hz on a VN-300, 800 Hz on the
+    others (VN-100, VN-110, VN-200, VN-310), as their manuals and ArduPilot's AP_ExternalAHRS_VectorNav
+    (which writes 800 / rate or, for a VN-300, 400 / rate) assume."""
+    return 400.0 if str(model).startswith("VN-300") else 800.0
+
+
 class _BinaryOutput:
-    def __init__(self, mode: int = 0, divisor: int = 1, layout=None, encoding: dict | None = None):
-        self.mode, self.divisor, self.layout = mode, divisor, layout
+    """One binary output register. `every`: the samples between packets when fixed by the emulator's own start-up
+    configuration (every scene sample), else None: the divisor, scaled from the unit's IMU rate to the scene's."""
+
+    def __init__(self, mode: int = 0, divisor: int = 1, layout=None, encoding: dict | None = None,
+                 every: int | None = None):
+        self.mode, self.divisor, self.layout, self.every = mode, divisor, layout, every
         self.encoder = BinaryEncoder(layout, **(encoding or {})) if layout is not None else None
+
+    @property
+    def active(self) -> bool:
+        """Async mode 0 or rate divisor 0 turns the output off (vnproglib's ASYNCMODE_NONE; the ROS 2 driver's
+        `$VNWRG,76,0,0,0` for an unused output)."""
+        return bool(self.mode) and self.divisor > 0 and self.encoder is not None
 
     def register_text(self) -> str:
         if self.layout is None:
@@ -128,11 +145,14 @@ class VectorNavDevice(Device):
             settings = PRESETS[preset][0]
             outputs = settings["outputs"]
             base_rate_hz = settings.get("base_rate_hz", base_rate_hz) if base_rate_hz is None else base_rate_hz
+        every = None if preset is not None else 1      # the plain stream: every scene sample
         if not str(model).startswith("VN-"):
             raise ValueError(f"model: VectorNav model numbers begin 'VN-' (drivers check), got {model!r}")
         if baud not in BAUD_RATES:
             raise ValueError(f"baud: one of {', '.join(map(str, BAUD_RATES))}, got {baud}")
-        self.base_rate_hz = float(base_rate_hz or rate_hz)
+        if base_rate_hz is not None and not (isinstance(base_rate_hz, (int, float)) and 0 < base_rate_hz < 1e6):
+            raise ValueError(f"base_rate_hz: a rate in Hz > 0, got {base_rate_hz!r}")
+        self.base_rate_hz = float(base_rate_hz or imu_rate_hz(model))
         if checksum not in _CHECKSUM_CODE:
             raise ValueError(f"checksum: 'xor' or 'crc', got {checksum!r}")
         ints = dict(_INT_REGISTERS)
@@ -141,7 +161,7 @@ class VectorNavDevice(Device):
         factory = {"user_tag": "", "baud": baud, "ascii_type": ascii_type,
                    "ascii_rate": min(ASCII_RATES, key=lambda r: abs(r - rate_hz)) if ascii_type else 40,
                    "ints": ints,
-                   "binary": [(3, divisor, parse_fields(spec)) for spec, divisor in outputs]}
+                   "binary": [(3, divisor, parse_fields(spec), every) for spec, divisor in outputs]}
         self._factory = factory
         self._saved = factory
         self._ascii_encoders = {}
@@ -160,15 +180,15 @@ class VectorNavDevice(Device):
         self.user_tag, self.baud = settings["user_tag"], settings["baud"]
         self.ascii_type, self.ascii_rate = settings["ascii_type"], settings["ascii_rate"]
         self.ints = dict(settings["ints"])
-        self.binary = [_BinaryOutput(mode, divisor, layout, self._encoding)
-                       for mode, divisor, layout in settings["binary"]]
+        self.binary = [_BinaryOutput(mode, divisor, layout, self._encoding, every)
+                       for mode, divisor, layout, every in settings["binary"]]
         self.binary += [_BinaryOutput() for _ in range(3 - len(self.binary))]
         self._made += [o.encoder for o in self.binary if o.encoder is not None]
 
     def _snapshot(self) -> dict:
         return {"user_tag": self.user_tag, "baud": self.baud, "ascii_type": self.ascii_type,
                 "ascii_rate": self.ascii_rate, "ints": dict(self.ints),
-                "binary": [(o.mode, o.divisor, o.layout) for o in self.binary]}
+                "binary": [(o.mode, o.divisor, o.layout, o.every) for o in self.binary]}
 
     def _ascii_encoder(self):
         # Asynchronous sentences carry the checksum register 30's SerialChecksum field selects (2 = CRC-16).
@@ -177,8 +197,17 @@ class VectorNavDevice(Device):
             self._ascii_encoders[key] = AsciiEncoder(*key)
         return self._ascii_encoders[key]
 
-    def _samples_per(self, divisor: int) -> int:
-        return max(1, int(round(divisor * self.rate_hz / self.base_rate_hz)))
+    def _samples_per(self, output: _BinaryOutput) -> int:
+        if output.every is not None:
+            return output.every
+        return max(1, int(round(output.divisor * self.rate_hz / self.base_rate_hz)))
+
+    def _note_rate(self, register: int, output: _BinaryOutput) -> None:
+        """Say so when a written output asks for more than the scene's samples give (nothing is invented)."""
+        if output.active and self.base_rate_hz / output.divisor > self.rate_hz * 1.001:
+            self.notes.append(f"VectorNav register {register}: {self.base_rate_hz:g} / {output.divisor} = "
+                              f"{self.base_rate_hz / output.divisor:g} Hz asked, the scene's {self.rate_hz:g} Hz "
+                              "samples give every sample instead")
 
     def encoders(self):
         # every encoder ever made, so replaced outputs' saturation counts stay in the total
@@ -194,7 +223,7 @@ class VectorNavDevice(Device):
         parts = []
         one = None
         for out in self.binary:
-            if out.mode and out.encoder is not None and tick % self._samples_per(out.divisor) == 0:
+            if out.active and tick % self._samples_per(out) == 0:
                 one = one or self.increments.attach(single(samples, i))
                 parts.append(out.encoder.encode(one).data)
                 self.increments.sent(out.encoder)
@@ -376,13 +405,14 @@ class VectorNavDevice(Device):
             self.binary[register - 75] = output = self._binary_output(values, self._encoding)
             if output.encoder is not None:
                 self._made.append(output.encoder)
+            self._note_rate(register, output)
 
     @staticmethod
     def _binary_output(values: list, encoding: dict) -> _BinaryOutput:
         _count(values, 3, 3 + 7)
         mode, divisor = _integer(values[0]), _integer(values[1])
         groups = _hex(values[2])
-        if not 0 <= mode <= 3 or not 1 <= divisor <= 65535 or not 0 <= groups <= 0x7F:
+        if not 0 <= mode <= 3 or not 0 <= divisor <= 65535 or not 0 <= groups <= 0x7F:
             raise _Reject(ERR_PARAMETER)
         bits = [b for b in range(8) if groups >> b & 1]
         _count(values[3:], len(bits), len(bits))

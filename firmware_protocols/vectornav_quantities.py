@@ -1,0 +1,168 @@
+"""The quantities VectorNav's binary output carries that no Samples field holds as such, computed from the ones
+it does (firmware_protocols.wire_formats.vectornav_binary packs them): the INS estimate in ECEF and body axes,
+the attitude group's NED vectors, the uncertainties and status words, the GNSS receiver's solution, and the
+time fields.
+
+Each function takes a Samples block and returns an (n, width) array in VectorNav's units, or None when the
+samples lack what it needs, so the encoder falls back to its documented default (or a caller's constant).
+
+Frames (VectorNav ICD, as the wire format states): vectors in the part's body axes forward-right-down; quat
+rotates body -> NED (Samples' own convention, so nothing converts); ECEF from WGS-84 geodetic position in closed
+form. Times: GPS time = time_ns + the GPS week offset (vectornav_binary's convention), UTC = GPS time - leap
+seconds (firmware_protocols.gnss_time's 18 s), the receiver's PPS edges and the SyncIn input on whole GPS
+seconds (the SyncIn pin modelled as wired to the receiver's PPS, the usual installation).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from firmware_protocols.gnss_time import GNSS_DEFAULTS, GPS_EPOCH_UNIX_S, _calendar, dops
+
+WGS84_A = 6378137.0
+WGS84_F = 1.0 / 298.257223563
+WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
+DEG = 180.0 / np.pi
+SECOND_NS = 1_000_000_000
+LEAP_SECONDS = GNSS_DEFAULTS["leap_seconds"]
+
+
+def rotation_matrices(quat: np.ndarray) -> np.ndarray:
+    """(n, 4) scalar-first unit quaternions body -> NED -> (n, 3, 3) matrices R with v_ned = R v_body."""
+    q = np.asarray(quat, dtype=np.float64)
+    w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
+    return np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+                     2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+                     2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=1).reshape(-1, 3, 3)
+
+
+def ecef_from_ned_matrices(position_llh: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) matrices whose columns are north, east, down in ECEF at each latitude, longitude (deg)."""
+    lat, lon = np.radians(position_llh[:, 0]), np.radians(position_llh[:, 1])
+    sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
+    zero = np.zeros_like(lat)
+    return np.stack([-sl * co, -so, -cl * co,
+                     -sl * so, co, -cl * so,
+                     cl, zero, -sl], axis=1).reshape(-1, 3, 3)
+
+
+def ecef_position(position_llh: np.ndarray) -> np.ndarray:
+    """(n, 3) WGS-84 geodetic latitude, longitude (deg), ellipsoidal height (m) -> ECEF x, y, z (m)."""
+    lat, lon, h = np.radians(position_llh[:, 0]), np.radians(position_llh[:, 1]), position_llh[:, 2]
+    n = WGS84_A / np.sqrt(1.0 - WGS84_E2 * np.sin(lat) ** 2)
+    return np.stack([(n + h) * np.cos(lat) * np.cos(lon), (n + h) * np.cos(lat) * np.sin(lon),
+                     (n * (1.0 - WGS84_E2) + h) * np.sin(lat)], axis=1)
+
+
+def _apply(matrices: np.ndarray, vectors: np.ndarray, transpose: bool = False) -> np.ndarray:
+    return np.einsum("nji,nj->ni" if transpose else "nij,nj->ni", matrices, vectors)
+
+
+def gps_time_ns(time_ns: np.ndarray, gps_offset_ns: int) -> np.ndarray:
+    return np.asarray(time_ns, dtype=np.int64) + np.int64(gps_offset_ns)
+
+
+def utc_fields(time_ns: np.ndarray, gps_offset_ns: int) -> np.ndarray:
+    """(n, 7) VectorNav TimeUtc: year - 2000 (int8), month, day, hour, minute, second, millisecond."""
+    unix_ns = gps_time_ns(time_ns, gps_offset_ns) + (GPS_EPOCH_UNIX_S - LEAP_SECONDS) * SECOND_NS
+    year, month, day, hour, minute, second, nano = _calendar(unix_ns)
+    return np.column_stack((year - 2000, month, day, hour, minute, second, nano // 1_000_000)).astype(np.float64)
+
+
+def since_pps(time_ns: np.ndarray, gps_offset_ns: int) -> np.ndarray:
+    """(n, 1) ns since the last PPS edge (whole GPS seconds): TimeGpsPps, and TimeSyncIn (SyncIn on the PPS)."""
+    return (gps_time_ns(time_ns, gps_offset_ns) % SECOND_NS).astype(np.float64).reshape(-1, 1)
+
+
+def sync_in_count(time_ns: np.ndarray) -> np.ndarray:
+    """(n, 1) SyncIn edges since start-up: the whole seconds elapsed on the sample clock (u32 on the wire;
+    the PPS edges fall on whole seconds of time_ns too, since the GPS offset is whole weeks)."""
+    return (np.maximum(np.asarray(time_ns, dtype=np.int64), 0) // SECOND_NS).astype(np.float64).reshape(-1, 1)
+
+
+def ins_status(samples, fix_default: float) -> np.ndarray | None:
+    """(n, 1) InsStatus: bits 0-1 the filter mode (Samples.ins_mode: 0 not tracking, 1 aligning, 2 tracking),
+    bit 2 GNSS fix (a 3D fix). None when the samples carry neither (the encoder's default 0x0006)."""
+    if samples.ins_mode is None and samples.gnss_fix is None:
+        return None
+    mode = samples.field_or("ins_mode", 2.0)
+    fix = samples.field_or("gnss_fix", fix_default)
+    return (np.clip(np.rint(mode), 0, 3) + 4.0 * (fix >= 3)).reshape(-1, 1)
+
+
+def gnss_dops(samples) -> np.ndarray | None:
+    """(n, 7) g, p, t, v, h, n, e from the receiver's HDOP / VDOP (north = east = HDOP / sqrt 2, the time
+    part the default's), so the seven stay consistent; None when the samples carry neither."""
+    if samples.gnss_hdop is None and samples.gnss_vdop is None:
+        return None
+    d = GNSS_DEFAULTS
+    h = samples.field_or("gnss_hdop", float(np.hypot(d["dop_n"], d["dop_e"])))
+    v = samples.field_or("gnss_vdop", float(d["dop_v"]))
+    t = np.full_like(h, float(d["dop_t"]))
+    p = np.hypot(h, v)
+    return np.column_stack((np.hypot(p, t), p, t, v, h, h / np.sqrt(2.0), h / np.sqrt(2.0)))
+
+
+def sigma_norm(values: np.ndarray | None) -> np.ndarray | None:
+    """(n, 1) the 3-D 1-sigma (root sum of squares of north, east, down): VectorNav's scalar PosU / VelU."""
+    return None if values is None else np.sqrt(np.sum(values ** 2, axis=1, keepdims=True))
+
+
+def ypr_uncertainty(samples) -> np.ndarray | None:
+    """(n, 3) YprU: yaw, pitch, roll 1-sigma in degrees from Samples.attitude_sigma_rad (roll, pitch, yaw)."""
+    sigma = samples.attitude_sigma_rad
+    return None if sigma is None else sigma[:, ::-1] * DEG
+
+
+def gnss_position_uncertainty(samples) -> np.ndarray | None:
+    """(n, 3) GPS PosU north, east, down: the horizontal accuracy on both horizontal axes, the vertical down."""
+    if samples.gnss_horizontal_accuracy_m is None and samples.gnss_vertical_accuracy_m is None:
+        return None
+    h = samples.field_or("gnss_horizontal_accuracy_m", 1.0)
+    v = samples.field_or("gnss_vertical_accuracy_m", 1.5)
+    return np.column_stack((h, h, v))
+
+
+def rotated(samples, vector: str, default, to: str) -> np.ndarray:
+    """A body vector (`vector`, e.g. "accel") in NED (`to` "ned") or ECEF ("ecef"); or an NED vector in body
+    axes ("body"). The attitude and position are the samples' own, else the encoder's defaults (`default`:
+    name -> one row)."""
+    n = len(samples)
+    quat = samples.quat if samples.quat is not None else np.broadcast_to(default("quat"), (n, 4))
+    value = getattr(samples, vector)
+    value = np.broadcast_to(default(vector), (n, 3)) if value is None else value
+    r = rotation_matrices(quat)
+    if to == "body":
+        return _apply(r, value, transpose=True)
+    ned = _apply(r, value)
+    if to == "ned":
+        return ned
+    return ecef_vector(samples, ned, default)
+
+
+def ecef_vector(samples, ned: np.ndarray, default, position: str = "position_llh") -> np.ndarray:
+    n = len(samples)
+    llh = getattr(samples, position)
+    if llh is None and position != "position_llh":
+        llh = samples.position_llh
+    llh = np.broadcast_to(default("position_llh"), (n, 3)) if llh is None else llh
+    return _apply(ecef_from_ned_matrices(llh), ned)
+
+
+def position(samples, default, name: str = "position_llh") -> np.ndarray:
+    """(n, 3) the named position (gnss_llh falls back on the INS position_llh, then the default)."""
+    llh = getattr(samples, name)
+    if llh is None and name != "position_llh":
+        llh = samples.position_llh
+    return np.broadcast_to(default("position_llh"), (len(samples), 3)) if llh is None else llh
+
+
+def velocity(samples, default, name: str = "velocity_ned") -> np.ndarray:
+    vel = getattr(samples, name)
+    if vel is None and name != "velocity_ned":
+        vel = samples.velocity_ned
+    return np.broadcast_to(default("velocity_ned"), (len(samples), 3)) if vel is None else vel
+
+
+__all__ = ["dops", "rotation_matrices", "ecef_position", "ecef_from_ned_matrices", "utc_fields", "since_pps",
+           "sync_in_count", "ins_status", "gnss_dops", "sigma_norm", "ypr_uncertainty", "gnss_position_uncertainty",
+           "rotated", "ecef_vector", "position", "velocity"]
