@@ -57,13 +57,22 @@ def _apply(matrices: np.ndarray, vectors: np.ndarray, transpose: bool = False) -
     return np.einsum("nji,nj->ni" if transpose else "nij,nj->ni", matrices, vectors)
 
 
+INT64_MAX = np.iinfo(np.int64).max
+
+
 def gps_time_ns(time_ns: np.ndarray, gps_offset_ns: int) -> np.ndarray:
-    return np.asarray(time_ns, dtype=np.int64) + np.int64(gps_offset_ns)
+    """time_ns (negative: 0) + the GPS week offset, held at the int64 limit as the packing kernel's GPS time is
+    (the wire fields built from it then saturate, counted, instead of wrapping)."""
+    t = np.maximum(np.asarray(time_ns, dtype=np.int64), 0)
+    if gps_offset_ns >= INT64_MAX:
+        return np.full_like(t, INT64_MAX)
+    return np.minimum(t, INT64_MAX - gps_offset_ns) + np.int64(gps_offset_ns)
 
 
 def utc_fields(time_ns: np.ndarray, gps_offset_ns: int) -> np.ndarray:
     """(n, 7) VectorNav TimeUtc: year - 2000 (int8), month, day, hour, minute, second, millisecond."""
-    unix_ns = gps_time_ns(time_ns, gps_offset_ns) + (GPS_EPOCH_UNIX_S - LEAP_SECONDS) * SECOND_NS
+    shift = (GPS_EPOCH_UNIX_S - LEAP_SECONDS) * SECOND_NS
+    unix_ns = np.minimum(gps_time_ns(time_ns, gps_offset_ns), INT64_MAX - shift) + shift
     year, month, day, hour, minute, second, nano = _calendar(unix_ns)
     return np.column_stack((year - 2000, month, day, hour, minute, second, nano // 1_000_000)).astype(np.float64)
 

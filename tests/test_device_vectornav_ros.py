@@ -4,7 +4,6 @@ accepts it, then packets whose fields equal the scene's truth (float32 rounding)
 scene computed here, position from the scene's truth through pymap3d, ECEF and body quantities from the decoded
 position and attitude with pymap3d and scipy, times consistent with one another."""
 import datetime
-import struct
 
 import numpy as np
 import pymap3d

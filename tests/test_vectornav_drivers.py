@@ -225,7 +225,8 @@ def test_ros2_node_configures_every_output_turns_two_off_and_every_field_equals_
 
 def test_gnss_group_reports_the_receiver_not_the_ins():
     """GPS PosLla / VelNed / PosEcef / VelEcef / NumSats / VelU come from Samples.gnss_*, ECEF via pymap3d."""
-    device = VectorNavDevice(RATE, model="VN-300-CR", fields="gps:numsats,poslla,posecef,velned,velecef,velu,timeinfo")
+    device = VectorNavDevice(RATE, model="VN-300-CR",
+                             fields="gps:numsats,poslla,posecef,velned,velecef,velu,timeinfo")
     samples = truth(40)
     header = bytes([0x08]) + struct.pack("<H", 0x1000 | 0x0400 | 0x01E8)
     v = np.array(split(stream(device, samples), header, "<B3d3d3f3ffBb"), dtype=np.float64)
@@ -246,11 +247,10 @@ def test_ardupilot_rates_come_right_from_the_model_alone():
     for model, imu_rate in (("VN-100T-CR", 800), ("VN-300-CR", 400)):
         for scene_rate in (200.0, 400.0, 1000.0):
             device = VectorNavDevice(scene_rate, model=model)
+            echoed = [f"VNWRG,75,3,{imu_rate // 50},01,0721", f"VNWRG,76,3,{imu_rate // 50},11,0001,0106"]
             replay(device, [("VNASY,0", "VNASY,0"), ("VNWRG,06,0,1", "VNWRG,06,0,1"),
-                            ("VNWRG,06,0,2", "VNWRG,06,0,2"), ("VNRRG,01", f"VNRRG,01,{model}"),
-                            (f"VNWRG,75,3,{imu_rate // 50},01,0721", f"VNWRG,75,3,{imu_rate // 50},01,0721"),
-                            (f"VNWRG,76,3,{imu_rate // 50},11,0001,0106", f"VNWRG,76,3,{imu_rate // 50},11,0001,0106"),
-                            ("VNASY,1", "VNASY,1")])
+                            ("VNWRG,06,0,2", "VNWRG,06,0,2"), ("VNRRG,01", f"VNRRG,01,{model}")]
+                   + [(body, body) for body in echoed] + [("VNASY,1", "VNASY,1")])
             n = int(scene_rate)
             samples = Samples(np.arange(n, dtype=np.int64) * int(round(1e9 / scene_rate)), np.zeros((n, 3)),
                               np.zeros((n, 3)))
@@ -283,3 +283,43 @@ def test_ins_status_follows_the_filter_mode_and_the_fix(fields):
     header = bytes([0x01 if fields.startswith("common") else 0x20]) + struct.pack("<H", 0x1000 if "common" in fields
                                                                                  else 0x0001)
     assert [r[0] for r in split(stream(device, samples), header, "<H")] == [0x0000, 0x0001, 0x0006, 0x0002]
+
+
+def test_attitude_and_ins_vectors_in_ned_ecef_and_body_axes():
+    """Attitude MagNed, AccelNed, LinearAccelBody and INS MagEcef, LinearAccelEcef (the remaining rotated
+    quantities) against scipy's Rotation and pymap3d; defaults apply for a block without the fields."""
+    samples = truth(30)
+    n = len(samples)
+    samples.linear_accel_ned = np.random.default_rng(3).normal(0, 2, (n, 3))
+    spec = "attitude:magned,accelned,linearaccelbody;ins:magecef,linearaccelecef"
+    header = bytes([0x30]) + struct.pack("<2H", 0x0070, 0x0140)
+    v = np.array(split(stream(VectorNavDevice(RATE, fields=spec), samples), header, "<15f"), dtype=np.float64)
+    r, llh = rotation(samples, np.arange(n)), samples.position_llh
+    np.testing.assert_allclose(v[:, 0:3], r.apply(samples.mag), rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(v[:, 3:6], r.apply(samples.accel), rtol=1e-6, atol=1e-5)
+    np.testing.assert_allclose(v[:, 6:9], r.inv().apply(samples.linear_accel_ned), rtol=1e-6, atol=1e-5)
+    np.testing.assert_allclose(v[:, 9:12], ecef_vector(r.apply(samples.mag), llh), rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(v[:, 12:15], ecef_vector(samples.linear_accel_ned, llh), rtol=1e-6, atol=1e-5)
+    # nothing but accel and gyro: identity attitude, zero field and linear acceleration, PX4's home
+    bare = Samples([0], [[1.0, 2.0, -9.0]], [[0.0, 0.0, 0.0]])
+    (row,) = split(stream(VectorNavDevice(RATE, fields=spec), bare), header, "<15f")
+    home = np.array([[47.397742, 8.545594, 488.0]])
+    np.testing.assert_allclose(row[3:6], [1.0, 2.0, -9.0], rtol=1e-7)
+    assert row[0:3] == row[6:9] == row[9:12] == row[12:15] == (0.0, 0.0, 0.0)
+    assert np.isfinite(home).all()
+
+
+def test_integer_time_fields_saturate_and_count_and_status_follows_the_fix():
+    """TimeUtc's int8 year beyond 2127 and SyncInCnt beyond 2^32 seconds saturate (counted per wire field);
+    TimeStatus and GPS TimeInfo say 0 without any fix."""
+    from firmware_protocols.wire_formats.vectornav_binary import BinaryDecoder, BinaryEncoder
+    from firmware_protocols.wire_formats.vectornav_binary import MAX_GPS_WEEK
+    with pytest.raises(ValueError, match="gps_week_offset"):
+        BinaryEncoder("time:timeutc", gps_week_offset=MAX_GPS_WEEK + 1)      # past int64 nanoseconds
+    encoder = BinaryEncoder("time:timeutc,syncincnt,timestatus;gps:timeinfo", gps_week_offset=MAX_GPS_WEEK)
+    later = int(2**32 + 5) * 10**9
+    fields = BinaryDecoder().feed(encoder.encode(Samples([later], [[0, 0, 0]], [[0, 0, 0]], gnss_fix=[0])).data)
+    f = fields[0].fields
+    assert f["time.timeutc.year"] == 127 and f["time.syncincnt"] == 2**32 - 1
+    assert f["time.timestatus"] == 0 and f["gps.timeinfo.status"] == 0 and f["gps.timeinfo.leapseconds"] == 18
+    assert encoder.saturated.counts == {"time.timeutc": 1, "time.syncincnt": 1}

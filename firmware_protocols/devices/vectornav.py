@@ -28,14 +28,20 @@ allows), both with an optional serial port argument; 30 communication protocol c
 NED re-expresses DeltaTheta/DeltaVel in NED before summing, see _integration_frame): stored and read
 back, and register 30's SerialChecksum field (1 8-bit, 2 CRC-16; the `checksum` option sets it at start) picks the checksum of the
 asynchronous ASCII sentences (replies always use the command's kind); 75-77 binary outputs 1-3:
-`asyncMode, rateDivisor, outputGroup (hex), groupField (hex) per set group bit`. A binary output is sent at
-sample rate * rateDivisor^-1 scaled by base_rate_hz (the IMU rate the divisor divides: default the scene's
-rate; ArduPilot writes 800/rate for a VN-100, so set base_rate_hz=800 there), asyncMode 0 turns it off. All
-outputs count samples from one counter, so outputs with related divisors fall on the same samples as on the
-device. Fields the emulator has no data for (GPS UTC, ECEF quantities, ...) are error 7, never a packet
-with invented layout. The GPS groups (VN-200/300) carry the truth position and velocity, the configured
-satellite count, fix and uncertainties, and GPS time = sample time + `gps_week_offset` weeks: ArduPilot's
-VN-300 sequence (`$VNWRG,77,3,80,49,0003,26B8,0018`) gets its GNSS packet.
+`asyncMode, rateDivisor, outputGroup (hex), groupField (hex) per set group bit`. A written binary output is sent
+at base_rate_hz / rateDivisor, base_rate_hz being the model's IMU rate (VN-300 400 Hz, every other model 800 Hz,
+as the manuals and ArduPilot's 800 / rate and 400 / rate divisors have it; the `base_rate_hz` option replaces it),
+on every round(rateDivisor * scene rate / base_rate_hz)-th scene sample; a rate above the scene's gives every
+sample and a note says so. asyncMode 0 or rateDivisor 0 turns it off (the ROS 2 node's `$VNWRG,76,0,0,0`). The
+emulator's own start-up output (the `fields` option) goes out every scene sample. All outputs count samples
+from one counter, so outputs with related divisors fall on the same samples as on the device. Every field the
+ROS 1 / ROS 2 nodes and ArduPilot / PX4 ask for is produced (wire_formats.vectornav_binary lists what each
+carries); the ones the emulator has no data for (Attitude Dcm, IMU Raw) are error 7, never a packet with
+invented layout. The GPS groups (VN-200/300) carry the GNSS receiver's solution (Samples.gnss_*, else the INS
+estimate and the configured satellite count, fix and uncertainties), GPS time = sample time + `gps_week_offset`
+weeks: ArduPilot's VN-300 sequence (`$VNWRG,77,3,80,49,0003,26B8,0018`) gets its GNSS packet. Registers the
+ROS 2 node reads on a VN-200/300 after configuring (55 GPS configuration, 57 antenna offset, 93 compass
+baseline) are error 8; the node catches that and goes on.
 
 Errors (`$VNERR,<2 digits>`): 03 bad checksum (or none), 04 unknown command, 05 / 06 too few / too many
 parameters, 07 invalid parameter, 08 invalid register (unknown, or read-only on write). Input that is not a
@@ -452,7 +458,8 @@ def _hex(text: str) -> int:
 _OPTIONS = {
     "model": f"register 1, the model number (default {DEFAULT_MODEL}; ArduPilot picks AHRS or INS by it)",
     "preset": "named output set: " + "; ".join(f"{k}: {v[1]}" for k, v in PRESETS.items()),
-    "base_rate_hz": "the IMU rate that binary-output rate divisors divide (default: the scene's rate)",
+    "base_rate_hz": "the IMU rate that binary-output rate divisors divide (default: the model's, VN-300 400 Hz, "
+                    "others 800 Hz)",
     "serial_number": "register 3 (default 100012345)",
     "firmware": "register 4 (default 2.1.0.0)",
     "hardware_revision": "register 2 (default 2)",

@@ -30,18 +30,42 @@ What the encoder can fill, wire units, and the Samples field each comes from:
     Common.DeltaTheta  IMU.DeltaTheta + IMU.DeltaVel
     TimeGps         u64 ns          time_ns + gps_week_offset weeks (GPS time); Time.GpsTow u64 ns and
                                     Time/GPS Week u16 split it
-    GPS, GPS2       NumSats u8, Fix u8, PosLla 3 x f64, VelNed 3 x f32, PosU 3 x f32 (N, E, D m),
-                    VelU f32, Dop 7 x f32: position_llh / velocity_ned (the truth) and GNSS_CONSTANTS
+    TimeUtc, GPS Utc  i8 year-2000, u8 month, day, hour, minute, second, u16 ms: GPS time - 18 leap seconds
+    TimeGpsPps,     u64 ns          ns since the last PPS edge, on whole GPS seconds; the SyncIn pin is taken as
+    TimeSyncIn                      wired to the PPS, so TimeSyncIn is the same and
+    SyncInCnt       u32             counts the edges since start-up (whole seconds of time_ns); SyncOutCnt 0
+    TimeStatus, GPS TimeInfo  u8 7 (time of week, week, UTC valid; 0 without any fix) [+ i8 leap seconds 18]
+    Common.Position = INS.PosLla  3 x f64 deg, deg, m    position_llh (the INS estimate)   default PX4's home
+    Common.Velocity = INS.VelNed  3 x f32 m/s            velocity_ned                     default 0
+    InsStatus       u16             bits 0-1 ins_mode (0 not tracking, 1 aligning, 2 tracking), bit 2 a 3D GNSS fix
+                                    (gnss_fix >= 3)                                    default 0x0006
+    INS.PosEcef     3 x f64 m       position_llh in WGS-84 ECEF (closed form)
+    INS.VelEcef, VelBody  3 x f32   velocity_ned in ECEF / in body axes (quat)
+    INS.AccelEcef, MagEcef  3 x f32 accel (specific force, "with gravity") / mag rotated body -> NED -> ECEF
+    INS.LinearAccelEcef  3 x f32    linear_accel_ned in ECEF; Attitude.LinearAccelBody: in body axes
+    Attitude.AccelNed, MagNed  3 x f32  accel / mag rotated into NED
+    YprU            3 x f32 deg     attitude_sigma_rad reordered yaw, pitch, roll      default 1, 0.5, 0.5
+    INS.PosU, VelU  f32 m, m/s      the root sum of squares of position_sigma_m / velocity_sigma_mps  default 1, 0.05
+    GPS, GPS2       the receiver: NumSats u8 gnss_satellites, Fix u8 gnss_fix, PosLla 3 x f64 gnss_llh, PosEcef,
+                    VelNed 3 x f32 gnss_velocity_ned, VelEcef, PosU 3 x f32 (N, E = gnss_horizontal_accuracy_m,
+                    D = gnss_vertical_accuracy_m), VelU f32 gnss_speed_accuracy_mps, TimeU f32 s, Dop 7 x f32 (g, p,
+                    t, v, h, n, e from gnss_hdop / gnss_vdop); without gnss_* the INS estimate and GNSS_CONSTANTS
                     (BinaryEncoder(constants=...), defaults in _DEFAULTS)
+    ImuStatus, SensSat  u16 0       (reserved; no sensor saturated: saturation is counted at the wire instead)
+
+Frames: vectors in Samples are the part's body axes forward-right-down and quat rotates them to NED, which is
+VectorNav's own convention, so they go out unconverted; the derived quantities: firmware_protocols.
+vectornav_quantities. A quantity the samples do not carry uses the documented default (or the caller's
+constant), never a failure.
 
 A real unit resets its integrals at each output, so with an output divider its increments span several IMU
 samples; the encoder sends what it is given, one sample's increments per packet.
 
 The emulator has one accel/gyro/mag measurement, so the "uncompensated" fields carry the same values
-as the compensated ones. Every f32 saturates at +-float32 max (counted per wire field in
-`encoder.saturated`, e.g. "imu.accel"); non-finite input raises EncodeError naming field and sample.
-Fields the table knows but the emulator has no data for (Position, Dcm, GPS UTC, ...) can be
-decoded (as raw bytes) but not selected for encoding.
+as the compensated ones. Every f32 saturates at +-float32 max, every integer at its range (counted per wire
+field in `encoder.saturated`, e.g. "imu.accel"); non-finite input raises EncodeError naming field and sample.
+Fields the table knows but the emulator has no data for (Attitude Dcm, IMU Raw) can be decoded (as raw bytes)
+but not selected for encoding.
 """
 from __future__ import annotations
 
@@ -88,6 +112,8 @@ _WIRE_CODE = {"f": 0, "Q": 1, "d": 2, "H": 3, "B": 4}
 _VALUE_CODE = {"f": 0, "d": 2, "H": 3, "B": 4, "I": 8, "Q": 9, "b": 10}
 _TIME_CODE = {"startup": 1, "gps": 7, "tow": 5, "week": 6}
 WEEK_NS = 7 * 86400 * 1_000_000_000
+#: the last GPS week whose start fits the int64 nanoseconds the GPS time is computed in (year 2272)
+MAX_GPS_WEEK = (2**63 - 1) // WEEK_NS
 
 
 # Documented defaults for the navigation and status quantities (one row, broadcast), after those of Samples.
@@ -161,6 +187,8 @@ def _derived():
         "lin_accel_body": lambda s, e: vq.rotated(s, "linear_accel_ned", default(e), "body"),
         "utc": lambda s, e: vq.utc_fields(s.time_ns, e.gps_offset_ns),
         "time_status": lambda s, e: None if s.gnss_fix is None else 7.0 * (s.gnss_fix.reshape(-1, 1) >= 1),
+        "gnss_time_info": lambda s, e: None if s.gnss_fix is None else np.column_stack(
+            (7.0 * (s.gnss_fix >= 1), np.full(len(s), float(vectornav_quantities.LEAP_SECONDS)))),
         "since_pps": lambda s, e: vq.since_pps(s.time_ns, e.gps_offset_ns),
         "sync_in_count": lambda s, e: vq.sync_in_count(s.time_ns),
     }
@@ -293,7 +321,8 @@ _GROUP_TABLE = (
         ("TimeSyncIn", 8, _SINCE_PPS), ("TimeGpsPps", 8, _SINCE_PPS), ("TimeUtc", 8, _UTC),
         ("SyncInCnt", 4, _SYNC_IN_COUNT), ("SyncOutCnt", 4, _SYNC_OUT_COUNT), ("TimeStatus", 1, _TIME_STATUS)]),
     ("imu", 2, [
-        ("ImuStatus", 2, _ZERO_WORD), ("UncompMag", 12, _MAG), ("UncompAccel", 12, _ACCEL), ("UncompGyro", 12, _GYRO),
+        ("ImuStatus", 2, _ZERO_WORD), ("UncompMag", 12, _MAG), ("UncompAccel", 12, _ACCEL),
+        ("UncompGyro", 12, _GYRO),
         ("Temp", 4, _TEMP), ("Pres", 4, _PRES), ("DeltaTheta", 16, _DTHETA), ("DeltaVel", 12, _DVEL), ("Mag", 12, _MAG),
         ("Accel", 12, _ACCEL), ("AngularRate", 12, _GYRO), ("SensSat", 2, _ZERO_WORD), ("Raw", 40, ())]),
     ("gps", 3, _GPS_FIELDS),
@@ -419,7 +448,8 @@ def _pack(out, size, header, items, scales, time_ns, accel, gyro, mag, quat, eul
           gps_offset_ns):
     """Write len(time_ns) packets of `size` bytes into `out`. items[j] = (source id, column, wire type
     0 f32 / 1 u64 time / 2 f64 / 3 u16 / 4 u8 / 5 u64 GPS time of week / 6 u16 GPS week / 7 u64 GPS time /
-    8 u32 / 9 u64 / 10 i8, the last three from a value) in wire order. Returns the first sample with a non-finite value, or -1."""
+    8 u32 / 9 u64 / 10 i8, the last three from a value) in wire order. Returns the first sample with a
+    non-finite value, or -1."""
     scratch = np.empty(1, np.float32)
     bits = scratch.view(np.uint32)
     scratch64 = np.empty(1, np.float64)
@@ -558,8 +588,8 @@ class BinaryEncoder:
         self.sample_period_s = sample_period_s
         self._last_time_ns = None
         if isinstance(gps_week_offset, bool) or not isinstance(gps_week_offset, (int, np.integer)) \
-                or not 0 <= gps_week_offset <= 65535:
-            raise ValueError(f"gps_week_offset: a GPS week 0..65535, got {gps_week_offset!r}")
+                or not 0 <= gps_week_offset <= MAX_GPS_WEEK:
+            raise ValueError(f"gps_week_offset: a GPS week 0..{MAX_GPS_WEEK}, got {gps_week_offset!r}")
         self.gps_offset_ns = int(gps_week_offset) * WEEK_NS
         undecodable = [f.key for f in self.layout.fields if not f.quantities]
         if undecodable:
@@ -740,14 +770,15 @@ class BinaryDecoder:
 
 register(FormatInfo(
     name="vectornav-binary", kind="serial",
-    description="VectorNav binary output (0xFA, user-chosen groups/fields, CRC-16/XMODEM)",
+    description="VectorNav binary output (0xFA, user-chosen groups/fields, CRC-16/XMODEM; rate divisors divide the "
+                "model's IMU rate: VN-300 400 Hz, others 800 Hz)",
     encoder=BinaryEncoder, decoder=BinaryDecoder,
     bytes_per_sample=parse_fields(DEFAULT_FIELDS).packet_size,
     options={"fields": f"groups and fields, e.g. 'common:timestartup,accel;imu:uncompgyro' "
                        f"(default {DEFAULT_FIELDS!r}, PX4's binary output 1)",
              "sample_period_s": "DeltaTheta's dtime in s, > 0, when the samples carry none (None: time since the "
                                 "previous sample)",
-             "gps_week_offset": "GPS week added to time_ns for the GPS time fields, 0..65535",
+             "gps_week_offset": f"GPS week added to time_ns for the GPS time fields, 0..{MAX_GPS_WEEK}",
              "constants": "values for quantities no sample carries: " + ", ".join(_SETTABLE)
                           + " (e.g. {gnss_num_sats = 9})"},
 ))
