@@ -323,3 +323,55 @@ def test_integer_time_fields_saturate_and_count_and_status_follows_the_fix():
     assert f["time.timeutc.year"] == 127 and f["time.syncincnt"] == 2**32 - 1
     assert f["time.timestatus"] == 0 and f["gps.timeinfo.status"] == 0 and f["gps.timeinfo.leapseconds"] == 18
     assert encoder.saturated.counts == {"time.timeutc": 1, "time.syncincnt": 1}
+
+
+# PX4 src/drivers/ins/vectornav/VectorNav.cpp at 004d420324d12d4b2aeb42827c189fc4005dafee (vnproglib's C library,
+# async mode PORT2): output 1 TimeStartup + IMU UncompAccel|UncompGyro, divider 1; output 2 divider 8: TimeStartup;
+# IMU Temp, Pres, Mag; Attitude Quaternion, LinearAccelNed; INS InsStatus, PosLla, VelNed, PosU, VelU; output 3
+# divider 80: TimeStartup; GPS Utc, NumSats, Fix, PosLla, VelNed, PosU, VelU, Dop. Each parsed by
+# VnUartPacket_isCompatible (exact groups) and extracted in field order, as here.
+PX4_SEQUENCE = [("VNRRG,01", "VNRRG,01,VN-300-CR"), ("VNWRG,05,921600", "VNWRG,05,921600"),
+                ("VNRRG,01", "VNRRG,01,VN-300-CR"), ("VNRRG,02", "VNRRG,02,2"), ("VNRRG,03", "VNRRG,03,100012345"),
+                ("VNRRG,04", "VNRRG,04,2.1.0.0"), ("VNWRG,06,0", "VNWRG,06,0"), ("VNRRG,35", "VNRRG,35,1,1,1,1"),
+                ("VNWRG,35,1,0,1,1", "VNWRG,35,1,0,1,1"), ("VNRRG,35", "VNRRG,35,1,0,1,1"),
+                ("VNWRG,75,2,1,6,1,C", "VNWRG,75,2,1,6,1,C"), ("VNWRG,76,2,8,36,1,130,84,613",
+                                                               "VNWRG,76,2,8,36,1,130,84,613"),
+                ("VNWRG,77,2,80,A,1,26B9", "VNWRG,77,2,80,A,1,26B9")]
+
+
+def test_px4_configures_its_three_outputs_and_parses_them_to_the_truth():
+    device = VectorNavDevice(800.0, model="VN-300-CR", gps_week_offset=WEEK)
+    replay(device, PX4_SEQUENCE)
+    n = 1600
+    samples = truth(n)
+    samples.time_ns = np.arange(n, dtype=np.int64) * 1_250_000
+    samples.linear_accel_ned = np.random.default_rng(8).normal(0, 1, (n, 3))
+    data = stream(device, samples)
+    out1 = split(data, bytes([0x06]) + struct.pack("<2H", 0x0001, 0x000C), "<Q3f3f")
+    out2 = split(data, bytes([0x36]) + struct.pack("<4H", 0x0001, 0x0130, 0x0084, 0x0613), "<Qff3f4f3fH3d3fff")
+    out3 = split(data, bytes([0x0A]) + struct.pack("<2H", 0x0001, 0x26B9), "<QbBBBBBHBB3d3f3ff7f")
+    # a VN-300's 400 Hz IMU: / 1, / 8, / 80 = 400, 50 and 5 Hz, from an 800 Hz scene
+    assert (len(out1), len(out2), len(out3)) == (n // 2, n // 16, n // 160)
+    v1 = np.array(out1, dtype=np.float64)
+    k1 = (v1[:, 0] / 1_250_000).astype(int)
+    np.testing.assert_array_equal(v1[:, 1:4], f32(samples.accel[k1]))
+    np.testing.assert_array_equal(v1[:, 4:7], f32(samples.gyro[k1]))
+    v2 = np.array(out2, dtype=np.float64)
+    k2 = (v2[:, 0] / 1_250_000).astype(int)
+    np.testing.assert_array_equal(v2[:, 1], f32(samples.temperature_c[k2]))
+    np.testing.assert_array_equal(v2[:, 2] * 1000, f32(samples.pressure_pa[k2] / 1000) * 1000)   # kPa -> Pa
+    q = v2[:, 6:10]                                                     # x, y, z, w -> PX4's w, x, y, z
+    np.testing.assert_array_equal(np.column_stack((q[:, 3], q[:, :3])), f32(samples.quat[k2]))
+    np.testing.assert_array_equal(v2[:, 10:13], f32(samples.linear_accel_ned[k2]))
+    assert set(v2[:, 13].astype(int) & 0b11) == {0b10}                  # tracking: PX4 publishes the position
+    np.testing.assert_array_equal(v2[:, 14:17], samples.position_llh[k2])
+    v3 = np.array(out3, dtype=np.float64)
+    k3 = (v3[:, 0] / 1_250_000).astype(int)
+    assert set(v3[:, 8]) == {17} and set(v3[:, 9]) == {3}              # NumSats; Fix > 0: sensor_gps published
+    np.testing.assert_array_equal(v3[:, 10:13], samples.gnss_llh[k3])
+    np.testing.assert_array_equal(v3[:, 13:16], f32(samples.gnss_velocity_ned[k3]))
+    np.testing.assert_array_equal(v3[:, 16:19], f32(np.tile([0.8, 0.8, 1.3], (len(k3), 1))))
+    dop = v3[:, 20:27]                                                  # g, p, t, v, h, n, e: PX4 takes h, v
+    np.testing.assert_allclose(dop[:, 0] ** 2, dop[:, 1] ** 2 + dop[:, 2] ** 2, rtol=1e-5)
+    np.testing.assert_allclose(dop[:, 1] ** 2, dop[:, 3] ** 2 + dop[:, 4] ** 2, rtol=1e-5)
+    assert device.stats.errors == 0
