@@ -160,11 +160,10 @@ def sync_in_count(time_ns: np.ndarray) -> np.ndarray:
     return (np.maximum(np.asarray(time_ns, dtype=np.int64), 0) // SECOND_NS).astype(np.float64).reshape(-1, 1)
 
 
-def ins_status(samples, fix_default: float) -> np.ndarray | None:
-    """(n, 1) InsStatus: bits 0-1 the filter mode (Samples.ins_mode: 0 not tracking, 1 aligning, 2 tracking),
-    bit 2 GNSS fix (a 3D fix). None when the samples carry neither (the encoder's default 0x0006)."""
-    if samples.ins_mode is None and samples.gnss_fix is None:
-        return None
+def ins_status(samples, fix_default: float) -> np.ndarray:
+    """(n, 1) InsStatus: bits 0-1 the filter mode (Samples.ins_mode: 0 not tracking, 1 aligning, 2 tracking;
+    tracking when the samples carry none), bit 2 GNSS fix (a 3D fix; `fix_default` when the samples carry no
+    gnss_fix)."""
     mode = samples.field_or("ins_mode", 2.0)
     fix = samples.field_or("gnss_fix", fix_default)
     return (np.clip(np.rint(mode), 0, 3) + 4.0 * (fix >= 3)).reshape(-1, 1)
@@ -181,6 +180,11 @@ def gnss_dops(samples) -> np.ndarray | None:
     t = np.full_like(h, float(d["dop_t"]))
     p = np.hypot(h, v)
     return np.column_stack((np.hypot(p, t), p, t, v, h, h / np.sqrt(2.0), h / np.sqrt(2.0)))
+
+
+def time_valid(samples, fix_default: float) -> np.ndarray:
+    """(n,) 7 (time of week, week and UTC valid) while the receiver has any fix, else 0: TimeStatus, TimeInfo."""
+    return 7.0 * (samples.field_or("gnss_fix", fix_default) >= 1)
 
 
 def sigma_norm(values: np.ndarray | None) -> np.ndarray | None:
@@ -237,6 +241,6 @@ def velocity(samples, default, name: str = "velocity_ned") -> np.ndarray:
     return np.broadcast_to(default("velocity_ned"), (len(samples), 3)) if vel is None else vel
 
 
-__all__ = ["dops", "ecef_position", "ned_to_ecef", "rotate",
-           "utc_fields", "since_pps", "sync_in_count", "ins_status", "gnss_dops", "sigma_norm", "ypr_uncertainty",
-           "gnss_position_uncertainty", "rotated", "ecef_vector", "position", "velocity"]
+__all__ = ["dops", "ecef_position", "ned_to_ecef", "rotate", "utc_fields", "since_pps", "sync_in_count",
+           "ins_status", "time_valid", "gnss_dops", "sigma_norm", "ypr_uncertainty", "gnss_position_uncertainty",
+           "rotated", "ecef_vector", "position", "velocity"]

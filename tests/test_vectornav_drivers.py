@@ -283,6 +283,15 @@ def test_ins_status_follows_the_filter_mode_and_the_fix(fields):
     header = bytes([0x01 if fields.startswith("common") else 0x20]) + struct.pack("<H", 0x1000 if "common" in fields
                                                                                  else 0x0001)
     assert [r[0] for r in split(stream(device, samples), header, "<H")] == [0x0000, 0x0001, 0x0006, 0x0002]
+    # without either in the samples: tracking, and the fix the device's `gnss_fix` option states
+    bare = Samples(np.arange(2, dtype=np.int64), np.zeros((2, 3)), np.zeros((2, 3)))
+    assert [r[0] for r in split(stream(VectorNavDevice(RATE, fields=fields), bare), header, "<H")] == [6, 6]
+    lost = VectorNavDevice(RATE, fields=fields + ";time:timestatus", gnss_fix=0)
+    time_mask = struct.pack("<H", 0x0200)                                   # Time group (bit 1), TimeStatus
+    masks = header[1:3] + time_mask if fields.startswith("common") else time_mask + header[1:3]
+    fmt = "<HB" if fields.startswith("common") else "<BH"
+    rows = split(stream(lost, bare), bytes([header[0] | 0x02]) + masks, fmt)
+    assert sorted(map(sorted, rows)) == [[0, 2], [0, 2]]         # mode 2 without the fix bit; no fix, no valid time
 
 
 def test_attitude_and_ins_vectors_in_ned_ecef_and_body_axes():

@@ -137,11 +137,8 @@ _DEFAULTS = {
     "gnss_pos_u": (1.0, 1.0, 1.5),
     "gnss_vel_u": (0.05,),
     "gnss_dop": dops(GNSS_DEFAULTS["dop_n"], GNSS_DEFAULTS["dop_e"], GNSS_DEFAULTS["dop_v"], GNSS_DEFAULTS["dop_t"]),
-    # GPS TimeU (s) and TimeInfo (status: time of week, week and UTC valid = 7; leap seconds)
+    # GPS TimeU (s); SyncOutCnt: the SyncOut pin is not configured (register 32)
     "gnss_time_u": (GNSS_DEFAULTS["t_acc_ns"] * 1e-9,),
-    "gnss_time_info": (7.0, float(GNSS_DEFAULTS["leap_seconds"])),
-    # Time TimeStatus (the same three validity bits); SyncOutCnt: the SyncOut pin is not configured (register 32)
-    "time_status": (7.0,),
     "sync_out_count": (0.0,),
     # IMU ImuStatus (reserved) and SensSat (no sensor saturated: saturation is counted at the wire instead)
     "zero_word": (0.0,),
@@ -164,7 +161,9 @@ def _derived():
         "ypr_u": lambda s, e: vq.ypr_uncertainty(s),
         "pos_u": lambda s, e: vq.sigma_norm(s.position_sigma_m),
         "vel_u": lambda s, e: vq.sigma_norm(s.velocity_sigma_mps),
-        "ins_status": lambda s, e: vq.ins_status(s, fix_default(e)),
+        # a caller's ins_status constant stands while the samples carry neither mode nor fix
+        "ins_status": lambda s, e: None if ("ins_status" in e._constants and s.ins_mode is None
+                                            and s.gnss_fix is None) else vq.ins_status(s, fix_default(e)),
         "gnss_num_sats": lambda s, e: s.gnss_satellites,
         "gnss_pos_u": lambda s, e: vq.gnss_position_uncertainty(s),
         "gnss_vel_u": lambda s, e: s.gnss_speed_accuracy_mps,
@@ -186,9 +185,9 @@ def _derived():
             else np.broadcast_to(e._defaults["linear_accel_ned"], (len(s), 3)), default(e)),
         "lin_accel_body": lambda s, e: vq.rotated(s, "linear_accel_ned", default(e), "body"),
         "utc": lambda s, e: vq.utc_fields(s.time_ns, e.gps_offset_ns),
-        "time_status": lambda s, e: None if s.gnss_fix is None else 7.0 * (s.gnss_fix.reshape(-1, 1) >= 1),
-        "gnss_time_info": lambda s, e: None if s.gnss_fix is None else np.column_stack(
-            (7.0 * (s.gnss_fix >= 1), np.full(len(s), float(vectornav_quantities.LEAP_SECONDS)))),
+        "time_status": lambda s, e: vq.time_valid(s, fix_default(e)).reshape(-1, 1),
+        "gnss_time_info": lambda s, e: np.column_stack(
+            (vq.time_valid(s, fix_default(e)), np.full(len(s), float(vectornav_quantities.LEAP_SECONDS)))),
         "since_pps": lambda s, e: vq.since_pps(s.time_ns, e.gps_offset_ns),
         "sync_in_count": lambda s, e: vq.sync_in_count(s.time_ns),
     }
@@ -619,6 +618,7 @@ class BinaryEncoder:
         self._defaults = {name: np.array([value], dtype=np.float64) for name, value in _DEFAULTS.items()}
         for name, value in (constants or {}).items():
             self._defaults[name] = _constant(name, value)
+        self._constants = frozenset(constants or ())
         self._unused = np.zeros((1, 4), dtype=np.float64)
         self._offsets = np.zeros(1, dtype=np.int64)   # reused while block sizes repeat (the live path)
 
