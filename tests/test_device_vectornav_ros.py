@@ -11,8 +11,8 @@ from scipy.spatial.transform import Rotation
 
 from test_device_vectornav import Driver
 from test_stream_support import Emulator, reference, write_scene
-from test_vectornav_drivers import (ROS1_HEADER, ROS1_STRUCT, ROS2_CONFIG, ROS2_HEADER, ROS2_STRUCT, ecef_vector,
-                                    identity, split)
+from test_vectornav_drivers import (ROS1_HEADER, ROS1_STRUCT, ROS2_CONFIG, ROS2_HEADER, ROS2_STRUCT,
+                                    ROS2_VN300_READS, ecef_vector, identity, split)
 
 WEEK = 2345
 WEEK_NS = 7 * 86400 * 10**9
@@ -76,7 +76,7 @@ def test_ros1_node_over_a_pty(tmp_path):
 def test_ros2_node_over_a_pty(tmp_path):
     model = "VN-300-CR"
     exchange = ([("VNRRG,01", f"VNRRG,01,{model}"), ("VNRRG,01", f"VNRRG,01,{model}")] + identity(model)
-                + [("VNRRG,00", "VNRRG,00,")] + ROS2_CONFIG)
+                + [("VNRRG,00", "VNRRG,00,")] + ROS2_CONFIG + ROS2_VN300_READS)
     scene_path, rate, after = run(tmp_path, model, exchange, seconds=2.5)
     start = after.find(b"\xfa" + ROS2_HEADER)
     rows = split(after[start:], ROS2_HEADER, ROS2_STRUCT)

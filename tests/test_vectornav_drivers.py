@@ -173,6 +173,11 @@ ROS2_CONFIG = [("VNWRG,06,0", "VNWRG,06,0"), ("VNWRG,07,20", "VNWRG,07,20"),
                ("VNWRG,30,0,0,0,0,1,0,1", "VNWRG,30,0,0,0,0,1,0,1"),
                ("VNWRG,75,3,40,29,7FFF,210,C", "VNWRG,75,3,40,29,7FFF,210,C"),
                ("VNWRG,76,0,0,0", "VNWRG,76,0,0,0"), ("VNWRG,77,0,0,0", "VNWRG,77,0,0,0")]
+# then, not a VN-100 (determineDeviceFamily reads register 1 each time): GNSS configuration and antenna offset,
+# and on a VN-300 the compass baseline (vnproglib genReadGpsConfiguration / AntennaOffset / CompassBaseline)
+ROS2_VN300_READS = [("VNRRG,01", "VNRRG,01,VN-300-CR"), ("VNRRG,55", "VNRRG,55,0,0,5,0,0"),
+                    ("VNRRG,57", "VNRRG,57,+0.000000,+0.000000,+0.000000"), ("VNRRG,01", "VNRRG,01,VN-300-CR"),
+                    ("VNRRG,93", "VNRRG,93,+1.000000,+0.000000,+0.000000,+0.025400,+0.025400,+0.025400")]
 
 
 def test_ros2_node_configures_every_output_turns_two_off_and_every_field_equals_the_truth():
@@ -180,7 +185,7 @@ def test_ros2_node_configures_every_output_turns_two_off_and_every_field_equals_
     device = VectorNavDevice(RATE, model=model, gps_week_offset=WEEK,
                              fields="common:timestartup;imu:accel", preset=None)
     replay(device, [("VNRRG,01", f"VNRRG,01,{model}"), ("VNRRG,01", f"VNRRG,01,{model}")] + identity(model)
-           + [("VNRRG,00", "VNRRG,00,")] + ROS2_CONFIG)
+           + [("VNRRG,00", "VNRRG,00,")] + ROS2_CONFIG + ROS2_VN300_READS)
     # the readback shows output 2 off (vnproglib parses "mode,divisor,groups")
     assert device.receive(command("VNRRG,76")) == [command("VNRRG,76,0,0,00")]
     samples = truth()
@@ -221,6 +226,18 @@ def test_ros2_node_configures_every_output_turns_two_off_and_every_field_equals_
     np.testing.assert_allclose(v[:, 50:53], rotation(samples, k).inv().apply(samples.velocity_ned[k]),
                                rtol=1e-6, atol=1e-5)
     assert device.stats.errors == 0
+
+
+def test_gnss_registers_exist_on_gnss_models_only_and_keep_what_is_written():
+    vn300, vn200, vn100 = (VectorNavDevice(RATE, model=m) for m in ("VN-300-CR", "VN-200T-CR", "VN-100T-CR"))
+    replay(vn300, [("VNWRG,57,0.1,-0.2,0.3", "VNWRG,57,0.1,-0.2,0.3"),
+                   ("VNRRG,57", "VNRRG,57,+0.100000,-0.200000,+0.300000"),
+                   ("VNWRG,55,0,0,5,0,0", "VNWRG,55,0,0,5,0,0")])
+    for bad, code in (("VNWRG,57,nan,0,0", "07"), ("VNWRG,57,1,2", "05"), ("VNWRG,93,1,0,0,1,1,1,1", "06")):
+        assert vn300.receive(command(bad)) == [command(f"VNERR,{code}")], bad
+    assert vn200.receive(command("VNRRG,55")) == [command("VNRRG,55,0,0,5,0,0")]
+    assert vn200.receive(command("VNRRG,93")) == [command("VNERR,08")]        # a compass baseline: VN-300 only
+    assert vn100.receive(command("VNRRG,57")) == [command("VNERR,08")]
 
 
 def test_gnss_group_reports_the_receiver_not_the_ins():

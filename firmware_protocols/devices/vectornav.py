@@ -39,9 +39,9 @@ ROS 1 / ROS 2 nodes and ArduPilot / PX4 ask for is produced (wire_formats.vector
 carries); the ones the emulator has no data for (Attitude Dcm, IMU Raw) are error 7, never a packet with
 invented layout. The GPS groups (VN-200/300) carry the GNSS receiver's solution (Samples.gnss_*, else the INS
 estimate and the configured satellite count, fix and uncertainties), GPS time = sample time + `gps_week_offset`
-weeks: ArduPilot's VN-300 sequence (`$VNWRG,77,3,80,49,0003,26B8,0018`) gets its GNSS packet. Registers the
-ROS 2 node reads on a VN-200/300 after configuring (55 GPS configuration, 57 antenna offset, 93 compass
-baseline) are error 8; the node catches that and goes on.
+weeks: ArduPilot's VN-300 sequence (`$VNWRG,77,3,80,49,0003,26B8,0018`) gets its GNSS packet. A VN-200/300 also
+has the GNSS registers the ROS 2 node reads after configuring: 55 GNSS configuration (5 integers), 57 antenna
+offset (3 reals) and, on a VN-300, 93 compass baseline (6 reals), stored and read back (a VN-1xx answers 8).
 
 Errors (`$VNERR,<2 digits>`): 03 bad checksum (or none), 04 unknown command, 05 / 06 too few / too many
 parameters, 07 invalid parameter, 08 invalid register (unknown, or read-only on write). Input that is not a
@@ -75,6 +75,13 @@ _INT_REGISTERS = {30: (0, 0, 0, 0, 1, 0, 1), 32: (3, 0, 0, 0, 0, 0, 0, 100000000
 # VnCompensationMode NONE 0 / BIAS 1): each field's allowed values.
 _DELTA_CONFIG_VALUES = (range(2), range(2), range(2), range(256), range(65536))
 INTEGRATION_NED = 1
+# The GNSS registers of a VN-200/VN-300 (none on a VN-1xx, whose reads are error 8), which the ROS 2 node reads
+# after configuring: 55 GNSS configuration (vnproglib `$VNWRG,55,%u,%u,5,0,0`: mode 0 internal receiver,
+# PPS source 0, rate 5 Hz, two reserved), 57 antenna A offset (3 floats, m, body axes) and, on a VN-300, 93
+# the compass baseline (position 3 floats m, uncertainty 3 floats m; the factory's 1 m forward, 0.0254 m).
+_GNSS_INT_REGISTERS = {55: (0, 0, 5, 0, 0)}
+_GNSS_FLOAT_REGISTERS = {57: (0.0, 0.0, 0.0)}
+_COMPASS_FLOAT_REGISTERS = {93: (1.0, 0.0, 0.0, 0.0254, 0.0254, 0.0254)}
 _MAX_LINE = 256
 _LINE_END = re.compile(rb"[\r\n$]")
 
@@ -162,11 +169,16 @@ class VectorNavDevice(Device):
         if checksum not in _CHECKSUM_CODE:
             raise ValueError(f"checksum: 'xor' or 'crc', got {checksum!r}")
         ints = dict(_INT_REGISTERS)
+        gnss = not str(model).startswith("VN-1")
+        if gnss:
+            ints.update(_GNSS_INT_REGISTERS)
+        floats = {**(_GNSS_FLOAT_REGISTERS if gnss else {}),
+                  **(_COMPASS_FLOAT_REGISTERS if str(model).startswith("VN-3") else {})}
         ints[30] = ints[30][:4] + (_CHECKSUM_CODE[checksum],) + ints[30][5:]
         self.fixed = {1: str(model), 2: str(int(hardware_revision)), 3: str(int(serial_number)), 4: str(firmware)}
         factory = {"user_tag": "", "baud": baud, "ascii_type": ascii_type,
                    "ascii_rate": min(ASCII_RATES, key=lambda r: abs(r - rate_hz)) if ascii_type else 40,
-                   "ints": ints,
+                   "ints": ints, "floats": floats,
                    "binary": [(3, divisor, parse_fields(spec), every) for spec, divisor in outputs]}
         self._factory = factory
         self._saved = factory
@@ -186,6 +198,7 @@ class VectorNavDevice(Device):
         self.user_tag, self.baud = settings["user_tag"], settings["baud"]
         self.ascii_type, self.ascii_rate = settings["ascii_type"], settings["ascii_rate"]
         self.ints = dict(settings["ints"])
+        self.floats = dict(settings["floats"])
         self.binary = [_BinaryOutput(mode, divisor, layout, self._encoding, every)
                        for mode, divisor, layout, every in settings["binary"]]
         self.binary += [_BinaryOutput() for _ in range(3 - len(self.binary))]
@@ -193,7 +206,7 @@ class VectorNavDevice(Device):
 
     def _snapshot(self) -> dict:
         return {"user_tag": self.user_tag, "baud": self.baud, "ascii_type": self.ascii_type,
-                "ascii_rate": self.ascii_rate, "ints": dict(self.ints),
+                "ascii_rate": self.ascii_rate, "ints": dict(self.ints), "floats": dict(self.floats),
                 "binary": [(o.mode, o.divisor, o.layout, o.every) for o in self.binary]}
 
     def _ascii_encoder(self):
@@ -368,12 +381,15 @@ class VectorNavDevice(Device):
             return str(self.ascii_rate)
         if register in self.ints:
             return ",".join(map(str, self.ints[register]))
+        if register in self.floats:
+            return ",".join(f"{v:+.6f}" for v in self.floats[register])
         if 75 <= register <= 77:
             return self.binary[register - 75].register_text()
         raise _Reject(ERR_REGISTER)
 
     def _write(self, register: int, values: list) -> None:
-        if register in self.fixed or not (register in (0, 5, 6, 7) or register in self.ints or 75 <= register <= 77):
+        if register in self.fixed or not (register in (0, 5, 6, 7) or register in self.ints or register in self.floats
+                                          or 75 <= register <= 77):
             raise _Reject(ERR_REGISTER)
         if register == 0:
             _count(values, 1, 1)
@@ -400,8 +416,12 @@ class VectorNavDevice(Device):
                 if value not in ASCII_RATES:
                     raise _Reject(ERR_PARAMETER)
                 self.ascii_rate = value
+        elif register in self.floats:
+            expected = len(self.floats[register])
+            _count(values, expected, expected)
+            self.floats[register] = tuple(_real(v) for v in values)
         elif register in self.ints:
-            expected = len(_INT_REGISTERS[register])
+            expected = len(self.ints[register])
             _count(values, expected, expected)
             numbers = tuple(_integer(v) for v in values)
             if register == 82 and any(v not in allowed for v, allowed in zip(numbers, _DELTA_CONFIG_VALUES)):
@@ -445,6 +465,16 @@ def _integer(text: str) -> int:
         value = int(text, 10)
     except ValueError:
         raise _Reject(ERR_PARAMETER) from None
+    return value
+
+
+def _real(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise _Reject(ERR_PARAMETER) from None
+    if not abs(value) < 1e6:            # nan, inf, and offsets no antenna has
+        raise _Reject(ERR_PARAMETER)
     return value
 
 
