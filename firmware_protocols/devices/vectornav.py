@@ -163,7 +163,8 @@ class VectorNavDevice(Device):
             raise ValueError(f"model: VectorNav model numbers begin 'VN-' (drivers check), got {model!r}")
         if baud not in BAUD_RATES:
             raise ValueError(f"baud: one of {', '.join(map(str, BAUD_RATES))}, got {baud}")
-        if base_rate_hz is not None and not (isinstance(base_rate_hz, (int, float)) and 0 < base_rate_hz < 1e6):
+        if base_rate_hz is not None and (isinstance(base_rate_hz, bool) or not isinstance(base_rate_hz, (int, float))
+                                         or not 0 < base_rate_hz < 1e6):
             raise ValueError(f"base_rate_hz: a rate in Hz > 0, got {base_rate_hz!r}")
         self.base_rate_hz = float(base_rate_hz or imu_rate_hz(model))
         if checksum not in _CHECKSUM_CODE:
