@@ -115,14 +115,36 @@ def ardupilot_start(model: str) -> list:
 
 ARDUPILOT_IMU = bytes.fromhex("012107")        # TimeStartup, AngularRate, Accel, Imu, MagPres: 82 bytes
 ARDUPILOT_AHRS = bytes.fromhex("1101000601")   # TimeStartup; YawPitchRoll, Quaternion, YprU: 56 bytes
+# NED coordinates of the test scene's ENU vectors: north = y, east = x, down = -z
+NED_FROM_ENU = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+
+
+def healthy_throughout(imu_ns, ekf_ns, gnss_ns=None) -> bool:
+    """ArduPilot's AP_ExternalAHRS_VectorNav::healthy() (ArduPilot master, the run_command() version of
+    AP_ExternalAHRS_VectorNav.cpp): `now - last_pkt1_ms < 40 && now - last_pkt2_ms < 500` and, for an INS,
+    `now - last_pkt3_ms < 1000`. It holds at every instant after the first packets exactly when no two successive
+    packets of a kind are that far apart; judged here on the packets' own TimeStartup (sensor time), since wall
+    time on a loaded test machine says nothing about the emulator."""
+    limits = [(imu_ns, 40e6), (ekf_ns, 500e6)] + ([(gnss_ns, 1000e6)] if gnss_ns is not None else [])
+    return all(len(t) > 1 and np.max(np.diff(np.sort(t))) < limit for t, limit in limits)
+
+
+def scene_attitude(scene_path, k):
+    """The scene's attitude at samples k, body -> NED (scipy Rotation), as the wire must carry it."""
+    from scipy.spatial.transform import Rotation
+
+    from imu_emulator.runtime.simulation import Simulation
+    from imu_emulator.scene.load import load_scene
+    block = Simulation(load_scene(scene_path)).block(0, int(np.max(k)) + 1)
+    return Rotation.from_matrix(NED_FROM_ENU) * Rotation.from_quat(block.quat[0][k][:, [1, 2, 3, 0]])
 
 
 def test_ardupilot_vn100_start_up_sequence_and_the_packets_it_then_parses(tmp_path):
+    """No option at all: a VN-100's divisors divide its 800 Hz IMU rate, as ArduPilot assumes."""
     rate = 400
     scene_path = write_scene(tmp_path, rate=rate, duration=60.0)
     scene, _, accel, gyro = reference(scene_path)
-    with Emulator(scene_path, "--format", "vectornav-binary", "--to", "pty", "--duration", "40",
-                  "--option", "base_rate_hz=800") as emu:
+    with Emulator(scene_path, "--format", "vectornav-binary", "--to", "pty", "--duration", "40") as emu:
         driver = Driver(emu.targets[0])
         ardupilot_rate = 200            # AP's EAHRS_RATE: it writes 800 / rate as the divisor
         exchange = ardupilot_start("VN-100T-CR") + echoed(f"VNWRG,75,3,{800 // ardupilot_rate},01,0721",
@@ -156,6 +178,13 @@ def test_ardupilot_vn100_start_up_sequence_and_the_packets_it_then_parses(tmp_pa
     x, y, z, w = att[:, 3:7].T
     yaw = np.degrees(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
     np.testing.assert_allclose(att[:, 0], yaw, atol=1e-3)
+    # the attitude ArduPilot takes (state.quat = w, x, y, z from the packet's x, y, z, w) is the scene's
+    from scipy.spatial.transform import Rotation
+    wire = Rotation.from_quat(att[:, 3:7])
+    assert np.all((scene_attitude(scene_path, np.rint(t_ahrs * 1e-9 * rate).astype(int)).inv() * wire).magnitude()
+                  < 1e-6)
+    # healthy() throughout, so pre_arm_check() (setup complete, healthy; no GNSS check for a VN-1xx) passes
+    assert healthy_throughout(t_imu, t_ahrs)
     assert "device: 7 commands answered, 0 error replies" in err
 
 
@@ -176,11 +205,10 @@ def test_ardupilot_vn300_start_up_sequence_and_its_gnss_packet(tmp_path):
     from imu_emulator.geo.geodesy import DEFAULT_ORIGIN
     from imu_emulator.scene.load import load_scene
     from imu_emulator.runtime.simulation import Simulation
-    rate, week = 400, 2345
+    rate, week = 200, 2345          # a scene slower than the unit: divisors still count its 400 Hz IMU
     scene_path = write_scene(tmp_path, rate=rate, duration=60.0)
     with Emulator(scene_path, "--format", "vectornav-binary", "--to", "pty", "--duration", "40",
-                  "--option", "model=VN-300-CR", "--option", "base_rate_hz=400",
-                  "--option", f"gps_week_offset={week}") as emu:
+                  "--option", "model=VN-300-CR", "--option", f"gps_week_offset={week}") as emu:
         driver = Driver(emu.targets[0])
         ardupilot_rate = 200            # EAHRS_RATE; a VN-300's IMU runs at 400 Hz: divisor 400 / rate
         exchange = ardupilot_start("VN-300-CR") + echoed(f"VNWRG,75,3,{400 // ardupilot_rate},01,0721",
@@ -193,7 +221,12 @@ def test_ardupilot_vn300_start_up_sequence_and_its_gnss_packet(tmp_path):
     ekf_size = 1 + 7 + 8 + 12 + 16 + 12 + 2 + 24 + 12 + 4 + 4 + 2
     found, stray = packets(after, {ARDUPILOT_IMU: 82, ARDUPILOT_INS_EKF: ekf_size, ARDUPILOT_GNSS: 110})
     assert stray == 0 and len(found[ARDUPILOT_INS_EKF]) >= 50
+    # a VN-300 divides its 400 Hz IMU rate without being told: IMU at 200 Hz, EKF 50 Hz, GNSS 5 Hz; healthy()
+    t_imu = np.array([struct.unpack_from("<Q", p, 4)[0] for p in found[ARDUPILOT_IMU]])
+    t_ekf = np.array([struct.unpack_from("<Q", p, 8)[0] for p in found[ARDUPILOT_INS_EKF]])
+    assert set(np.diff(t_imu)) == {5_000_000} and set(np.diff(t_ekf)) == {20_000_000}
     gnss = [GNSS_STRUCT.unpack_from(p, 8) for p in found[ARDUPILOT_GNSS]]
+    assert healthy_throughout(t_imu, t_ekf, np.array([g[0] for g in gnss]))
     assert len(gnss) >= 8               # 400 / 80 = 5 Hz for 2.5 s
     t_startup = np.array([g[0] for g in gnss])
     assert set(np.diff(t_startup)) == {200_000_000}
@@ -299,7 +332,7 @@ BAD = [
     (command("VNRRG"), "VNERR,05"),             # truncated: no register
     (command("VNWRG,75,3,4,01"), "VNERR,05"),   # fewer fields than groups
     (command("VNWRG,75,3,4,01,0721,0001"), "VNERR,06"),
-    (command("VNWRG,75,3,4,08,0001"), "VNERR,07"),    # GPS group UTC: no data for it
+    (command("VNWRG,75,3,4,10,0008"), "VNERR,07"),    # Attitude Dcm: no data for it
     (command("VNWRG,05,12345"), "VNERR,07"),
     (command("VNWRG,06,2"), "VNERR,07"),        # VNQTN: not produced
     (command("VNASY,2"), "VNERR,07"),

@@ -28,14 +28,20 @@ allows), both with an optional serial port argument; 30 communication protocol c
 NED re-expresses DeltaTheta/DeltaVel in NED before summing, see _integration_frame): stored and read
 back, and register 30's SerialChecksum field (1 8-bit, 2 CRC-16; the `checksum` option sets it at start) picks the checksum of the
 asynchronous ASCII sentences (replies always use the command's kind); 75-77 binary outputs 1-3:
-`asyncMode, rateDivisor, outputGroup (hex), groupField (hex) per set group bit`. A binary output is sent at
-sample rate * rateDivisor^-1 scaled by base_rate_hz (the IMU rate the divisor divides: default the scene's
-rate; ArduPilot writes 800/rate for a VN-100, so set base_rate_hz=800 there), asyncMode 0 turns it off. All
-outputs count samples from one counter, so outputs with related divisors fall on the same samples as on the
-device. Fields the emulator has no data for (GPS UTC, ECEF quantities, ...) are error 7, never a packet
-with invented layout. The GPS groups (VN-200/300) carry the truth position and velocity, the configured
-satellite count, fix and uncertainties, and GPS time = sample time + `gps_week_offset` weeks: ArduPilot's
-VN-300 sequence (`$VNWRG,77,3,80,49,0003,26B8,0018`) gets its GNSS packet.
+`asyncMode, rateDivisor, outputGroup (hex), groupField (hex) per set group bit`. A written binary output is sent
+at base_rate_hz / rateDivisor, base_rate_hz being the model's IMU rate (VN-300 400 Hz, every other model 800 Hz,
+as the manuals and ArduPilot's 800 / rate and 400 / rate divisors have it; the `base_rate_hz` option replaces it),
+on every round(rateDivisor * scene rate / base_rate_hz)-th scene sample; a rate above the scene's gives every
+sample and a note says so. asyncMode 0 or rateDivisor 0 turns it off (the ROS 2 node's `$VNWRG,76,0,0,0`). The
+emulator's own start-up output (the `fields` option) goes out every scene sample. All outputs count samples
+from one counter, so outputs with related divisors fall on the same samples as on the device. Every field the
+ROS 1 / ROS 2 nodes and ArduPilot / PX4 ask for is produced (wire_formats.vectornav_binary lists what each
+carries); the ones the emulator has no data for (Attitude Dcm, IMU Raw) are error 7, never a packet with
+invented layout. The GPS groups (VN-200/300) carry the GNSS receiver's solution (Samples.gnss_*, else the INS
+estimate and the configured satellite count, fix and uncertainties), GPS time = sample time + `gps_week_offset`
+weeks: ArduPilot's VN-300 sequence (`$VNWRG,77,3,80,49,0003,26B8,0018`) gets its GNSS packet. A VN-200/300 also
+has the GNSS registers the ROS 2 node reads after configuring: 55 GNSS configuration (5 integers), 57 antenna
+offset (3 reals) and, on a VN-300, 93 compass baseline (6 reals), stored and read back (a VN-1xx answers 8).
 
 Errors (`$VNERR,<2 digits>`): 03 bad checksum (or none), 04 unknown command, 05 / 06 too few / too many
 parameters, 07 invalid parameter, 08 invalid register (unknown, or read-only on write). Input that is not a
@@ -69,6 +75,13 @@ _INT_REGISTERS = {30: (0, 0, 0, 0, 1, 0, 1), 32: (3, 0, 0, 0, 0, 0, 0, 100000000
 # VnCompensationMode NONE 0 / BIAS 1): each field's allowed values.
 _DELTA_CONFIG_VALUES = (range(2), range(2), range(2), range(256), range(65536))
 INTEGRATION_NED = 1
+# The GNSS registers of a VN-200/VN-300 (none on a VN-1xx, whose reads are error 8), which the ROS 2 node reads
+# after configuring: 55 GNSS configuration (vnproglib `$VNWRG,55,%u,%u,5,0,0`: mode 0 internal receiver,
+# PPS source 0, rate 5 Hz, two reserved), 57 antenna A offset (3 floats, m, body axes) and, on a VN-300, 93
+# the compass baseline (position 3 floats m, uncertainty 3 floats m; the factory's 1 m forward, 0.0254 m).
+_GNSS_INT_REGISTERS = {55: (0, 0, 5, 0, 0)}
+_GNSS_FLOAT_REGISTERS = {57: (0.0, 0.0, 0.0)}
+_COMPASS_FLOAT_REGISTERS = {93: (1.0, 0.0, 0.0, 0.0254, 0.0254, 0.0254)}
 _MAX_LINE = 256
 _LINE_END = re.compile(rb"[\r\n$]")
 
@@ -94,10 +107,27 @@ class _Reject(Exception):
         self.code = code
 
 
+def imu_rate_hz(model: str) -> float:
+    """The IMU rate a binary output's rate divisor divides on this model: 400 Hz on a VN-300, 800 Hz on the
+    others (VN-100, VN-110, VN-200, VN-310), as their manuals and ArduPilot's AP_ExternalAHRS_VectorNav
+    (which writes 800 / rate or, for a VN-300, 400 / rate) assume."""
+    return 400.0 if str(model).startswith("VN-300") else 800.0
+
+
 class _BinaryOutput:
-    def __init__(self, mode: int = 0, divisor: int = 1, layout=None, encoding: dict | None = None):
-        self.mode, self.divisor, self.layout = mode, divisor, layout
+    """One binary output register. `every`: the samples between packets when fixed by the emulator's own start-up
+    configuration (every scene sample), else None: the divisor, scaled from the unit's IMU rate to the scene's."""
+
+    def __init__(self, mode: int = 0, divisor: int = 1, layout=None, encoding: dict | None = None,
+                 every: int | None = None):
+        self.mode, self.divisor, self.layout, self.every = mode, divisor, layout, every
         self.encoder = BinaryEncoder(layout, **(encoding or {})) if layout is not None else None
+
+    @property
+    def active(self) -> bool:
+        """Async mode 0 or rate divisor 0 turns the output off (vnproglib's ASYNCMODE_NONE; the ROS 2 driver's
+        `$VNWRG,76,0,0,0` for an unused output)."""
+        return bool(self.mode) and self.divisor > 0 and self.encoder is not None
 
     def register_text(self) -> str:
         if self.layout is None:
@@ -128,20 +158,29 @@ class VectorNavDevice(Device):
             settings = PRESETS[preset][0]
             outputs = settings["outputs"]
             base_rate_hz = settings.get("base_rate_hz", base_rate_hz) if base_rate_hz is None else base_rate_hz
+        every = None if preset is not None else 1      # the plain stream: every scene sample
         if not str(model).startswith("VN-"):
             raise ValueError(f"model: VectorNav model numbers begin 'VN-' (drivers check), got {model!r}")
         if baud not in BAUD_RATES:
             raise ValueError(f"baud: one of {', '.join(map(str, BAUD_RATES))}, got {baud}")
-        self.base_rate_hz = float(base_rate_hz or rate_hz)
+        if base_rate_hz is not None and (isinstance(base_rate_hz, bool) or not isinstance(base_rate_hz, (int, float))
+                                         or not 0 < base_rate_hz < 1e6):
+            raise ValueError(f"base_rate_hz: a rate in Hz > 0, got {base_rate_hz!r}")
+        self.base_rate_hz = float(base_rate_hz or imu_rate_hz(model))
         if checksum not in _CHECKSUM_CODE:
             raise ValueError(f"checksum: 'xor' or 'crc', got {checksum!r}")
         ints = dict(_INT_REGISTERS)
+        gnss = not str(model).startswith("VN-1")
+        if gnss:
+            ints.update(_GNSS_INT_REGISTERS)
+        floats = {**(_GNSS_FLOAT_REGISTERS if gnss else {}),
+                  **(_COMPASS_FLOAT_REGISTERS if str(model).startswith("VN-3") else {})}
         ints[30] = ints[30][:4] + (_CHECKSUM_CODE[checksum],) + ints[30][5:]
         self.fixed = {1: str(model), 2: str(int(hardware_revision)), 3: str(int(serial_number)), 4: str(firmware)}
         factory = {"user_tag": "", "baud": baud, "ascii_type": ascii_type,
                    "ascii_rate": min(ASCII_RATES, key=lambda r: abs(r - rate_hz)) if ascii_type else 40,
-                   "ints": ints,
-                   "binary": [(3, divisor, parse_fields(spec)) for spec, divisor in outputs]}
+                   "ints": ints, "floats": floats,
+                   "binary": [(3, divisor, parse_fields(spec), every) for spec, divisor in outputs]}
         self._factory = factory
         self._saved = factory
         self._ascii_encoders = {}
@@ -160,15 +199,16 @@ class VectorNavDevice(Device):
         self.user_tag, self.baud = settings["user_tag"], settings["baud"]
         self.ascii_type, self.ascii_rate = settings["ascii_type"], settings["ascii_rate"]
         self.ints = dict(settings["ints"])
-        self.binary = [_BinaryOutput(mode, divisor, layout, self._encoding)
-                       for mode, divisor, layout in settings["binary"]]
+        self.floats = dict(settings["floats"])
+        self.binary = [_BinaryOutput(mode, divisor, layout, self._encoding, every)
+                       for mode, divisor, layout, every in settings["binary"]]
         self.binary += [_BinaryOutput() for _ in range(3 - len(self.binary))]
         self._made += [o.encoder for o in self.binary if o.encoder is not None]
 
     def _snapshot(self) -> dict:
         return {"user_tag": self.user_tag, "baud": self.baud, "ascii_type": self.ascii_type,
-                "ascii_rate": self.ascii_rate, "ints": dict(self.ints),
-                "binary": [(o.mode, o.divisor, o.layout) for o in self.binary]}
+                "ascii_rate": self.ascii_rate, "ints": dict(self.ints), "floats": dict(self.floats),
+                "binary": [(o.mode, o.divisor, o.layout, o.every) for o in self.binary]}
 
     def _ascii_encoder(self):
         # Asynchronous sentences carry the checksum register 30's SerialChecksum field selects (2 = CRC-16).
@@ -177,8 +217,17 @@ class VectorNavDevice(Device):
             self._ascii_encoders[key] = AsciiEncoder(*key)
         return self._ascii_encoders[key]
 
-    def _samples_per(self, divisor: int) -> int:
-        return max(1, int(round(divisor * self.rate_hz / self.base_rate_hz)))
+    def _samples_per(self, output: _BinaryOutput) -> int:
+        if output.every is not None:
+            return output.every
+        return max(1, int(round(output.divisor * self.rate_hz / self.base_rate_hz)))
+
+    def _note_rate(self, register: int, output: _BinaryOutput) -> None:
+        """Say so when a written output asks for more than the scene's samples give (nothing is invented)."""
+        if output.active and self.base_rate_hz / output.divisor > self.rate_hz * 1.001:
+            self.notes.append(f"VectorNav register {register}: {self.base_rate_hz:g} / {output.divisor} = "
+                              f"{self.base_rate_hz / output.divisor:g} Hz asked, the scene's {self.rate_hz:g} Hz "
+                              "samples give every sample instead")
 
     def encoders(self):
         # every encoder ever made, so replaced outputs' saturation counts stay in the total
@@ -194,7 +243,7 @@ class VectorNavDevice(Device):
         parts = []
         one = None
         for out in self.binary:
-            if out.mode and out.encoder is not None and tick % self._samples_per(out.divisor) == 0:
+            if out.active and tick % self._samples_per(out) == 0:
                 one = one or self.increments.attach(single(samples, i))
                 parts.append(out.encoder.encode(one).data)
                 self.increments.sent(out.encoder)
@@ -333,12 +382,15 @@ class VectorNavDevice(Device):
             return str(self.ascii_rate)
         if register in self.ints:
             return ",".join(map(str, self.ints[register]))
+        if register in self.floats:
+            return ",".join(f"{v:+.6f}" for v in self.floats[register])
         if 75 <= register <= 77:
             return self.binary[register - 75].register_text()
         raise _Reject(ERR_REGISTER)
 
     def _write(self, register: int, values: list) -> None:
-        if register in self.fixed or not (register in (0, 5, 6, 7) or register in self.ints or 75 <= register <= 77):
+        if register in self.fixed or not (register in (0, 5, 6, 7) or register in self.ints or register in self.floats
+                                          or 75 <= register <= 77):
             raise _Reject(ERR_REGISTER)
         if register == 0:
             _count(values, 1, 1)
@@ -365,8 +417,12 @@ class VectorNavDevice(Device):
                 if value not in ASCII_RATES:
                     raise _Reject(ERR_PARAMETER)
                 self.ascii_rate = value
+        elif register in self.floats:
+            expected = len(self.floats[register])
+            _count(values, expected, expected)
+            self.floats[register] = tuple(_real(v) for v in values)
         elif register in self.ints:
-            expected = len(_INT_REGISTERS[register])
+            expected = len(self.ints[register])
             _count(values, expected, expected)
             numbers = tuple(_integer(v) for v in values)
             if register == 82 and any(v not in allowed for v, allowed in zip(numbers, _DELTA_CONFIG_VALUES)):
@@ -376,13 +432,14 @@ class VectorNavDevice(Device):
             self.binary[register - 75] = output = self._binary_output(values, self._encoding)
             if output.encoder is not None:
                 self._made.append(output.encoder)
+            self._note_rate(register, output)
 
     @staticmethod
     def _binary_output(values: list, encoding: dict) -> _BinaryOutput:
         _count(values, 3, 3 + 7)
         mode, divisor = _integer(values[0]), _integer(values[1])
         groups = _hex(values[2])
-        if not 0 <= mode <= 3 or not 1 <= divisor <= 65535 or not 0 <= groups <= 0x7F:
+        if not 0 <= mode <= 3 or not 0 <= divisor <= 65535 or not 0 <= groups <= 0x7F:
             raise _Reject(ERR_PARAMETER)
         bits = [b for b in range(8) if groups >> b & 1]
         _count(values[3:], len(bits), len(bits))
@@ -412,6 +469,16 @@ def _integer(text: str) -> int:
     return value
 
 
+def _real(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise _Reject(ERR_PARAMETER) from None
+    if not abs(value) < 1e6:            # nan, inf, and offsets no antenna has
+        raise _Reject(ERR_PARAMETER)
+    return value
+
+
 def _hex(text: str) -> int:
     try:
         return int(text, 16)
@@ -422,7 +489,8 @@ def _hex(text: str) -> int:
 _OPTIONS = {
     "model": f"register 1, the model number (default {DEFAULT_MODEL}; ArduPilot picks AHRS or INS by it)",
     "preset": "named output set: " + "; ".join(f"{k}: {v[1]}" for k, v in PRESETS.items()),
-    "base_rate_hz": "the IMU rate that binary-output rate divisors divide (default: the scene's rate)",
+    "base_rate_hz": "the IMU rate that binary-output rate divisors divide (default: the model's, VN-300 400 Hz, "
+                    "others 800 Hz)",
     "serial_number": "register 3 (default 100012345)",
     "firmware": "register 4 (default 2.1.0.0)",
     "hardware_revision": "register 2 (default 2)",

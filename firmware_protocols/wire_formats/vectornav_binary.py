@@ -30,18 +30,42 @@ What the encoder can fill, wire units, and the Samples field each comes from:
     Common.DeltaTheta  IMU.DeltaTheta + IMU.DeltaVel
     TimeGps         u64 ns          time_ns + gps_week_offset weeks (GPS time); Time.GpsTow u64 ns and
                                     Time/GPS Week u16 split it
-    GPS, GPS2       NumSats u8, Fix u8, PosLla 3 x f64, VelNed 3 x f32, PosU 3 x f32 (N, E, D m),
-                    VelU f32, Dop 7 x f32: position_llh / velocity_ned (the truth) and GNSS_CONSTANTS
+    TimeUtc, GPS Utc  i8 year-2000, u8 month, day, hour, minute, second, u16 ms: GPS time - 18 leap seconds
+    TimeGpsPps,     u64 ns          ns since the last PPS edge, on whole GPS seconds; the SyncIn pin is taken as
+    TimeSyncIn                      wired to the PPS, so TimeSyncIn is the same and
+    SyncInCnt       u32             counts the edges since start-up (whole seconds of time_ns); SyncOutCnt 0
+    TimeStatus, GPS TimeInfo  u8 7 (time of week, week, UTC valid; 0 without any fix) [+ i8 leap seconds 18]
+    Common.Position = INS.PosLla  3 x f64 deg, deg, m    position_llh (the INS estimate)   default PX4's home
+    Common.Velocity = INS.VelNed  3 x f32 m/s            velocity_ned                     default 0
+    InsStatus       u16             bits 0-1 ins_mode (0 not tracking, 1 aligning, 2 tracking), bit 2 a 3D GNSS fix
+                                    (gnss_fix >= 3)                                    default 0x0006
+    INS.PosEcef     3 x f64 m       position_llh in WGS-84 ECEF (closed form)
+    INS.VelEcef, VelBody  3 x f32   velocity_ned in ECEF / in body axes (quat)
+    INS.AccelEcef, MagEcef  3 x f32 accel (specific force, "with gravity") / mag rotated body -> NED -> ECEF
+    INS.LinearAccelEcef  3 x f32    linear_accel_ned in ECEF; Attitude.LinearAccelBody: in body axes
+    Attitude.AccelNed, MagNed  3 x f32  accel / mag rotated into NED
+    YprU            3 x f32 deg     attitude_sigma_rad reordered yaw, pitch, roll      default 1, 0.5, 0.5
+    INS.PosU, VelU  f32 m, m/s      the root sum of squares of position_sigma_m / velocity_sigma_mps  default 1, 0.05
+    GPS, GPS2       the receiver: NumSats u8 gnss_satellites, Fix u8 gnss_fix, PosLla 3 x f64 gnss_llh, PosEcef,
+                    VelNed 3 x f32 gnss_velocity_ned, VelEcef, PosU 3 x f32 (N, E = gnss_horizontal_accuracy_m,
+                    D = gnss_vertical_accuracy_m), VelU f32 gnss_speed_accuracy_mps, TimeU f32 s, Dop 7 x f32 (g, p,
+                    t, v, h, n, e from gnss_hdop / gnss_vdop); without gnss_* the INS estimate and GNSS_CONSTANTS
                     (BinaryEncoder(constants=...), defaults in _DEFAULTS)
+    ImuStatus, SensSat  u16 0       (reserved; no sensor saturated: saturation is counted at the wire instead)
+
+Frames: vectors in Samples are the part's body axes forward-right-down and quat rotates them to NED, which is
+VectorNav's own convention, so they go out unconverted; the derived quantities: firmware_protocols.
+vectornav_quantities. A quantity the samples do not carry uses the documented default (or the caller's
+constant), never a failure.
 
 A real unit resets its integrals at each output, so with an output divider its increments span several IMU
 samples; the encoder sends what it is given, one sample's increments per packet.
 
 The emulator has one accel/gyro/mag measurement, so the "uncompensated" fields carry the same values
-as the compensated ones. Every f32 saturates at +-float32 max (counted per wire field in
-`encoder.saturated`, e.g. "imu.accel"); non-finite input raises EncodeError naming field and sample.
-Fields the table knows but the emulator has no data for (Position, Dcm, GPS UTC, ...) can be
-decoded (as raw bytes) but not selected for encoding.
+as the compensated ones. Every f32 saturates at +-float32 max, every integer at its range (counted per wire
+field in `encoder.saturated`, e.g. "imu.accel"); non-finite input raises EncodeError naming field and sample.
+Fields the table knows but the emulator has no data for (Attitude Dcm, IMU Raw) can be decoded (as raw bytes)
+but not selected for encoding.
 """
 from __future__ import annotations
 
@@ -51,10 +75,11 @@ from dataclasses import dataclass
 from imu_emulator.native.lazy import jit
 import numpy as np
 
-from firmware_protocols.base import (_FIELD_WIDTHS, DecoderStats, EncodeError, Packet, SaturationStats, Samples,
+from firmware_protocols.base import (DecoderStats, EncodeError, Packet, SaturationStats, Samples,
                                      SerialBatch, integration_intervals)
 from firmware_protocols.crc import crc16_ccitt, crc16_ccitt_bytes
 from firmware_protocols.gnss_time import GNSS_DEFAULTS, dops
+from firmware_protocols import vectornav_quantities
 from firmware_protocols.registry import FormatInfo, register
 from firmware_protocols.vectornav_common import DEG, SAMPLE_DEFAULTS
 
@@ -66,19 +91,29 @@ SYNC = 0xFA
 _SOURCES = ("time_ns", "accel", "gyro", "mag", "quat", "euler", "temperature_c", "pressure_pa", "extra")
 _SOURCE_ID = {name: i for i, name in enumerate(_SOURCES)}
 # Navigation and status quantities: packed side by side into the kernel's one "extra" matrix (only when a
-# layout asks for them). Name -> width. Samples fields where Samples has them; the rest are constants.
+# layout asks for them). Name -> width. Samples fields where Samples has them, quantities computed from the samples
+# (_DERIVED), else the documented defaults / the caller's constants.
 _EXTRA_WIDTH = {"position_llh": 3, "velocity_ned": 3, "linear_accel_ned": 3, "ypr_u": 3, "ins_status": 1,
                 "pos_u": 1, "vel_u": 1, "delta_time": 1, "delta_theta": 3, "delta_velocity": 3,
-                "gnss_num_sats": 1, "gnss_fix": 1, "gnss_pos_u": 3, "gnss_vel_u": 1, "gnss_dop": 7}
+                "gnss_num_sats": 1, "gnss_fix": 1, "gnss_pos_u": 3, "gnss_vel_u": 1, "gnss_dop": 7,
+                "gnss_llh": 3, "gnss_velocity_ned": 3, "gnss_pos_ecef": 3, "gnss_vel_ecef": 3, "gnss_time_u": 1,
+                "gnss_time_info": 2, "pos_ecef": 3, "vel_ecef": 3, "vel_body": 3, "accel_ned": 3, "mag_ned": 3,
+                "accel_ecef": 3, "mag_ecef": 3, "lin_accel_ecef": 3, "lin_accel_body": 3, "utc": 7,
+                "time_status": 1, "since_pps": 1, "sync_in_count": 1, "sync_out_count": 1, "zero_word": 1}
 #: extras without a default: the caller must give them (the integrated outputs; a rate times the period would
 #: be an approximation the field's name does not announce)
 _REQUIRED = {"delta_theta", "delta_velocity"}
-#: the constants a caller may set (BinaryEncoder(constants=...)): what neither Samples nor the time base carries
-_SETTABLE = tuple(n for n in _EXTRA_WIDTH if n not in _FIELD_WIDTHS and n not in _REQUIRED and n != "delta_time")
+#: the constants a caller may set (BinaryEncoder(constants=...)): what the samples may not carry
+_SETTABLE = ("ypr_u", "ins_status", "pos_u", "vel_u", "gnss_num_sats", "gnss_fix", "gnss_pos_u", "gnss_vel_u",
+             "gnss_dop")
 # Kernel wire codes: value kinds f32, f64, u16, u8; and integer times made from time_ns (+ the GPS offset).
 _WIRE_CODE = {"f": 0, "Q": 1, "d": 2, "H": 3, "B": 4}
+# Integers made from a value (extras): u32, u64 (exact below 2^53), i8.
+_VALUE_CODE = {"f": 0, "d": 2, "H": 3, "B": 4, "I": 8, "Q": 9, "b": 10}
 _TIME_CODE = {"startup": 1, "gps": 7, "tow": 5, "week": 6}
 WEEK_NS = 7 * 86400 * 1_000_000_000
+#: the last GPS week whose start fits the int64 nanoseconds the GPS time is computed in (year 2272)
+MAX_GPS_WEEK = (2**63 - 1) // WEEK_NS
 
 
 # Documented defaults for the navigation and status quantities (one row, broadcast), after those of Samples.
@@ -102,8 +137,63 @@ _DEFAULTS = {
     "gnss_pos_u": (1.0, 1.0, 1.5),
     "gnss_vel_u": (0.05,),
     "gnss_dop": dops(GNSS_DEFAULTS["dop_n"], GNSS_DEFAULTS["dop_e"], GNSS_DEFAULTS["dop_v"], GNSS_DEFAULTS["dop_t"]),
+    # GPS TimeU (s); SyncOutCnt: the SyncOut pin is not configured (register 32)
+    "gnss_time_u": (GNSS_DEFAULTS["t_acc_ns"] * 1e-9,),
+    "sync_out_count": (0.0,),
+    # IMU ImuStatus (reserved) and SensSat (no sensor saturated: saturation is counted at the wire instead)
+    "zero_word": (0.0,),
 }
 GNSS_CONSTANTS = ("gnss_num_sats", "gnss_fix", "gnss_pos_u", "gnss_vel_u", "gnss_dop")
+
+
+def _derived():
+    """name -> f(samples, encoder) giving the (n, width) quantity from the samples, or None (then the default or
+    the caller's constant). See firmware_protocols.vectornav_quantities for the frames and time conventions."""
+    vq = vectornav_quantities
+
+    def default(enc):
+        return lambda name: enc._defaults[name][0]
+
+    def fix_default(enc):
+        return float(enc._defaults["gnss_fix"][0, 0])
+
+    return {
+        "ypr_u": lambda s, e: vq.ypr_uncertainty(s),
+        "pos_u": lambda s, e: vq.sigma_norm(s.position_sigma_m),
+        "vel_u": lambda s, e: vq.sigma_norm(s.velocity_sigma_mps),
+        # a caller's ins_status constant stands while the samples carry neither mode nor fix
+        "ins_status": lambda s, e: None if ("ins_status" in e._constants and s.ins_mode is None
+                                            and s.gnss_fix is None) else vq.ins_status(s, fix_default(e)),
+        "gnss_num_sats": lambda s, e: s.gnss_satellites,
+        "gnss_pos_u": lambda s, e: vq.gnss_position_uncertainty(s),
+        "gnss_vel_u": lambda s, e: s.gnss_speed_accuracy_mps,
+        "gnss_dop": lambda s, e: vq.gnss_dops(s),
+        "gnss_llh": lambda s, e: vq.position(s, default(e), "gnss_llh"),
+        "gnss_velocity_ned": lambda s, e: vq.velocity(s, default(e), "gnss_velocity_ned"),
+        "gnss_pos_ecef": lambda s, e: vq.ecef_position(vq.position(s, default(e), "gnss_llh")),
+        "gnss_vel_ecef": lambda s, e: vq.ecef_vector(s, vq.velocity(s, default(e), "gnss_velocity_ned"), default(e),
+                                                     "gnss_llh"),
+        "pos_ecef": lambda s, e: vq.ecef_position(vq.position(s, default(e))),
+        "vel_ecef": lambda s, e: vq.ecef_vector(s, vq.velocity(s, default(e)), default(e)),
+        "vel_body": lambda s, e: vq.rotated(s, "velocity_ned", default(e), "body"),
+        "accel_ned": lambda s, e: vq.rotated(s, "accel", default(e), "ned"),
+        "mag_ned": lambda s, e: vq.rotated(s, "mag", default(e), "ned"),
+        "accel_ecef": lambda s, e: vq.rotated(s, "accel", default(e), "ecef"),
+        "mag_ecef": lambda s, e: vq.rotated(s, "mag", default(e), "ecef"),
+        "lin_accel_ecef": lambda s, e: vq.ecef_vector(
+            s, s.linear_accel_ned if s.linear_accel_ned is not None
+            else np.broadcast_to(e._defaults["linear_accel_ned"], (len(s), 3)), default(e)),
+        "lin_accel_body": lambda s, e: vq.rotated(s, "linear_accel_ned", default(e), "body"),
+        "utc": lambda s, e: vq.utc_fields(s.time_ns, e.gps_offset_ns),
+        "time_status": lambda s, e: vq.time_valid(s, fix_default(e)).reshape(-1, 1),
+        "gnss_time_info": lambda s, e: np.column_stack(
+            (vq.time_valid(s, fix_default(e)), np.full(len(s), float(vectornav_quantities.LEAP_SECONDS)))),
+        "since_pps": lambda s, e: vq.since_pps(s.time_ns, e.gps_offset_ns),
+        "sync_in_count": lambda s, e: vq.sync_in_count(s.time_ns),
+    }
+
+
+_DERIVED = _derived()
 
 
 @dataclass(frozen=True)
@@ -164,6 +254,37 @@ _VEL_U = (_q("vel_u", 1),)
 # VnUartPacket parsing of IMUGROUP_DELTATHETA / DELTAVEL; VectorNav's field description via INSTINCT).
 _DTHETA = (_q("delta_time", 1, label="dtime"), _q("delta_theta", scale=DEG, label="dtheta"))
 _DVEL = (_q("delta_velocity"),)
+# Time and counters (vectornav_quantities): TimeSyncIn / TimeGpsPps u64 ns since the PPS edge, SyncInCnt /
+# SyncOutCnt u32, TimeStatus u8, TimeUtc int8 year - 2000, u8 month, day, hour, minute, second, u16 ms
+# (vnproglib's TimeUtc struct).
+_SINCE_PPS = (_q("since_pps", 1, wire="Q"),)
+_SYNC_IN_COUNT = (_q("sync_in_count", 1, wire="I"),)
+_SYNC_OUT_COUNT = (_q("sync_out_count", 1, wire="I"),)
+_TIME_STATUS = (_q("time_status", 1, wire="B"),)
+_UTC = ((_q("utc", 1, order=(0,), wire="b", label="year"),)
+        + tuple(_q("utc", 1, order=(k,), wire="B", label=name)
+                for k, name in enumerate(("month", "day", "hour", "minute", "second"), start=1))
+        + (_q("utc", 1, order=(6,), wire="H", label="ms"),))
+_ZERO_WORD = (_q("zero_word", 1, wire="H"),)
+# GNSS receiver: its own solution (Samples.gnss_*, else the INS estimate), ECEF from it; TimeU s; TimeInfo
+# status u8 + leap seconds i8
+_GNSS_LLA = (_q("gnss_llh", wire="d"),)
+_GNSS_VEL_NED = (_q("gnss_velocity_ned"),)
+_GNSS_POS_ECEF = (_q("gnss_pos_ecef", wire="d"),)
+_GNSS_VEL_ECEF = (_q("gnss_vel_ecef"),)
+_GNSS_TIME_U = (_q("gnss_time_u", 1),)
+_GNSS_TIME_INFO = (_q("gnss_time_info", 1, order=(0,), wire="B", label="status"),
+                   _q("gnss_time_info", 1, order=(1,), wire="b", label="leapseconds"))
+# INS estimate in ECEF / body axes, attitude group's NED vectors (vectornav_quantities)
+_POS_ECEF = (_q("pos_ecef", wire="d"),)
+_VEL_ECEF = (_q("vel_ecef"),)
+_VEL_BODY = (_q("vel_body"),)
+_ACCEL_NED = (_q("accel_ned"),)
+_MAG_NED = (_q("mag_ned"),)
+_ACCEL_ECEF = (_q("accel_ecef"),)
+_MAG_ECEF = (_q("mag_ecef"),)
+_LIN_ACC_ECEF = (_q("lin_accel_ecef"),)
+_LIN_ACC_BODY = (_q("lin_accel_body"),)
 
 
 def _lbl(quantities, label):
@@ -176,9 +297,10 @@ def _lbl(quantities, label):
 # (ArduPilot reads [0] as horizontal, [2] as vertical accuracy), DOP is g, p, t, v, h, n, e. Position and
 # velocity are the truth the INS group reports too (a receiver without noise), from the same sources.
 _GPS_FIELDS = [
-    ("Utc", 8, ()), ("Tow", 8, _GPS_TOW), ("Week", 2, _GPS_WEEK), ("NumSats", 1, _NUM_SATS), ("Fix", 1, _GNSS_FIX),
-    ("PosLla", 24, _LLA), ("PosEcef", 24, ()), ("VelNed", 12, _VEL_NED), ("VelEcef", 12, ()),
-    ("PosU", 12, _GNSS_POS_U), ("VelU", 4, _GNSS_VEL_U), ("TimeU", 4, ()), ("TimeInfo", 2, ()), ("Dop", 28, _DOP)]
+    ("Utc", 8, _UTC), ("Tow", 8, _GPS_TOW), ("Week", 2, _GPS_WEEK), ("NumSats", 1, _NUM_SATS), ("Fix", 1, _GNSS_FIX),
+    ("PosLla", 24, _GNSS_LLA), ("PosEcef", 24, _GNSS_POS_ECEF), ("VelNed", 12, _GNSS_VEL_NED),
+    ("VelEcef", 12, _GNSS_VEL_ECEF), ("PosU", 12, _GNSS_POS_U), ("VelU", 4, _GNSS_VEL_U), ("TimeU", 4, _GNSS_TIME_U),
+    ("TimeInfo", 2, _GNSS_TIME_INFO), ("Dop", 28, _DOP)]
 
 
 # (group name, group bit, [(field name, size, quantities)] in field-bit order). Sizes: vnupack.c
@@ -186,31 +308,35 @@ _GPS_FIELDS = [
 # enums in the same library and PX4/ArduPilot drivers.
 _GROUP_TABLE = (
     ("common", 0, [
-        ("TimeStartup", 8, _TIME), ("TimeGps", 8, _GPS_TIME), ("TimeSyncIn", 8, ()), ("YawPitchRoll", 12, _YPR),
-        ("Quaternion", 16, _QUAT), ("AngularRate", 12, _GYRO), ("Position", 24, ()), ("Velocity", 12, ()),
+        ("TimeStartup", 8, _TIME), ("TimeGps", 8, _GPS_TIME), ("TimeSyncIn", 8, _SINCE_PPS),
+        ("YawPitchRoll", 12, _YPR), ("Quaternion", 16, _QUAT), ("AngularRate", 12, _GYRO), ("Position", 24, _LLA),
+        ("Velocity", 12, _VEL_NED),
         ("Accel", 12, _ACCEL), ("Imu", 24, _lbl(_ACCEL, "accel") + _lbl(_GYRO, "gyro")),
         ("MagPres", 20, _lbl(_MAG, "mag") + _lbl(_TEMP, "temperature_c") + _lbl(_PRES, "pressure_pa")),
-        ("DeltaTheta", 28, _DTHETA + _lbl(_DVEL, "dvel")), ("InsStatus", 2, ()), ("SyncInCnt", 4, ()),
-        ("TimeGpsPps", 8, ())]),
+        ("DeltaTheta", 28, _DTHETA + _lbl(_DVEL, "dvel")), ("InsStatus", 2, _INS_STATUS),
+        ("SyncInCnt", 4, _SYNC_IN_COUNT), ("TimeGpsPps", 8, _SINCE_PPS)]),
     ("time", 1, [
         ("TimeStartup", 8, _TIME), ("TimeGps", 8, _GPS_TIME), ("GpsTow", 8, _GPS_TOW), ("GpsWeek", 2, _GPS_WEEK),
-        ("TimeSyncIn", 8, ()), ("TimeGpsPps", 8, ()), ("TimeUtc", 8, ()), ("SyncInCnt", 4, ()),
-        ("SyncOutCnt", 4, ()), ("TimeStatus", 1, ())]),
+        ("TimeSyncIn", 8, _SINCE_PPS), ("TimeGpsPps", 8, _SINCE_PPS), ("TimeUtc", 8, _UTC),
+        ("SyncInCnt", 4, _SYNC_IN_COUNT), ("SyncOutCnt", 4, _SYNC_OUT_COUNT), ("TimeStatus", 1, _TIME_STATUS)]),
     ("imu", 2, [
-        ("ImuStatus", 2, ()), ("UncompMag", 12, _MAG), ("UncompAccel", 12, _ACCEL), ("UncompGyro", 12, _GYRO),
+        ("ImuStatus", 2, _ZERO_WORD), ("UncompMag", 12, _MAG), ("UncompAccel", 12, _ACCEL),
+        ("UncompGyro", 12, _GYRO),
         ("Temp", 4, _TEMP), ("Pres", 4, _PRES), ("DeltaTheta", 16, _DTHETA), ("DeltaVel", 12, _DVEL), ("Mag", 12, _MAG),
-        ("Accel", 12, _ACCEL), ("AngularRate", 12, _GYRO), ("SensSat", 2, ()), ("Raw", 40, ())]),
+        ("Accel", 12, _ACCEL), ("AngularRate", 12, _GYRO), ("SensSat", 2, _ZERO_WORD), ("Raw", 40, ())]),
     ("gps", 3, _GPS_FIELDS),
     # Attitude bits 9-11 exist on some units but their names and sizes vary by library version.
     ("attitude", 4, [
         ("VpeStatus", 2, ()), ("YawPitchRoll", 12, _YPR), ("Quaternion", 16, _QUAT), ("Dcm", 36, ()),
-        ("MagNed", 12, ()), ("AccelNed", 12, ()), ("LinearAccelBody", 12, ()), ("LinearAccelNed", 12, _LIN_ACC_NED),
+        ("MagNed", 12, _MAG_NED), ("AccelNed", 12, _ACCEL_NED), ("LinearAccelBody", 12, _LIN_ACC_BODY),
+        ("LinearAccelNed", 12, _LIN_ACC_NED),
         ("YprU", 12, _YPR_U)]),
     # INS group: vnproglib 1.1 vnenum.h INSGROUP_* bits and vnupack.c sizes; PosLla is 3 x f64 (deg, deg, m).
     ("ins", 5, [
-        ("InsStatus", 2, _INS_STATUS), ("PosLla", 24, _LLA), ("PosEcef", 24, ()), ("VelBody", 12, ()),
-        ("VelNed", 12, _VEL_NED), ("VelEcef", 12, ()), ("MagEcef", 12, ()), ("AccelEcef", 12, ()),
-        ("LinearAccelEcef", 12, ()), ("PosU", 4, _POS_U), ("VelU", 4, _VEL_U)]),
+        ("InsStatus", 2, _INS_STATUS), ("PosLla", 24, _LLA), ("PosEcef", 24, _POS_ECEF), ("VelBody", 12, _VEL_BODY),
+        ("VelNed", 12, _VEL_NED), ("VelEcef", 12, _VEL_ECEF), ("MagEcef", 12, _MAG_ECEF),
+        ("AccelEcef", 12, _ACCEL_ECEF), ("LinearAccelEcef", 12, _LIN_ACC_ECEF), ("PosU", 4, _POS_U),
+        ("VelU", 4, _VEL_U)]),
     ("gps2", 6, _GPS_FIELDS),
 )
 
@@ -320,8 +446,9 @@ def parse_fields(fields) -> Layout:
 def _pack(out, size, header, items, scales, time_ns, accel, gyro, mag, quat, euler, temp, pres, extra, steps, sat,
           gps_offset_ns):
     """Write len(time_ns) packets of `size` bytes into `out`. items[j] = (source id, column, wire type
-    0 f32 / 1 u64 time / 2 f64 / 3 u16 / 4 u8 / 5 u64 GPS time of week / 6 u16 GPS week / 7 u64 GPS time) in
-    wire order. Returns the first sample with a non-finite value, or -1."""
+    0 f32 / 1 u64 time / 2 f64 / 3 u16 / 4 u8 / 5 u64 GPS time of week / 6 u16 GPS week / 7 u64 GPS time /
+    8 u32 / 9 u64 / 10 i8, the last three from a value) in wire order. Returns the first sample with a
+    non-finite value, or -1."""
     scratch = np.empty(1, np.float32)
     bits = scratch.view(np.uint32)
     scratch64 = np.empty(1, np.float64)
@@ -336,12 +463,12 @@ def _pack(out, size, header, items, scales, time_ns, accel, gyro, mag, quat, eul
         for j in range(items.shape[0]):
             src = items[j, 0]
             kind = items[j, 2]
-            if kind == 1 or kind >= 5:
+            if kind == 1 or 5 <= kind <= 7:
                 t = time_ns[i]
                 if t < 0:
                     t = 0
                     sat[j] += 1
-                if kind >= 5:
+                if kind != 1:
                     if t > 9223372036854775807 - gps_offset_ns:
                         t = 9223372036854775807
                         sat[j] += 1
@@ -388,6 +515,22 @@ def _pack(out, size, header, items, scales, time_ns, accel, gyro, mag, quat, eul
                 for b in range(8):
                     out[p + b] = (w >> np.uint64(8 * b)) & np.uint64(0xFF)
                 p += 8
+                continue
+            if kind >= 8:       # integers from a value: u32, u64, i8 (rounded, saturated and counted)
+                lo, top, width = 0.0, 4294967295.0, 4
+                if kind == 9:
+                    top, width = 9007199254740992.0, 8
+                elif kind == 10:
+                    lo, top, width = -128.0, 127.0, 1
+                if v < lo or v > top:
+                    sat[j] += 1
+                    v = min(max(v, lo), top)
+                word = int(np.rint(v))
+                if word < 0:
+                    word += 256
+                for b in range(width):
+                    out[p + b] = (word >> (8 * b)) & 0xFF
+                p += width
                 continue
             if kind == 3 or kind == 4:
                 top = 65535.0 if kind == 3 else 255.0
@@ -444,8 +587,8 @@ class BinaryEncoder:
         self.sample_period_s = sample_period_s
         self._last_time_ns = None
         if isinstance(gps_week_offset, bool) or not isinstance(gps_week_offset, (int, np.integer)) \
-                or not 0 <= gps_week_offset <= 65535:
-            raise ValueError(f"gps_week_offset: a GPS week 0..65535, got {gps_week_offset!r}")
+                or not 0 <= gps_week_offset <= MAX_GPS_WEEK:
+            raise ValueError(f"gps_week_offset: a GPS week 0..{MAX_GPS_WEEK}, got {gps_week_offset!r}")
         self.gps_offset_ns = int(gps_week_offset) * WEEK_NS
         undecodable = [f.key for f in self.layout.fields if not f.quantities]
         if undecodable:
@@ -460,7 +603,7 @@ class BinaryEncoder:
                     if q.source in _EXTRA_WIDTH:
                         if q.source not in self._extra_base:
                             self._extra_base[q.source] = sum(_EXTRA_WIDTH[e] for e in self._extra_base)
-                        rows.append((_SOURCE_ID["extra"], self._extra_base[q.source] + col, _WIRE_CODE[q.wire]))
+                        rows.append((_SOURCE_ID["extra"], self._extra_base[q.source] + col, _VALUE_CODE[q.wire]))
                     else:
                         code = _TIME_CODE[q.time] if q.time else _WIRE_CODE[q.wire]
                         rows.append((_SOURCE_ID[q.source], col, code))
@@ -475,6 +618,7 @@ class BinaryEncoder:
         self._defaults = {name: np.array([value], dtype=np.float64) for name, value in _DEFAULTS.items()}
         for name, value in (constants or {}).items():
             self._defaults[name] = _constant(name, value)
+        self._constants = frozenset(constants or ())
         self._unused = np.zeros((1, 4), dtype=np.float64)
         self._offsets = np.zeros(1, dtype=np.int64)   # reused while block sizes repeat (the live path)
 
@@ -496,13 +640,14 @@ class BinaryEncoder:
         if self._extra_base:
             parts = []
             for name in self._extra_base:
-                value = getattr(samples, name, None)
+                value = _DERIVED[name](samples, self) if name in _DERIVED else getattr(samples, name, None)
                 if name == "delta_time":
                     value = integration_intervals(samples, self.sample_period_s, self._last_time_ns)
                 elif value is None and name in _REQUIRED:
                     raise EncodeError(f"VectorNav fields {', '.join(self._fields_reading(name))}: the samples "
                                       f"carry no {name} (integrated outputs: run with increments)")
-                parts.append(self._defaults[name] if value is None else value.reshape(len(samples), -1))
+                parts.append(self._defaults[name] if value is None
+                             else np.asarray(value, dtype=np.float64).reshape(len(samples), -1))
             if any(part.shape[0] != 1 for part in parts):
                 steps[_SOURCE_ID["extra"]] = 1
                 parts = [np.broadcast_to(part, (len(samples), part.shape[1])) for part in parts]
@@ -547,6 +692,9 @@ def _field_values(field: _Field, raw: bytes, offset: int) -> dict:
         key = f"{field.key}.{q.label}" if q.label else field.key
         if q.time:
             values[key] = int(wire[0])
+            continue
+        if count == 1:
+            values[key] = float(wire[0]) / q.scale
             continue
         si = np.empty(count, dtype=np.float64)
         si[list(q.order)] = np.asarray(wire, dtype=np.float64) / q.scale
@@ -622,14 +770,15 @@ class BinaryDecoder:
 
 register(FormatInfo(
     name="vectornav-binary", kind="serial",
-    description="VectorNav binary output (0xFA, user-chosen groups/fields, CRC-16/XMODEM)",
+    description="VectorNav binary output (0xFA, user-chosen groups/fields, CRC-16/XMODEM; rate divisors divide the "
+                "model's IMU rate: VN-300 400 Hz, others 800 Hz)",
     encoder=BinaryEncoder, decoder=BinaryDecoder,
     bytes_per_sample=parse_fields(DEFAULT_FIELDS).packet_size,
     options={"fields": f"groups and fields, e.g. 'common:timestartup,accel;imu:uncompgyro' "
                        f"(default {DEFAULT_FIELDS!r}, PX4's binary output 1)",
              "sample_period_s": "DeltaTheta's dtime in s, > 0, when the samples carry none (None: time since the "
                                 "previous sample)",
-             "gps_week_offset": "GPS week added to time_ns for the GPS time fields, 0..65535",
+             "gps_week_offset": f"GPS week added to time_ns for the GPS time fields, 0..{MAX_GPS_WEEK}",
              "constants": "values for quantities no sample carries: " + ", ".join(_SETTABLE)
                           + " (e.g. {gnss_num_sats = 9})"},
 ))
