@@ -82,7 +82,7 @@ COMPANION = Companion(
             "position_sigma_m": 3, "velocity_sigma_mps": 3, "ins_mode": 0},
     start=_Estimate, validate=validate,
     params=(_param("attitude_error", "rad", "attitude error, 1 sigma roll, pitch, yaw (about N, E, D)",
-                   datasheet="`[0.5 deg, 0.5 deg, 2 deg]`"),
+                   datasheet='`["0.5 deg", "0.5 deg", "2 deg"]`'),
             _param("position_error", "m", "position error, 1 sigma north, east, down", datasheet="`[1, 1, 2]`"),
             _param("velocity_error", "m/s", "velocity error, 1 sigma north, east, down", datasheet="`0.05 m/s`"),
             _param("error_time_s", "s", "time constant of the errors (first-order Gauss-Markov)", "scalar", 60.0,

@@ -15,7 +15,7 @@ from imu_emulator.errors import DataError
 from imu_emulator.codegen.increments import check_nodes
 from imu_emulator.codegen.plan import EffectPlan
 from imu_emulator.codegen.signature import BIAS_TRUTH_KEYS, EMPTY3, TRUTH_KEYS, arguments
-from imu_emulator.runtime.kernels import compile_kernel
+from imu_emulator.runtime.kernels import compile_kernel, kernel_outputs
 from imu_emulator.runtime.memory import check_memory
 from imu_emulator.runtime.samples import SampleBlock
 from imu_emulator.scene.model import SampledData, Scene
@@ -38,8 +38,7 @@ class Simulation:
         #: companion sensors (imu_emulator.companions): computed after the kernel from its truth and attitude,
         #: which the kernel then outputs whether or not they were asked for; they carry state across blocks
         self._companions = any(imu.companions for imu in scene.imus)
-        self._truth_out = truth or self._companions
-        self._attitude_out = attitude or self._companions
+        self._attitude_out, self._truth_out = kernel_outputs(scene, attitude, truth)
         self._stateful = bool(self._plan.slots) or self._companions
         #: each IMU's temperature profile reaches the samples when the temperature effect is on
         self.temperature = "temperature" in scene.effects
