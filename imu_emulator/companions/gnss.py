@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from imu_emulator.companions._record import Companion, Markov, Runner, changes, normals, update_index
+from imu_emulator.companions._record import Companion, Markov, Runner, changes, hold, normals, update_index
 from imu_emulator.effects import Param
 from imu_emulator.errors import SceneError
 
@@ -109,13 +109,11 @@ class _Receiver(Runner):
         n = len(truth.s)
         r = update_index(truth.s, truth.rate_hz, v["rate_hz"], v["latency_s"])
         new = changes(r, self.report_j) & (r >= 0)
-        rows = np.empty((n, len(self.held)))
-        current = self.held
-        for i in range(n):       # at most one new solution a sample at 20 Hz; rows in between copy
-            if new[i]:
-                current = self._report(int(r[i]))
-            rows[i] = current
-        self.held = current
+        reports = np.zeros((n, len(self.held)))
+        for i in np.flatnonzero(new):       # a few a block (20 Hz at most); the rest hold them
+            reports[i] = self._report(int(r[i]))
+        rows = hold(new, reports, self.held)
+        self.held = rows[-1].copy()
         self.report_j = int(r[-1])
         for jj in [k for k in self.pending if k <= self.report_j]:
             del self.pending[jj]

@@ -92,6 +92,8 @@ def estimated_bytes(scene, truth: bool, increments: bool = False) -> int:
     for group in COMPANION_GROUPS:
         if group.option in scene_companions(scene):
             parts.append((len(group.columns) * n_imu, len(group.keys)))
+    if any(imu.companions for imu in scene.imus):
+        parts.append((4 * n_imu, 1))      # quat: the kernel computes the attitude the companions read
     if truth:
         parts.append((3 * len(TRUTH_KEYS), len(TRUTH_KEYS)))
         if EffectPlan(scene).bias_truth:
