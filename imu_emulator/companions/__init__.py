@@ -31,7 +31,8 @@ def named(scene) -> set[str]:
 def documentation_table() -> str:
     """The Markdown table of companion sensors and their parameters (README "Companion sensors" holds it; a test
     checks they agree)."""
-    rows = ["| sensor | parameter | unit (plain numbers) | default | datasheet forms | what |", "|---|---|---|---|---|---|"]
+    rows = ["| sensor | parameter | unit (plain numbers) | default | datasheet forms | what |",
+            "|---|---|---|---|---|---|"]
     for companion in COMPANIONS.values():
         for param in companion.params:
             rows.append(f"| `[imu.{companion.name}]` | `{param.key}` | {param.unit} | `{_plain(param.default)}` | "

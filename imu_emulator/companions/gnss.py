@@ -4,10 +4,10 @@ receiver gives (fix type, satellites, DOP, 1-sigma accuracies); outages named in
 
 Timing: solution j is valid at run time j / rate_hz (the first sample at or after it: the truth is the
 simulation's, at its sample instants) and reaches the output at the first sample at or after j / rate_hz +
-latency_s, where gnss_new is 1; the output holds it until the next (Samples.gnss_*). gnss_age_s is the
-time from the solution's time of validity to the sample, so a format's GPS week and time of week
-(firmware_protocols.gnss_time) of time_ns - gnss_age_s name the epoch the solution belongs to. Before the first
-solution, and for solutions valid inside an outage ([start, stop) in scene seconds), the fix is 0, the
+latency_s, where gnss_new is 1; the output holds it until the next (Samples.gnss_*). gnss_age_s is the time from
+the solution's time of validity to the sample (0 before the first solution), so a format's GPS week and time of
+week (firmware_protocols.gnss_time) of time_ns - gnss_age_s name the epoch the solution belongs to. Before the
+first solution, and for solutions valid inside an outage ([start, stop) in scene seconds), the fix is 0, the
 satellites 0 and the last position is held (zeros before any).
 
 Errors, in local north, east, down: e_j = white_j + markov_j, white ~ N(0, position_noise^2) per update and

@@ -1,5 +1,10 @@
 """The companion sensors' part of a block (imu_emulator.companions): their output arrays, and running them on the
-kernel's truth (body position, velocity, rate; Earth truth) and each IMU's attitude output."""
+kernel's truth (body position, velocity, rate; Earth truth) and each IMU's attitude output.
+
+The attitude is relative to the local level frame at the current position when the Earth model is on
+(imu_emulator.motion.earth); with it off (a flat ENU/NED scene with an origin) it is relative to the origin's
+tangent axes, taken here as the local ones: off by the distance from the origin over the Earth's radius
+(1.6e-4 rad a kilometre), as the flat scene itself is."""
 from __future__ import annotations
 
 import numpy as np
