@@ -413,6 +413,23 @@ def test_simulated_magnetometer_is_the_field_in_the_sensor_axes_and_blocks_out_o
     assert abs(p.mean() - barometer.isa(PLACE[2] + 50.0)[1][0]) < 4.5 / math.sqrt(600)
 
 
+def test_simulated_magnetometer_reads_the_heading_in_closed_form_in_an_enu_scene(run):
+    """A level body flying a circle with tangent attitude: heading psi = atan2(v_e, v_n) from the truth velocity;
+    the field in forward-right-down axes is (X cos psi + Y sin psi, -X sin psi + Y cos psi, Z), and the ENU scene's
+    body axes are forward-left-up (y, z negated)."""
+    scene, _, whole = run
+    updates = np.arange(0, len(whole), 2)          # the 50 Hz magnetometer updates at even 100 Hz samples
+    v = whole.truth["velocity_ned"][updates]
+    psi = np.arctan2(v[:, 1], v[:, 0])
+    x, y, z = magnetometer.field_ned(whole.truth["geodetic"][updates], 2025.0).T
+    frd = np.column_stack([x * np.cos(psi) + y * np.sin(psi), -x * np.sin(psi) + y * np.cos(psi), z])
+    flu = frd * [1.0, -1.0, -1.0]
+    got = whole.companion[0]["mag"][updates]
+    sigma = 4e-4 * math.sqrt(50.0)
+    assert np.abs(got - flu).max() < 5.5 * sigma
+    assert abs(np.mean(got - flu)) < 5.5 * sigma / math.sqrt(got.size)
+
+
 def test_generate_columns_carry_the_companions_and_nan_for_an_imu_without(run):
     from imu_emulator.output.columns import block_columns, scene_layout
     scene, _, whole = run
