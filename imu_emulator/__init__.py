@@ -8,7 +8,8 @@ Python API:
 The package's layers, in the order data flows (README "Project layout"; the import contract in
 pyproject.toml checks that imports run this one way):
     scene -> motion -> codegen -> runtime -> output -> live -> analysis -> commands -> cli
-with effects, geo, numerics, native, files, extensions and errors as leaves any layer may use.
+with companions (sensors beside the IMU's triads, which scene validation reads and runtime runs), effects, geo,
+numerics, native, files, extensions and errors as leaves any layer may use.
 """
 from imu_emulator.errors import DataError, ImuEmulatorError, SceneError, TargetError
 

@@ -126,9 +126,10 @@ def _write(task: Task, path: Path, identity: dict) -> float | None:
     from imu_emulator.motion import earth_truth
     from imu_emulator.scene.earth import model_on
     conventions = earth_truth.conventions(scene) if task.truth and model_on(scene) else None   # Earth columns
+    from imu_emulator.output.columns import scene_companions
     with open_writer(path, scene.imu_names, task.truth, bias_truth=sim.bias_truth,
                      temperature=sim.temperature, metadata=run_metadata(scene, batch={**identity, "truth": task.truth}),
-                     conventions=conventions) as writer:
+                     conventions=conventions, companions=scene_companions(scene)) as writer:
         for k0 in range(0, sim.n_samples, task.block):
             writer.write(sim.block(k0, min(task.block, sim.n_samples - k0)))
     return load_s

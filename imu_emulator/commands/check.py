@@ -98,6 +98,9 @@ def cmd_check(args) -> int:
         lines = imu_parameter_lines(imu, sorted(scene.effects), EFFECTS)
         for line in lines or ["no parameters"]:
             print(f"    {line}")
+        for name, values in sorted(imu.companions.items()):     # companion sensors (imu_emulator.companions)
+            print(f"    {name:16} " + ", ".join(f"{key} = {value!r}" for key, value in values.items()
+                                                 if (any(value) if isinstance(value, tuple) else value != 0.0)))
     for warning in scene.warnings:
         print(f"  warning: {warning}")
     sizes = output_sizes(scene, truth=False)

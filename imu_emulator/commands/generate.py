@@ -42,6 +42,7 @@ def cmd_generate(args) -> int:
 
 def _generate(args, scene, stopped) -> int:
     from imu_emulator.output.formats import check_output, format_of, open_writer
+    from imu_emulator.output.columns import scene_companions
     from imu_emulator.runtime.samples import counts_text
     from imu_emulator.runtime.simulation import Simulation
 
@@ -60,7 +61,8 @@ def _generate(args, scene, stopped) -> int:
                      temperature="temperature" in scene.effects, increments=bool(args.increments),
                      metadata=record.run_metadata(scene) if record.run_metadata else None, conventions=conventions,
                      covariances=variances(scene), frame=scene.frame,
-                     attitude_reference=scene.attitude_reference, effects=scene.effects) as writer:
+                     attitude_reference=scene.attitude_reference, effects=scene.effects,
+                     companions=scene_companions(scene)) as writer:
         check_output(scene, args.output, args.truth, args.allow_large, increments=bool(args.increments))
         attitude = record.attitude    # a ROS Imu message has an orientation field: the sensor frame's attitude
         with CompileStatus(scene, attitude=attitude, truth=args.truth, quiet=args.quiet, increments=args.increments):

@@ -64,6 +64,7 @@ class Stream:
         # Wire formats reference attitude to NED (Samples.quat is sensor -> NED): an ENU scene's is converted.
         # (ECEF and ECI scenes give attitude relative to local NED already)
         quat = attitude.to_ned(block.quat[i], "ENU" if self.frame == "ENU" else "NED")
+        quat, temperature, companion = _companion_fields(block, i, quat, temperature)
         increments = {}
         if block.dtheta is not None:   # over one sample period, by the sensor's own (nominal) clock
             increments = {"delta_theta": block.dtheta[i], "delta_velocity": block.dvel[i],
@@ -71,7 +72,7 @@ class Stream:
                           "attitude_change": self._attitude_change(block, quat)}
         if self.device is None:
             return Samples(time_ns, block.accel[i], block.gyro[i], quat=quat, temperature_c=temperature,
-                           **increments)
+                           **increments, **companion)
         # imported here: rotations pulls in numba, which every command would pay for at start-up otherwise
         from imu_emulator.geo.rotations import quat_to_euler, quat_to_matrix
         # A device may be asked for any field its format knows at any moment: give it all we have.
@@ -81,7 +82,7 @@ class Stream:
             nav = device_navigation(block.truth["position"], block.truth["velocity"], specific_force,
                                     *self.navigation)
         return Samples(time_ns, block.accel[i], block.gyro[i], quat=quat, euler=quat_to_euler(quat),
-                       temperature_c=temperature, **nav, **increments)
+                       temperature_c=temperature, **{**nav, **companion}, **increments)
 
     def _attitude_change(self, block, quat: np.ndarray) -> np.ndarray:
         """Each interval's attitude change from the true attitudes at its ends (attitude.attitude_change); the
@@ -192,6 +193,22 @@ class Stream:
 # Replies kept while the link is full: a driver sends a command and waits, so a handful is what it can have
 # outstanding; more means the link has stopped taking anything and the rest are counted as dropped.
 _MAX_WAITING = 64
+
+
+def _companion_fields(block, i: int, quat, temperature):
+    """The companion sensors' Samples fields of IMU i (imu_emulator.companions), and the attitude and temperature
+    as the part reports them: its own estimate's attitude (the INS error turned in on the NED side) and the
+    barometer's temperature where no temperature effect gives the IMU's. The magnetometer's vector is in the
+    sensor's axes, as accel and gyro are."""
+    if block.companion is None or not block.companion[i]:
+        return quat, temperature, {}
+    fields = dict(block.companion[i])
+    error = fields.pop("ins_attitude_error_rad", None)
+    if error is not None:
+        from imu_emulator.companions.ins import estimate_quat
+        quat = estimate_quat(quat, error)
+    baro_temperature = fields.pop("baro_temperature_c", None)
+    return quat, temperature if temperature is not None else baro_temperature, fields
 
 
 def _saturation_total(encoder) -> int:

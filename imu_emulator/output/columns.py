@@ -4,7 +4,9 @@ readers (`plot`, `align`) read, so that a column is named, ordered and counted i
 A row is one IMU at one sample (sample k of every IMU before sample k + 1): the time stamp "t" (s on the
 scene's time base plus the IMU's [[imu]] time_offset_s; Parquet stores it as integer "t_ns"), the IMU's name
 "imu", then groups of float64 columns in a fixed order, each present when its option is on (`Layout`).
-A group is per IMU (each IMU's own values) or shared by the IMUs of a sample (the truth of the body).
+A group is per IMU (each IMU's own values) or shared by the IMUs of a sample (the truth of the body). The
+companion sensors' groups (magnetometer, barometer, GNSS: imu_emulator.companions) are per IMU and present when
+any IMU of the scene carries the sensor; an IMU without it has NaN there.
 
 The Earth truth's columns belong to imu_emulator.motion.earth_truth (KEYS, COLUMNS: what `--truth` adds on
 the Earth); they are read from there, and only when a scene is on the Earth (earth_truth imports the frames).
@@ -34,6 +36,7 @@ class Group:
     in_truth: bool
     keys: tuple[str, ...]
     columns: tuple[Column, ...]
+    in_companion: bool = False     # read from SampleBlock.companion (per IMU {field: values}), NaN where absent
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -41,8 +44,22 @@ class Group:
 
     def arrays(self, block) -> list[np.ndarray]:
         """The group's values in a block: per IMU (n_imu, n, k), shared (n, k)."""
+        if self.in_companion:
+            return [_companion_array(block, key) for key in self.keys]
         found = [block.truth[key] if self.in_truth else getattr(block, key) for key in self.keys]
         return [a[:, :, None] if self.per_imu and a.ndim == 2 else a for a in found]
+
+
+def _companion_array(block, key: str) -> np.ndarray:
+    """(n_imu, n, k) of a companion field, NaN for the IMUs that do not carry its sensor."""
+    n = len(block)
+    per_imu = [None if block.companion is None else block.companion[m].get(key) for m in range(block.n_imu)]
+    width = next((1 if a.ndim == 1 else a.shape[1] for a in per_imu if a is not None), 1)
+    out = np.full((block.n_imu, n, width), np.nan)
+    for m, a in enumerate(per_imu):
+        if a is not None:
+            out[m] = a.reshape(n, width)
+    return out
 
 
 def _xyz(prefix: str, unit: str, what: str, axes: str = "xyz") -> tuple[Column, ...]:
@@ -74,6 +91,23 @@ BIAS = Group("bias_truth", True, True, ("accel_bias", "gyro_bias"),
              + _xyz("bg", "rad/s", "realized gyro bias, sensor frame"))
 
 
+#: the companion sensors' outputs (imu_emulator.companions; the ROS 2 writer reads these names)
+MAGNETOMETER = Group("magnetometer", True, False, ("mag",),
+                     _xyz("mag_", "gauss", "magnetic field measured in the sensor frame"), in_companion=True)
+BAROMETER = Group("barometer", True, False, ("pressure_pa", "baro_temperature_c"),
+                  (Column("pressure_pa", "Pa", "static pressure measured"),
+                   Column("baro_temperature_c", "degC", "the barometer's temperature")), in_companion=True)
+GNSS = Group("gnss", True, False, ("gnss_llh", "gnss_velocity_ned", "gnss_fix", "gnss_new"),
+             (Column("gnss_lat_deg", "deg", "GNSS antenna latitude, WGS-84, as last reported"),
+              Column("gnss_lon_deg", "deg", "GNSS antenna longitude, WGS-84, as last reported"),
+              Column("gnss_h_m", "m", "GNSS antenna height above the WGS-84 ellipsoid, as last reported"),
+              Column("gnss_vn", "m/s", "GNSS velocity north"), Column("gnss_ve", "m/s", "GNSS velocity east"),
+              Column("gnss_vd", "m/s", "GNSS velocity down"),
+              Column("gnss_fix", "", "fix type: 0 none, 3 3D"),
+              Column("gnss_new", "", "1 where a new solution arrived at this sample")), in_companion=True)
+COMPANION_GROUPS = (MAGNETOMETER, BAROMETER, GNSS)
+
+
 @lru_cache(maxsize=1)
 def earth_group() -> Group:
     """The Earth truth (a scene on the Earth, --truth): imu_emulator.motion.earth_truth's keys and columns (its
@@ -99,6 +133,7 @@ class Layout:
     temperature: bool = False
     increments: bool = False
     earth: bool = False
+    companions: tuple[str, ...] = ()     # the companion groups carried (COMPANION_GROUPS' options)
 
     def __post_init__(self):    # the realized biases and the Earth truth are parts of the truth
         object.__setattr__(self, "bias_truth", self.truth and self.bias_truth)
@@ -109,7 +144,8 @@ class Layout:
         groups = [SAMPLES, INCREMENTS, TEMPERATURE, TRUTH, BIAS]
         if self.earth:
             groups.append(earth_group())
-        return [g for g in groups if g.option == "samples" or getattr(self, g.option)]
+        return ([g for g in groups if g.option == "samples" or getattr(self, g.option)]
+                + [g for g in COMPANION_GROUPS if g.option in self.companions])
 
     def names(self) -> tuple[str, ...]:
         """The float64 columns after t and imu."""
@@ -127,12 +163,19 @@ def scene_layout(scene, truth: bool, increments: bool = False) -> Layout:
     from imu_emulator.scene.earth import model_on
     return Layout(truth=truth, bias_truth=truth and EffectPlan(scene).bias_truth,
                   temperature="temperature" in scene.effects, increments=increments,
-                  earth=truth and model_on(scene))
+                  earth=truth and model_on(scene), companions=scene_companions(scene))
+
+
+def scene_companions(scene) -> tuple[str, ...]:
+    """The companion groups a scene's output carries: those of the sensors any of its IMUs names."""
+    named = {name for imu in scene.imus for name in imu.companions}
+    return tuple(group.option for group in COMPANION_GROUPS if group.option in named)
 
 
 def all_names() -> set[str]:
     """Every column any output may carry (a reader refuses others)."""
-    return set(LEADING_COLUMNS) | set(Layout(True, True, True, True, True).names())
+    return set(LEADING_COLUMNS) | set(Layout(True, True, True, True, True,
+                                             tuple(g.option for g in COMPANION_GROUPS)).names())
 
 
 def block_columns(block, imu_names, layout: Layout, time_ns: bool = False) -> dict:

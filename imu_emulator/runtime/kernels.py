@@ -121,10 +121,18 @@ def _numba_kernel(path: Path, key: str, text: str, scene: Scene, attitude: bool,
     return module
 
 
+def kernel_outputs(scene: Scene, attitude: bool, truth: bool) -> tuple[bool, bool]:
+    """The outputs a scene's kernel computes when asked for `attitude` and `truth`: the companion sensors
+    (imu_emulator.companions) read the truth and each IMU's attitude, so a scene naming one computes both."""
+    companions = any(imu.companions for imu in scene.imus)
+    return attitude or companions, truth or companions
+
+
 def compile_kernel(scene: Scene, attitude: bool = True, truth: bool = False, increments: int = 0):
     """The kernel function for this scene's motion, effects and outputs (cached in memory and on disk).
     Loaded as machine code without numba when the entry holds it (imu_emulator.native.objects), else numba's.
     UntrustedCache if the cache or the entry is not the running user's alone (imu_emulator.files.trust)."""
+    attitude, truth = kernel_outputs(scene, attitude, truth)
     key = scene_key(scene, attitude, truth, increments)
     if key in _loaded:
         return _loaded[key]
@@ -189,12 +197,12 @@ def _generate(root: Path, entry: Path, key: str, scene: Scene, attitude: bool, t
 
 def is_loaded(scene: Scene, attitude: bool = True, truth: bool = False, increments: int = 0) -> bool:
     """Whether this process has this scene's kernel loaded already (compile_kernel returns it at once)."""
-    return scene_key(scene, attitude, truth, increments) in _loaded
+    return scene_key(scene, *kernel_outputs(scene, attitude, truth), increments) in _loaded
 
 
 def cached_kernel(scene: Scene, attitude: bool = True, truth: bool = False, increments: int = 0) -> tuple[Path, bool]:
     """Where this scene's kernel lives in the cache, and whether it is there compiled already (numba's index
     beside it), for `check` and the first-run status line; it generates and compiles nothing."""
-    entry = cache_dir() / scene_key(scene, attitude, truth, increments)
+    entry = cache_dir() / scene_key(scene, *kernel_outputs(scene, attitude, truth), increments)
     return entry, (entry / "kernel.py").exists() and ((entry / NATIVE).exists()
                                                       or any((entry / "__pycache__").glob("*.nbi")))

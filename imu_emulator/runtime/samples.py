@@ -28,6 +28,9 @@ class SampleBlock:
     dvel: np.ndarray | None = None     # of the specific force, m/s (imu_emulator.codegen.increments); None unless asked
     time_offset_s: np.ndarray | None = None   # (n_imu,) [[imu]] time_offset_s, added to each IMU's stamps in
                                               # every output; None when every IMU's is 0
+    companion: list | None = None   # per IMU, {field: (n,) or (n, k)} of the companion sensors it carries
+                                    # (imu_emulator.companions: Samples' field names, e.g. "mag", "gnss_llh");
+                                    # None when no IMU carries one
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
@@ -46,7 +49,9 @@ class SampleBlock:
                            temperature_c=None if self.temperature_c is None else self.temperature_c[:, start:stop],
                            dtheta=None if self.dtheta is None else self.dtheta[:, start:stop],
                            dvel=None if self.dvel is None else self.dvel[:, start:stop],
-                           time_offset_s=self.time_offset_s)
+                           time_offset_s=self.time_offset_s,
+                           companion=None if self.companion is None else [
+                               {k: v[start:stop] for k, v in fields.items()} for fields in self.companion])
 
     def time_ns(self, offset_ns: int = 0) -> np.ndarray:
         """Sample times as integer nanoseconds (exact to the ns for any sane t0), plus an offset."""
@@ -80,7 +85,10 @@ def concatenate(blocks: list[SampleBlock]) -> SampleBlock:
                        np.concatenate([b.temperature_c for b in blocks], axis=1),
                        dtheta=None if first.dtheta is None else np.concatenate([b.dtheta for b in blocks], axis=1),
                        dvel=None if first.dvel is None else np.concatenate([b.dvel for b in blocks], axis=1),
-                       time_offset_s=first.time_offset_s)
+                       time_offset_s=first.time_offset_s,
+                       companion=None if first.companion is None else [
+                           {k: np.concatenate([b.companion[m][k] for b in blocks]) for k in fields}
+                           for m, fields in enumerate(first.companion)])
 
 
 def counts_text(counts: dict[str, dict[str, int]]) -> str:

@@ -15,7 +15,7 @@ from imu_emulator.errors import DataError
 from imu_emulator.codegen.increments import check_nodes
 from imu_emulator.codegen.plan import EffectPlan
 from imu_emulator.codegen.signature import BIAS_TRUTH_KEYS, EMPTY3, TRUTH_KEYS, arguments
-from imu_emulator.runtime.kernels import compile_kernel
+from imu_emulator.runtime.kernels import compile_kernel, kernel_outputs
 from imu_emulator.runtime.memory import check_memory
 from imu_emulator.runtime.samples import SampleBlock
 from imu_emulator.scene.model import SampledData, Scene
@@ -35,14 +35,20 @@ class Simulation:
         # Sampled input is fitted before the kernel compiles: bad data is reported in a second, not after it.
         self._plan = EffectPlan(scene)
         self._keys = self._plan.keys(scene.seed)
-        self._stateful = bool(self._plan.slots)
+        #: companion sensors (imu_emulator.companions): computed after the kernel from its truth and attitude,
+        #: which the kernel then outputs whether or not they were asked for; they carry state across blocks
+        self._companions = any(imu.companions for imu in scene.imus)
+        self._attitude_out, self._truth_out = kernel_outputs(scene, attitude, truth)
+        self._stateful = bool(self._plan.slots) or self._companions
         #: each IMU's temperature profile reaches the samples when the temperature effect is on
         self.temperature = "temperature" in scene.effects
         from imu_emulator.scene.earth import model_on    # not earth_truth (frames, rotations) unless it is used
-        self._earth_truth = truth and model_on(scene)   # geodetic, NED, ECEF truth (earth_truth.KEYS)
+        # geodetic, NED, ECEF truth (earth_truth.KEYS); the companions read it
+        self._earth_truth = (truth and model_on(scene)) or self._companions
         self._position = self._series(scene.trajectory, 3 if scene.attitude_mode == "tangent" else 2, "trajectory")
         self._euler = self._series(scene.attitude, 2, "attitude")
-        self.kernel = compile_kernel(scene, attitude=attitude, truth=truth, increments=self.increments)
+        self.kernel = compile_kernel(scene, attitude=self._attitude_out, truth=self._truth_out,
+                                     increments=self.increments)
         offsets = np.array([imu.time_offset_s for imu in scene.imus])
         self._time_offsets = offsets if offsets.any() else None     # SampleBlock.time_offset_s
         # Tangent attitude holds the last defined heading (cos, sin) and pitch (cos, sin) across blocks.
@@ -57,10 +63,18 @@ class Simulation:
     def _reset_state(self) -> None:
         self._state = self._plan.initial_state(self.scene.seed)
         self._next = 0      # the run sample the state is at
+        if self._companions:
+            from imu_emulator.companions import COMPANIONS
+            self._runners = [{name: COMPANIONS[name].start(self.scene, m, values)
+                              for name, values in imu.companions.items()} for m, imu in enumerate(self.scene.imus)]
 
     @property
     def bias_truth(self) -> bool:
         return self.truth and self._plan.bias_truth
+
+    @property
+    def _bias_out(self) -> bool:
+        return self._truth_out and self._plan.bias_truth
 
     def counts(self) -> dict[str, dict[str, int]]:
         """What the effects counted so far in this run (e.g. "range.gyro.x": samples saturated at the full
@@ -68,6 +82,9 @@ class Simulation:
         found: dict[str, dict[str, int]] = {}
         for slot, m, label in self._plan.counters:
             found.setdefault(self.scene.imus[m].name, {})[label] = int(self._state[slot])
+        for m, runners in enumerate(self._runners if self._companions else ()):
+            for runner in runners.values():
+                found.setdefault(self.scene.imus[m].name, {}).update(runner.counts)
         return found
 
     @staticmethod
@@ -114,20 +131,31 @@ class Simulation:
             out.t_s[:] = t
         self._call(k0, n, s0, out)
         self._check_finite(out.accel, out.gyro, k0)
-        if self._earth_truth:
-            from imu_emulator.motion import earth_truth
-            earth_truth.fill(self.scene, t, out.truth)
+        self._after_kernel(t, s0, out)
         if self.temperature:
             from imu_emulator.effects.temperature import profile
             for m, imu in enumerate(self.scene.imus):
                 out.temperature_c[m] = profile(imu.values, t)
         return out
 
+    def _after_kernel(self, t: np.ndarray, s0: int, out: SampleBlock) -> None:
+        """The Earth truth, then the companion sensors from it (in run order: they carry state)."""
+        if self._earth_truth:
+            from imu_emulator.motion import earth_truth
+            earth_truth.fill(self.scene, t, out.truth)
+        if self._companions:
+            from imu_emulator.runtime.companions import run_companions
+            run_companions(self.scene, self._runners, t, s0, out)
+
     def _new_block(self, k0: int, t: np.ndarray) -> SampleBlock:
         n_imu, n = len(self.scene.imus), len(t)
+        companion = None
+        if self._companions:
+            from imu_emulator.runtime.companions import new_outputs
+            companion = new_outputs(self.scene, n)
         return SampleBlock(k0=k0, t_s=t, accel=np.empty((n_imu, n, 3)), gyro=np.empty((n_imu, n, 3)),
-                           quat=np.empty((n_imu, n, 4)) if self.attitude else None,
-                           truth=self._new_truth(n) if self.truth else None,
+                           quat=np.empty((n_imu, n, 4)) if self._attitude_out else None,
+                           truth=self._new_truth(n) if self._truth_out else None, companion=companion,
                            temperature_c=np.empty((n_imu, n)) if self.temperature else None,
                            dtheta=np.empty((n_imu, n, 3)) if self.increments else None,
                            dvel=np.empty((n_imu, n, 3)) if self.increments else None,
@@ -138,7 +166,7 @@ class Simulation:
         if self._earth_truth:
             from imu_emulator.motion.earth_truth import KEYS
             truth.update({k: np.empty((n, 3)) for k in KEYS})
-        if self.bias_truth:
+        if self._bias_out:
             truth.update({k: np.empty((len(self.scene.imus), n, 3)) for k in BIAS_TRUTH_KEYS})
         return truth
 
@@ -146,9 +174,9 @@ class Simulation:
         mot = self._evaluate(self._position, k0, n, s0)
         att = self._evaluate(self._euler, k0, n, s0)
         self.kernel(*arguments(k0, n, s0, mot, att, self._hold, self._keys, self._state, out.accel, out.gyro,
-                               quat=out.quat if self.attitude else None,
-                               truth=[out.truth[k] for k in TRUTH_KEYS] if self.truth else None,
-                               bias=[out.truth[k] for k in BIAS_TRUTH_KEYS] if self.bias_truth else None,
+                               quat=out.quat if self._attitude_out else None,
+                               truth=[out.truth[k] for k in TRUTH_KEYS] if self._truth_out else None,
+                               bias=[out.truth[k] for k in BIAS_TRUTH_KEYS] if self._bias_out else None,
                                increments=[out.dtheta, out.dvel] if self.increments else None))
         self._next = s0 + n
 
@@ -161,7 +189,11 @@ class Simulation:
             n = min(_REPLAY_BLOCK, s0 - self._next)
             k = self._next % self.n_samples    # the motion a looped run had at that run sample
             n = min(n, self.n_samples - k)
-            self._call(k, n, self._next, self._new_block(k, self.times(k, n)))
+            replayed = self._new_block(k, self.times(k, n))
+            s = self._next
+            self._call(k, n, s, replayed)
+            if self._companions:     # they carry state too: bring it along
+                self._after_kernel(replayed.t_s, s, replayed)
 
     def _evaluate(self, series, k0: int, n: int, s0: int):
         if series is None:
@@ -203,9 +235,9 @@ class Simulation:
     def run(self, block_size: int = 65536, progress=None) -> SampleBlock:
         """The whole scene in one SampleBlock; the kernel writes straight into the full arrays."""
         n_total = self.n_samples
-        check_memory(n_total, len(self.scene.imus), self.attitude, self.truth, "simulate",
+        check_memory(n_total, len(self.scene.imus), self._attitude_out, self._truth_out, "simulate",
                      increments=bool(self.increments), temperature=self.temperature,
-                     earth_truth=self._earth_truth, bias_truth=self.bias_truth)
+                     earth_truth=self._earth_truth, bias_truth=self._bias_out)
         whole = self._new_block(0, np.empty(n_total))
         for k0 in range(0, n_total, block_size):
             self.block(k0, min(block_size, n_total - k0), out=whole.view(k0, min(k0 + block_size, n_total)))

@@ -40,7 +40,8 @@ def _imu(table, where: str, effects: frozenset[str], taken: set[str], warnings: 
         raise SceneError(f"{where}: expected a table")
     declared = all_params()
     subtables = {p.table.split(".", 1)[1] for _, p in declared if p.table != "imu"}
-    no_unknown(table, {"name", "model", "time_offset_s", *subtables,
+    from imu_emulator.scene.companions import companion_specs, names as companion_names
+    no_unknown(table, {"name", "model", "time_offset_s", *subtables, *companion_names(),
                        *(k for _, p in declared if p.table == "imu" for k in (p.key, *p.aliases))}, where)
     name = table.get("name", where.replace("[", "").replace("]", ""))
     # names become CSV cells and labels on the wire: one printable line, no comma
@@ -93,4 +94,4 @@ def _imu(table, where: str, effects: frozenset[str], taken: set[str], warnings: 
         if effect.name in effects and effect.validate is not None:
             effect.validate(values, where)
     time_offset = number(table, "time_offset_s", where, default=0.0, bound=MAX_TIME_OFFSET_S, unit=" s")
-    return ImuSpec(name, values, time_offset)
+    return ImuSpec(name, values, time_offset, companion_specs(table, where))

@@ -18,6 +18,7 @@ from imu_emulator.scene import sources
 from imu_emulator.scene.checks import check_time_resolution, choice, no_unknown, number, shown_key, subtable
 from imu_emulator.scene.files import MAX_SCENE_BYTES, read_regular
 from imu_emulator.scene.earth import GEODETIC_KEYS, attitude_reference, earth_keys
+from imu_emulator.scene.companions import check_origin
 from imu_emulator.scene.imus import imu_specs
 from imu_emulator.scene.model import (ATTITUDE_MODES, FRAMES, MAX_ANGLE_DEG, MAX_DURATION_S, MAX_GRAVITY_MPS2,
                                       RATE_RANGE_HZ, SEED_LIMIT, Expressions, SampledData, Scene)
@@ -55,6 +56,7 @@ def from_dict(raw: Mapping[str, Any], base_dir: str | Path = ".", path: str | No
     origin, gravity_model = earth_keys(head, frame, effects, mode, "shape" in traj_table, trajectory, warnings)
     reference = attitude_reference(att_table, frame, effects, trajectory, gravity_model)
     imus = imu_specs(raw, effects, t0, duration, rate, warnings)
+    check_origin(imus, frame, origin, trajectory)
     streams = _streams(raw)
     return Scene(rate_hz=rate, duration_s=duration, frame=frame, gravity_mps2=gravity, t0_s=t0,
                  params=params, trajectory=trajectory, attitude_mode=mode, attitude=attitude,

@@ -63,6 +63,8 @@ class ImuSpec:
     # added to this IMU's time stamps in every output (its own clock's offset; not a kernel parameter: the
     # samples are taken at the scene's instants, only their stamps move)
     time_offset_s: float = 0.0
+    #: the companion sensors it carries ([imu.magnetometer], ...: imu_emulator.companions), name -> {key: value}
+    companions: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
     @property
     def lever_arm_m(self) -> tuple[float, float, float]:

@@ -26,6 +26,8 @@ second = [time] = s = sec
 radian = [angle] = rad
 minute = 60 * second = min
 hour = 60 * minute = h = hr
+day = 24 * hour
+year = 365.25 * day = yr
 hertz = 1 / second = Hz
 degree = pi / 180 * radian = deg = °
 degree_per_second = degree / second = dps
@@ -34,6 +36,11 @@ percent = 0.01 = %
 kelvin = [temperature] = K = degC
 
 ppm = 1e-6
+gauss = [magnetic_field] = G = Gs
+tesla = 1e4 * gauss = T
+pascal = [pressure] = Pa
+hectopascal = 100 * pascal = hPa
+bar = 1e5 * pascal
 """
 # The longest text read as a value with units, and the deepest nesting of parentheses and sqrt(): datasheet
 # forms are a few words long; the bounds keep a scene file from making the parser (or pint) work for minutes.

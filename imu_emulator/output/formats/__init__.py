@@ -52,17 +52,18 @@ def check_path(path: str | Path) -> Path:
 def open_writer(path: str | Path, imu_names, truth: bool, bias_truth: bool = False, temperature: bool = False,
                 increments: bool = False, metadata: dict | None = None, conventions: list[str] | None = None,
                 covariances: dict | None = None, frame: str | None = None, attitude_reference: str = "local_level",
-                effects=()):
+                effects=(), companions=()):
     """The writer for the output file's suffix (see each format's module). `conventions` (Earth scenes with
     truth) adds the Earth truth; `metadata` is what Parquet records in its footer; `covariances`, `frame`,
-    `attitude_reference` and `effects` are what MCAP needs beyond the columns."""
+    `attitude_reference` and `effects` are what MCAP needs beyond the columns; `companions` the companion sensors'
+    column groups (imu_emulator.output.columns.scene_companions)."""
     path = check_path(path)
     record = format_of(path)
     if increments and not record.increments:
         raise ImuEmulatorError(f"{path}: --increments: {record.description} has no field for integrated outputs; "
                                f"write {' or '.join(s for s, f in FORMATS.items() if f.increments)}")
     layout = Layout(truth=truth, bias_truth=bias_truth, temperature=temperature, increments=increments,
-                    earth=bool(truth and conventions))
+                    earth=bool(truth and conventions), companions=tuple(companions))
     return record.open(path, Contents(list(imu_names), layout, list(conventions) if layout.earth else [],
                                       metadata=metadata, covariances=covariances, frame=frame,
                                       attitude_reference=attitude_reference, effects=frozenset(effects)))

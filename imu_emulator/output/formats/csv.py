@@ -58,7 +58,7 @@ class CsvWriter(FinishOnExit):
 
 
 def csv_rows(block: SampleBlock, imu_names, truth: bool, bias_truth: bool = False,
-             temperature: bool = False, increments: bool = False, earth: bool = False) -> str:
+             temperature: bool = False, increments: bool = False, earth: bool = False, companions=()) -> str:
     """The CSV rows of one block (no header): one row per IMU per sample, sample k of every IMU before sample k+1.
 
     Numbers are the shortest text that reads back as the same double, like Python's repr (imu_emulator.output.csv_text;
@@ -66,17 +66,17 @@ def csv_rows(block: SampleBlock, imu_names, truth: bool, bias_truth: bool = Fals
     """
     from imu_emulator.output.csv_text import RowWriter
     return bytes(_csv_text(RowWriter(imu_names), block, imu_names, truth, bias_truth, temperature, increments,
-                           earth)).decode()
+                           earth, companions)).decode()
 
 
 def _csv_text(row_writer, block: SampleBlock, imu_names, *options) -> bytes | memoryview:
-    """options: Layout's fields in order (truth, bias_truth, temperature, increments, earth)."""
+    """options: Layout's fields in order (truth, bias_truth, temperature, increments, earth, companions)."""
     text = row_writer.rows(csv_segments(block, len(imu_names), *options), len(block))
     return _pyarrow_csv_rows(block, imu_names, *options).encode() if text is None else text
 
 
 def csv_segments(block: SampleBlock, n_imu: int, truth: bool, bias_truth: bool = False, temperature: bool = False,
-                 increments: bool = False, earth: bool = False) -> list[tuple[bool, np.ndarray]]:
+                 increments: bool = False, earth: bool = False, companions=()) -> list[tuple[bool, np.ndarray]]:
     """The numeric columns of a CSV row in order, as groups (per_imu, matrix) for csv_text.rows: a per-IMU
     matrix has a row per IMU per sample (IMU fastest), the others (time without offsets, truth) a row per sample.
     Neighbouring column groups of the same kind (imu_emulator.output.columns) are one matrix, formatted in one
@@ -88,7 +88,7 @@ def csv_segments(block: SampleBlock, n_imu: int, truth: bool, bias_truth: bool =
     segments = [(True, block.imu_t_s().T.reshape(-1, 1)) if block.time_offset_s is not None
                 else (False, block.t_s[:, None])]
     runs: list[tuple[bool, list]] = []
-    for group in Layout(truth, bias_truth, temperature, increments, earth).groups():
+    for group in Layout(truth, bias_truth, temperature, increments, earth, tuple(companions)).groups():
         if runs and runs[-1][0] == group.per_imu:
             runs[-1][1].extend(group.arrays(block))
         else:
@@ -98,13 +98,14 @@ def csv_segments(block: SampleBlock, n_imu: int, truth: bool, bias_truth: bool =
 
 
 def _pyarrow_csv_rows(block: SampleBlock, imu_names, truth: bool, bias_truth: bool = False,
-                      temperature: bool = False, increments: bool = False, earth: bool = False) -> str:
+                      temperature: bool = False, increments: bool = False, earth: bool = False, companions=()) -> str:
     """csv_rows through pyarrow's CSV writer (double-conversion's shortest mode), which has a text for NaN and
     infinities; about 180 ns a number."""
     import pyarrow as pa
     import pyarrow.csv as pa_csv
 
-    columns = block_columns(block, imu_names, Layout(truth, bias_truth, temperature, increments, earth))
+    columns = block_columns(block, imu_names, Layout(truth, bias_truth, temperature, increments, earth,
+                                                     tuple(companions)))
     # pyarrow's "needed" quotes every string; plain names go unquoted, as they always did.
     plain = not any(ch in name for name in imu_names for ch in '"\r\n,')
     sink = pa.BufferOutputStream()

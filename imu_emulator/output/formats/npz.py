@@ -14,7 +14,7 @@ import numpy as np
 
 from imu_emulator.output.atomic import AtomicOutput, FinishOnExit, output_error
 from imu_emulator.output.base import Contents, Format
-from imu_emulator.output.columns import TIME, Layout
+from imu_emulator.output.columns import COMPANION_GROUPS, TIME, Layout
 from imu_emulator.runtime.memory import check_fits
 from imu_emulator.runtime.samples import SampleBlock, concatenate
 
@@ -62,6 +62,10 @@ class NpzWriter(FinishOnExit):
             arrays["t_imu"] = data.imu_t_s()
         if self.layout.truth:
             arrays.update(data.truth)
+        for group in self.layout.groups():     # companion sensors: (imu, n[, k]) each, NaN for IMUs without
+            if group.in_companion:
+                arrays.update({key: array[:, :, 0] if array.shape[2] == 1 else array
+                               for key, array in zip(group.keys, group.arrays(data))})
         if self.conventions:
             arrays["conventions"] = np.array(self.conventions)
         try:
@@ -84,6 +88,12 @@ def estimated_bytes(scene, truth: bool, increments: bool = False) -> int:
     if any(imu.time_offset_s for imu in scene.imus):
         parts.append((n_imu, 1))                                      # t_imu
     text = 4 * max(len(name) for name in scene.imu_names) * n_imu     # imu_names, a unicode array
+    from imu_emulator.output.columns import scene_companions
+    for group in COMPANION_GROUPS:
+        if group.option in scene_companions(scene):
+            parts.append((len(group.columns) * n_imu, len(group.keys)))
+    if any(imu.companions for imu in scene.imus):
+        parts.append((4 * n_imu, 1))      # quat: the kernel computes the attitude the companions read
     if truth:
         parts.append((3 * len(TRUTH_KEYS), len(TRUTH_KEYS)))
         if EffectPlan(scene).bias_truth:
@@ -119,7 +129,7 @@ def read_columns(path: Path, names: tuple[str, ...]) -> dict | None:
         columns = {}
         if TIME.name in names:
             columns[TIME.name] = (rows(data["t_imu"], True) if "t_imu" in data else rows(data["t"], False))[:, 0]
-        for group in Layout(True, True, True, True, True).groups():
+        for group in Layout(True, True, True, True, True, tuple(g.option for g in COMPANION_GROUPS)).groups():
             wanted = [name for name in group.names if name in names]
             if not wanted:
                 continue
