@@ -42,6 +42,7 @@ import struct
 import numpy as np
 
 from firmware_protocols import attitude
+from firmware_protocols.axes import to_body_axes
 from firmware_protocols.base import Samples
 from firmware_protocols.devices.base import Device, SinceLastOutput, single
 from firmware_protocols.registry import attach_device
@@ -60,10 +61,11 @@ _IDENTITY = (1.0, 0.0, 0.0, 0.0)
 
 
 def aligned(one: Samples, sensor, local, frame: str) -> Samples:
-    """One sample as an MTi with alignment rotations outputs it. `sensor` (RotSensor, q_OS) rotates sensor-frame
+    """One sample (in the sensor frame S, forward-left-up: axes.to_body_axes) as an MTi with alignment rotations
+    outputs it. `sensor` (RotSensor, q_OS) rotates sensor-frame
     vectors into the object frame O: x_O = q_OS x_S q_OS*, and the orientation becomes q_LO = q_LS (x) q_OS*.
     `local` (RotLocal, q_L'L) turns the declared reference frame L (ENU, NED or NWU): q_L'O = q_L'L (x) q_LO,
-    done here on the Samples' NED attitude as q_NL (x) q_L'L (x) q_LN. Velocity stays in the unturned frame;
+    done here on the sample's S -> NED attitude as q_NL (x) q_L'L (x) q_LN. Velocity stays in the unturned frame;
     an absent attitude is the documented default (identity). UNVERIFIED: which way each quaternion turns
     (q_OS or q_SO) is this module's reading, not checked against Xsens' manual; ArduPilot's two rotations
     (local (0, 1/sqrt 2, 1/sqrt 2, 0): ENU -> NED; sensor (0, 1, 0, 0): FLU -> FRD) are half-turns, the same
@@ -174,10 +176,11 @@ class XsensDevice(Device):
         encoder = self._encoder(due)
         encoder.packet_counter = self.counter
         self.counter = (self.counter + 1) & 0xFFFF
-        one = self.increments.attach(single(samples, i))
+        # the MTi's sensor frame S first: the alignment rotations are defined on it
+        one = to_body_axes(self.increments.attach(single(samples, i)), encoder.body_axes)
         if self.alignment[0] != _IDENTITY or self.alignment[1] != _IDENTITY:
             one = aligned(one, self.alignment[0], self.alignment[1], self.frame)
-        data = encoder.encode(one).data
+        data = encoder.encode_sensor_axes(one).data
         self.increments.sent(encoder)
         return data
 

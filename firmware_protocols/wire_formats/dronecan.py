@@ -287,6 +287,11 @@ def can_id_for(dtid: int, node_id: int, priority: int) -> int:
 
 class _DroneCanEncoder:
     """Shared by the three messages: options, transfer id state, framing and saturation bookkeeping."""
+    # Axes: uavcan.equipment.ahrs.RawIMU / Solution DSDL: "The body frame is forward-right-down" (FRD), the
+    # orientation relative to NED. Samples are already so.
+    body_axes, reference = "FRD", "NED"
+    axes_source = "DroneCAN DSDL uavcan.equipment.ahrs (RawIMU, Solution): body frame forward-right-down, NED"
+
 
     message: _Message
 

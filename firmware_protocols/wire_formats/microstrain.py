@@ -112,6 +112,11 @@ GPS_FLAGS_DEFAULT = 0x1C
 
 class MipEncoder:
     """Samples -> one MIP 0x80 packet per sample, fields in the order given."""
+    # Axes: the MIP sensor frame is x forward, y right, z down (at rest, level, scaled accel z reads -1 g) and the
+    # attitude is vehicle -> NED (mip_sdk data_sensor.h: p_veh = q^-1 p_ned q). Samples are already so.
+    body_axes, reference = "FRD", "NED"
+    axes_source = "MicroStrain MIP DCP: sensor frame x forward y right z down (-1 g on z at rest); data_sensor.h NED"
+
 
     def __init__(self, fields=DEFAULT_FIELDS, gps_week_offset: int = 0, gps_flags: int = GPS_FLAGS_DEFAULT,
                  descriptor_set: int = SENSOR_DATA_SET, filter_state: int = FILTER_STATE_FULL_NAV):
