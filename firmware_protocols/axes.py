@@ -43,7 +43,9 @@ def reexpress(samples: Samples, source: str, target: str) -> Samples:
     (q_fs, signs_s), (q_ft, signs_t) = BODY_AXES[source], BODY_AXES[target]
     signs = signs_s * signs_t                    # C_TS = C_TF C_FS, both diagonal
     q_st = attitude.multiply(attitude.conjugate(q_fs), q_ft)
-    changes = {name: getattr(samples, name) * signs for name in VECTOR_FIELDS if getattr(samples, name) is not None}
+    # + 0.0 turns the -0.0 a negated zero would be into +0.0: a part at rest sends the zero a native one does
+    changes = {name: getattr(samples, name) * signs + 0.0 for name in VECTOR_FIELDS
+               if getattr(samples, name) is not None}
     quat = samples.quat
     if quat is None and samples.euler is not None:
         quat = attitude.from_euler(samples.euler)
