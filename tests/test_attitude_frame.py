@@ -51,9 +51,9 @@ def test_quaternion_on_the_wire_is_the_frd_body_referenced_to_ned(tmp_path, fram
     want = Rotation.from_matrix(NED_FROM_ENU) * scene * Rotation.from_matrix(FLU_FROM_FRD) if frame == "ENU" else scene
     # float32 on the wire: a few 1e-7 rad
     assert np.all((want.inv() * wire).magnitude() < 1e-6)
-    # What a reader does with it: the FRD specific force (what every FRD wire carries) rotated by the wire
-    # attitude is the NED specific force; the scene's circle is level, so its down component is -g (9.80665)
+    # What a reader does with it: the FRD specific force (what every FRD wire carries, as reference() gives it)
+    # rotated by the wire attitude is the NED specific force; the scene's circle is level, so its down component
+    # is -g (standard gravity, 9.80665)
     _, _, accel, _ = reference(scene_path)
-    frd = accel[:n] @ FLU_FROM_FRD if frame == "ENU" else accel[:n]
-    down = wire.apply(frd)[:, 2]
+    down = wire.apply(accel[:n])[:, 2]
     np.testing.assert_allclose(down, -9.80665, atol=1e-4)      # float32 quaternion: ~1e-6 relative

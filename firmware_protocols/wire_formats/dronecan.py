@@ -287,10 +287,10 @@ def can_id_for(dtid: int, node_id: int, priority: int) -> int:
 
 class _DroneCanEncoder:
     """Shared by the three messages: options, transfer id state, framing and saturation bookkeeping."""
-    # Axes: uavcan.equipment.ahrs.RawIMU / Solution DSDL: "The body frame is forward-right-down" (FRD), the
-    # orientation relative to NED. Samples are already so.
-    body_axes, reference = "FRD", "NED"
-    axes_source = "DroneCAN DSDL uavcan.equipment.ahrs (RawIMU, Solution): body frame forward-right-down, NED"
+    # Axes: uavcan.equipment.ahrs.RawIMU (dronecan's dsdl_specs, 1003.RawIMU.uavcan): "linear acceleration along X
+    # (forward positive) ... Y (right positive) ... Z (down positive)", rates about the same axes; Solution is
+    # "Inertial data and orientation in body frame", its orientation w.r.t. NED as the autopilots read it.
+    axes_source = "DSDL 1003.RawIMU: X forward, Y right, Z down positive; Solution: body frame, NED"
 
 
     message: _Message

@@ -186,7 +186,7 @@ class XsensEncoder:
     # bits (the `frame` option): choosing NED or NWU turns L only ("apply the following rotation matrix in
     # RotLocal", MTi User Manual MT0605P.E §4.2.3/5.4), never S. So encode re-expresses the FRD Samples in FLU.
     body_axes, reference = "FLU", "ENU"     # reference: the `frame` option's (the instance's self.reference)
-    axes_source = "Xsens MTi User Manual MT0605P.E 4.2: sensor frame S x forward y left z up; L = ENU, NED or NWU"
+    axes_source = "Xsens MT0605P.E 4.2: sensor frame S x fwd y left z up; L by option frame: ENU, NED, NWU"
 
 
     def __init__(self, items=DEFAULT_ITEMS, precision: str = "float32", frame: str = "ENU",
