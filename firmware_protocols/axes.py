@@ -12,7 +12,8 @@ A format whose body axes are not FRD calls `to_body_axes` once, on entry to `enc
 """
 from __future__ import annotations
 
-import dataclasses
+import copy
+import functools
 
 import numpy as np
 
@@ -40,9 +41,7 @@ def reexpress(samples: Samples, source: str, target: str) -> Samples:
         raise ValueError(f"body axes: {source!r} -> {target!r}; known: {', '.join(BODY_AXES)}")
     if source == target:
         return samples
-    (q_fs, signs_s), (q_ft, signs_t) = BODY_AXES[source], BODY_AXES[target]
-    signs = signs_s * signs_t                    # C_TS = C_TF C_FS, both diagonal
-    q_st = attitude.multiply(attitude.conjugate(q_fs), q_ft)
+    signs, quat_index, quat_signs, change_signs = _maps(source, target)
     # + 0.0 turns the -0.0 a negated zero would be into +0.0: a part at rest sends the zero a native one does
     changes = {name: getattr(samples, name) * signs + 0.0 for name in VECTOR_FIELDS
                if getattr(samples, name) is not None}
@@ -50,15 +49,36 @@ def reexpress(samples: Samples, source: str, target: str) -> Samples:
     if quat is None and samples.euler is not None:
         quat = attitude.from_euler(samples.euler)
     if quat is not None:
-        changes["quat"] = attitude.canonical(attitude.multiply(quat, q_st))
+        changes["quat"] = attitude.canonical(quat[:, quat_index] * quat_signs)
         if samples.euler is not None:
             changes["euler"] = attitude.to_euler(changes["quat"])
         if samples.quat is None:          # the caller gave euler alone: keep it that way
             del changes["quat"]
     if samples.attitude_change is not None:
-        changes["attitude_change"] = attitude.canonical(attitude.multiply(
-            attitude.multiply(attitude.conjugate(q_st), samples.attitude_change), q_st))
-    return dataclasses.replace(samples, **changes)
+        changes["attitude_change"] = attitude.canonical(samples.attitude_change * change_signs)
+    out = copy.copy(samples)           # the fields are checked already: no __post_init__ (dataclasses.replace)
+    for name, value in changes.items():
+        setattr(out, name, value)
+    return out
+
+
+@functools.lru_cache(maxsize=None)
+def _maps(source: str, target: str) -> tuple:
+    """What reexpress applies, as index and sign arrays (a few microseconds a call, where the quaternion products
+    they stand for cost tens: the live path runs this per block and a device per sample): the vectors' signs
+    C_TS; q -> q (x) q_ST as a signed permutation of (w, x, y, z); dq -> q_ST* (x) dq (x) q_ST as signs. Both are
+    exact because q_ST is the identity or a half turn about an axis (a basis quaternion), which the matrices,
+    computed here from attitude.multiply itself, confirm."""
+    (q_fs, signs_s), (q_ft, signs_t) = BODY_AXES[source], BODY_AXES[target]
+    q_st = attitude.multiply(attitude.conjugate(q_fs), q_ft)
+    basis = np.eye(4)
+    right = np.array([attitude.multiply(e, q_st) for e in basis]).T          # column j: e_j (x) q_ST
+    change = np.array([attitude.multiply(attitude.multiply(attitude.conjugate(q_st), e), q_st) for e in basis]).T
+    index = np.argmax(np.abs(right), axis=1)
+    quat_signs = right[np.arange(4), index]
+    if not (np.allclose(np.abs(right).sum(axis=1), 1.0) and np.allclose(change, np.diag(np.diag(change)))):
+        raise ValueError(f"body axes {source} -> {target}: not a half turn about an axis")
+    return signs_s * signs_t, index, quat_signs, np.diag(change).copy()
 
 
 def to_body_axes(samples: Samples, axes: str) -> Samples:

@@ -110,6 +110,7 @@ class XsensDevice(Device):
         self.firmware = bytes(int(p) & 0xFF for p in str(firmware).split("."))[:3].ljust(3, b"\0")
         self.measuring = True
         self.alignment = {0: _IDENTITY, 1: _IDENTITY}
+        self._block = self._block_in_s = None     # the last block given to output, and it in sensor axes
         # The configuration as the client would read it back: XDI with precision/frame bits, frequency.
         every = [n for n in encoder.items if n in ("packet_counter", "sample_time_fine", "sample_time_coarse")]
         self.config = [(self._xdi(n, precision, frame), 0xFFFF if n in every else min(0xFFFE, int(round(rate_hz))))
@@ -166,6 +167,11 @@ class XsensDevice(Device):
     def output(self, samples: Samples, i: int) -> bytes:
         tick = self.tick
         self.tick += 1
+        # The MTi's sensor frame S (forward-left-up) first, once per block: the alignment rotations are defined
+        # on S, and the increments summed since the last packet are the same sums seen from S.
+        if samples is not self._block:
+            self._block, self._block_in_s = samples, to_body_axes(samples, XsensEncoder.body_axes)
+        samples = self._block_in_s
         self.increments.add(samples, i)
         if not self.measuring or not self.plan:
             return b""
@@ -176,8 +182,7 @@ class XsensDevice(Device):
         encoder = self._encoder(due)
         encoder.packet_counter = self.counter
         self.counter = (self.counter + 1) & 0xFFFF
-        # the MTi's sensor frame S first: the alignment rotations are defined on it
-        one = to_body_axes(self.increments.attach(single(samples, i)), encoder.body_axes)
+        one = self.increments.attach(single(samples, i))
         if self.alignment[0] != _IDENTITY or self.alignment[1] != _IDENTITY:
             one = aligned(one, self.alignment[0], self.alignment[1], self.frame)
         data = encoder.encode_sensor_axes(one).data
