@@ -261,3 +261,34 @@ def test_enu_and_ned_versions_of_one_motion_give_the_same_bytes_on_every_wire(mo
         assert set(a.fields) == set(b.fields)
         for key in a.fields:           # float32: within a unit in the last place of values up to pi
             np.testing.assert_allclose(a.fields[key], b.fields[key], rtol=0, atol=4e-7, err_msg=key)
+
+
+def _xbus(mid: int, data: bytes = b"") -> bytes:
+    """An Xbus message from the host, built from the spec's rules (preamble FA, bus id FF, byte-sum checksum)."""
+    body = bytes([0xFF, mid, len(data)]) + data
+    return b"\xfa" + body + bytes([(0x100 - sum(body)) & 0xFF])
+
+
+@pytest.mark.parametrize("setting, bits", [("ENU", 0x0), ("NED", 0x4), ("NWU", 0x8)])
+def test_xsens_device_follows_the_coordinate_system_a_driver_configures(setting, bits):
+    """GoToConfig, SetOutputConfiguration with Quaternion and Acceleration (the quaternion's XDI carrying the
+    coordinate-system bits), GoToMeasurement; then a level part at rest facing north (FRD Samples: identity
+    attitude, f = (0, 0, -g)) goes out as the MTi's sensor frame referenced to what was configured: acceleration
+    z = +g in every setting, the euler angles of MT0605P.E's table (XSENS_RPY) computed from the quaternion."""
+    import struct
+    device = firmware_protocols.create_device("xsens-mtdata2", 100.0)
+    device.receive(_xbus(0x30), whole=True)
+    config = struct.pack(">HH", 0x2010 | bits, 100) + struct.pack(">HH", 0x4020, 100)
+    device.receive(_xbus(0xC0, config), whole=True)
+    device.receive(_xbus(0x10), whole=True)
+    block = Samples(np.arange(3) * 10_000_000, np.tile([0.0, 0.0, -G], (3, 1)), np.zeros((3, 3)),
+                    quat=np.tile([1.0, 0.0, 0.0, 0.0], (3, 1)), euler=np.zeros((3, 3)))
+    packets = firmware_protocols.create_decoder("xsens-mtdata2").feed(b"".join(device.output(block, i)
+                                                                               for i in range(3)))
+    assert len(packets) == 3
+    for packet in packets:
+        assert packet.fields["frame"] == setting
+        np.testing.assert_allclose(packet.fields["accel"], (0.0, 0.0, G), rtol=1e-7)
+        w, x, y, z = packet.fields["quat"]
+        rpy = Rotation.from_quat([x, y, z, w]).as_euler("ZYX", degrees=True)[::-1]
+        np.testing.assert_allclose(np.mod(rpy - XSENS_RPY[setting] + 180.0, 360.0) - 180.0, 0.0, atol=1e-4)
