@@ -94,10 +94,9 @@ class Stream:
 
     def _attitude_change(self, block, quat: np.ndarray) -> np.ndarray:
         """Each interval's attitude change from the true attitudes at its ends (attitude.attitude_change), in the
-        scene's body axes (reexpress turns it with the rest); the
-        last sample of the previous block is kept for the next block's first interval. The stream's first
-        sample, and the first after a loop restarts the scene, has no attitude before it: its change is the
-        rotation by its increment."""
+        scene's body axes (reexpress turns it with the rest); the last sample of the previous block is kept for the
+        next block's first interval. The stream's first sample, and the first after a loop restarts the scene, has
+        no attitude before it: its change is the rotation by its increment."""
         dtheta = block.dtheta[self.imu_index]
         if self._before is not None and self._before[0] == block.k0:
             quat_first, dtheta_first = self._before[1], self._before[2]
