@@ -15,6 +15,7 @@ from firmware_protocols.wire_formats.bosch import BoschMM7Decoder, BoschMM7Encod
 SETTINGS = settings(derandomize=True, deadline=None, max_examples=60,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 G = 9.80665
+FLU = np.array([1.0, -1.0, -1.0])      # Samples are FRD; the chip reports forward-left-up axes
 LAYOUT = {  # id -> {signal: (start bit, length)}, little-endian
     0x174: {"rate": (0, 16), "stat": (20, 4), "temp": (24, 8), "acc": (32, 16), "cnt": (48, 4), "acc_stat": (52, 4),
             "crc": (56, 8)},
@@ -50,8 +51,10 @@ def test_crc_check_value():
 
 
 def test_spec_layout_and_default_axes():
-    # forward-left-up sensor frame: yaw = +z, roll = -x (Bosch's driver), pitch = +y; AX/AY/AZ = +x/+y/+z
-    sample = Samples.single(0, [0.1, -0.2, 9.80665], [0.01, -0.02, 0.03], temperature_c=[31.4])
+    # The chip's forward-left-up axes: yaw = +z, roll = -x (Bosch's driver), pitch = +y; AX/AY/AZ = +x/+y/+z.
+    # Samples are forward-right-down: this one is (0.1, -0.2, 9.80665) and (0.01, -0.02, 0.03) in FLU, a part
+    # at rest reading +1 g on AZ as the datasheet's upright part does.
+    sample = Samples.single(0, [0.1, 0.2, -9.80665], [0.01, 0.02, -0.03], temperature_c=[31.4])
     frames = BoschMM7Encoder().encode(sample)
     assert [int(f["can_id"]) for f in frames] == [0x174, 0x178, 0x17C]
     assert not frames["extended"].any() and (frames["length"] == 8).all()
@@ -88,6 +91,7 @@ def test_round_trip_with_saturation(gyro, accel, temp):
     encoder = BoschMM7Encoder()
     frames = encoder.encode(Samples.single(0, accel, gyro, temperature_c=[temp]))
     tx1, tx2, tx3 = (spec_decode(int(f["can_id"]), frame_bytes(f)) for f in frames)
+    gyro, accel = np.asarray(gyro) * FLU + 0.0, np.asarray(accel) * FLU + 0.0     # the chip's axes
     wire_rates = (gyro[2], -gyro[0], gyro[1])
     wire_accels = (accel[1], accel[0], accel[2])
     rate_lo, rate_hi = math.radians(-163.84), math.radians(65534 * 0.005 - 163.84)
@@ -107,7 +111,8 @@ def test_round_trip_with_saturation(gyro, accel, temp):
 
 def test_saturation_edges_never_reach_ffff():
     encoder = BoschMM7Encoder()
-    frames = encoder.encode(Samples.single(0, [1e6, -1e6, 0.0], [1e6, -1e6, 1e6], temperature_c=[1000.0]))
+    # FLU accel (1e6, -1e6, 0) and rate (1e6, -1e6, 1e6), given as FRD Samples
+    frames = encoder.encode(Samples.single(0, [1e6, 1e6, 0.0], [1e6, 1e6, -1e6], temperature_c=[1000.0]))
     raw = [(int.from_bytes(frame_bytes(f)[0:2], "little"), int.from_bytes(frame_bytes(f)[4:6], "little"))
            for f in frames]
     assert raw == [(65534, 0), (0, 65534), (0, 32768)]   # yaw +z, roll -x, pitch +y; AY, AX, AZ
@@ -142,7 +147,8 @@ def test_decoder_drops_incomplete_and_bad_sets():
     packets = decoder.feed_frames(damaged)
     assert [p.fields["counter"] for p in packets] == [0, 1, 3, 5, 6, 8, 9]
     for p in packets:
-        np.testing.assert_allclose(p.fields["gyro"], samples.gyro[p.fields["counter"]], atol=math.radians(0.003))
+        np.testing.assert_allclose(p.fields["gyro"], samples.gyro[p.fields["counter"]] * FLU,      # chip axes
+                                   atol=math.radians(0.003))
     assert decoder.stats.bad_checksum == 1 and decoder.stats.ignored_frames > 0
 
 

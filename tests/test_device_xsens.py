@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from test_stream_support import Emulator, read_for, reference, write_scene
+from test_stream_support import FRD_FROM_SCENE, Emulator, read_for, reference, write_scene
 
 
 def message(mid: int, data: bytes = b"") -> bytes:
@@ -125,9 +125,11 @@ def test_ardupilot_configuration_then_exactly_the_configured_items(tmp_path):
     assert set(np.diff(fine)) == {100} and set(np.diff(counter) % 65536) == {1}
     k = np.rint(fine * 1e-4 * rate).astype(int)
     t_ns = k * (10**9 // rate)
-    # Sensor alignment pi about x: the object frame is x, -y, -z of the sensor's
+    # Sensor alignment pi about x: the object frame is x, -y, -z of the sensor's, whose own axes are forward-left-up
+    # (reference() gives forward-right-down: FRD_FROM_SCENE["ENU"] turns it back), so ArduPilot gets FRD
     got_acc = np.array([struct.unpack(">3f", p[0x4020]) for p in packets])
-    expected = Rotation.from_quat([*sensor_q[1:], sensor_q[0]]).apply(accel[k])
+    expected = Rotation.from_quat([*sensor_q[1:], sensor_q[0]]).apply(accel[k] * FRD_FROM_SCENE["ENU"])
+    np.testing.assert_allclose(got_acc, accel[k], rtol=1e-6, atol=1e-6)        # the same thing, said directly
     np.testing.assert_allclose(got_acc, expected, rtol=1e-6, atol=1e-6)
     # Quaternion: q_L'O = q_L'L q_LS q_OS*, the scene's ENU attitude turned to NED, body turned to x, -y, -z
     truth = Simulation(scene, truth=True).block(0, int(k.max()) + 1)

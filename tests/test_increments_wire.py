@@ -4,6 +4,8 @@ decode (pydronecan; the vendors' layouts unpacked here with struct) to the analy
 Motion with closed-form integrals (ENU, level): yaw = Ω t + A sin(w t), z = c t³, so the body rate is
 (0, 0, Ω + A w cos w t) and the specific force (0, 0, g + 6 c t):
     Δθ_z = Ω T + A (sin w t_k − sin w t_k−1),   Δv_z = g T + 3 c (t_k² − t_k−1²),   x and y components 0.
+Those are the ENU scene's forward-left-up body axes, which Xsens' sensor frame shares; the forward-right-down
+wires (DroneCAN, VectorNav, MIP) carry them with z negated (issue 24: the part sits upright in any scene).
 """
 from __future__ import annotations
 
@@ -45,12 +47,15 @@ gravity = true
 """
 
 
-def analytic():
+def analytic(axes: str = "FRD"):
+    """The closed-form increments in the wire's body axes: "FLU" (the scene's) or "FRD" (z negated)."""
     t = np.arange(N + 1, dtype=float) / RATE - 1.0 / RATE      # t_-1 .. t_N-1
     dtheta = np.zeros((N, 3))
     dvel = np.zeros((N, 3))
     dtheta[:, 2] = OMEGA / RATE + A * np.diff(np.sin(W * t))
     dvel[:, 2] = G0 / RATE + 3 * C * np.diff(t ** 2)
+    if axes == "FRD":
+        dtheta[:, 2], dvel[:, 2] = -dtheta[:, 2], -dvel[:, 2]
     return dtheta, dvel
 
 
@@ -95,7 +100,7 @@ def test_dronecan_rawimu_integrals_are_the_increments(tmp_path):
     # the tolerance would see a rate x interval stand-in: the rate at t_k times T misses the yaw's curvature
     t_k = np.arange(N) / RATE
     rate_times_t = (OMEGA + A * W * np.cos(W * t_k)) / RATE
-    assert np.abs(rate_times_t - dtheta[:, 2]).max() > 1000 * 2 * F32 * np.abs(dtheta).max()
+    assert np.abs(rate_times_t - analytic("FLU")[0][:, 2]).max() > 1000 * 2 * F32 * np.abs(dtheta).max()
 
 
 def _vectornav_packets(data: bytes, payload_size: int):
@@ -132,7 +137,7 @@ def test_xsens_delta_q_and_delta_v(tmp_path):
             {0x8030: dq, 0x4010: dv}[xdi & 0xFFF0].append(values)
             j += 3 + size
         i += 4 + length + 1
-    dtheta, dvel = analytic()
+    dtheta, dvel = analytic("FLU")          # the MTi's sensor frame: forward-left-up
     # DeltaQ: the rotation by the increment, scalar first (scipy: scalar last)
     expected_q = Rotation.from_rotvec(dtheta).as_quat()[:, [3, 0, 1, 2]]
     assert_f32_close(np.array(dq), expected_q, 1.0)

@@ -50,13 +50,21 @@ def write_scene(directory: Path, rate: float = 200, duration: float = 5.0, extra
     return path
 
 
+# An ENU scene's body is forward-left-up; every stream sends the part's forward-right-down axes (issue 24): the
+# half turn about x, y and z negated. NED scenes are forward-right-down already.
+FRD_FROM_SCENE = {"ENU": np.array([1.0, -1.0, -1.0]), "NED": np.ones(3)}
+
+
 def reference(scene_path: Path, imu: int = 0):
-    """The samples the emulator should send, computed here in-process from the same scene."""
+    """The samples the emulator should send, computed here in-process from the same scene, in the
+    forward-right-down axes of firmware_protocols.Samples (a forward-left-up wire, Xsens, multiplies by
+    FRD_FROM_SCENE["ENU"] again)."""
     from imu_emulator.scene.load import load_scene
     from imu_emulator.runtime.simulation import Simulation
     scene = load_scene(scene_path)
     block = Simulation(scene).block(0, scene.n_samples)
-    return scene, block.t_s, block.accel[imu], block.gyro[imu]
+    signs = FRD_FROM_SCENE[scene.frame]
+    return scene, block.t_s, block.accel[imu] * signs, block.gyro[imu] * signs
 
 
 def emulator_command(*args) -> list[str]:

@@ -29,6 +29,9 @@ RECORDED_XDIS = [0x1020, 0x1060, 0x2010, 0x4020, 0x4010, 0x4030, 0x8020, 0x8030,
 
 COMMON = dict(time_ns=1_234_567_000, accel=[0.1, -0.2, -9.80665], gyro=[0.01, -0.02, 0.03], mag=[0.21, 0.01, -0.42])
 ALL_ITEMS = tuple(ITEMS)
+# Samples are forward-right-down; the MTi's sensor frame is x forward, y left, z up (MT0605P.E §4.2): on the
+# wire a vector's y and z change sign (firmware_protocols.axes), and the attitude is that frame's.
+FLU = np.array([1.0, -1.0, -1.0])
 
 
 def common_sample(**extra):
@@ -131,9 +134,9 @@ def test_common_sample_read_by_spec_decoder(precision, bits):
     assert list(items) == [0x1020, 0x1060, 0x4020 | bits, 0x8020 | bits, 0xC020 | bits, 0x0810 | bits, 0x3010, 0xE020]
     assert struct.unpack(">H", items[0x1020]) == (7,)
     assert struct.unpack(">I", items[0x1060]) == (COMMON["time_ns"] // 100_000,)    # 10 kHz ticks
-    assert spec_reals(items[0x4020 | bits], bits) == [as_wire(v, bits) for v in COMMON["accel"]]
-    assert spec_reals(items[0x8020 | bits], bits) == [as_wire(v, bits) for v in COMMON["gyro"]]
-    assert spec_reals(items[0xC020 | bits], bits) == [as_wire(v / 0.5, bits) for v in COMMON["mag"]]
+    assert spec_reals(items[0x4020 | bits], bits) == [as_wire(v, bits) for v in COMMON["accel"] * FLU]
+    assert spec_reals(items[0x8020 | bits], bits) == [as_wire(v, bits) for v in COMMON["gyro"] * FLU]
+    assert spec_reals(items[0xC020 | bits], bits) == [as_wire(v / 0.5, bits) for v in COMMON["mag"] * FLU]
     assert spec_reals(items[0x0810 | bits], bits) == [as_wire(21.5, bits)]
     assert struct.unpack(">I", items[0x3010]) == (100_062,)
     assert struct.unpack(">I", items[0xE020]) == (0x00400003,)
@@ -147,8 +150,9 @@ _FROM_NED = {"NED": np.eye(3), "ENU": np.array([[0, 1, 0], [1, 0, 0], [0, 0, -1]
 
 @pytest.mark.parametrize("frame, bits", [("ENU", 0x0), ("NED", 0x4), ("NWU", 0x8)])
 def test_frame_bits_declared_on_orientation_and_attitude_expressed_in_that_frame(frame, bits):
-    """Samples carry sensor -> NED attitude; the packet declares its frame and must carry the same attitude
-    referenced to it: R_frame = C_frame<-NED R_ned (scipy's Rotation as the oracle, Euler z-y-x from it)."""
+    """Samples carry FRD -> NED attitude; the packet declares its frame and must carry the attitude of the MTi's
+    forward-left-up sensor frame referenced to it: R_frame = C_frame<-NED R_ned C_FRD<-FLU, the last a half
+    turn about x (scipy's Rotation as the oracle, Euler z-y-x from it)."""
     from scipy.spatial.transform import Rotation
     encoder = XsensEncoder(items="quaternion,euler_angles,acceleration", precision="float64", frame=frame)
     ned = Rotation.from_euler("ZYX", [3.0, -0.2, 0.1])
@@ -157,7 +161,7 @@ def test_frame_bits_declared_on_orientation_and_attitude_expressed_in_that_frame
                                            euler=[0.1, -0.2, 3.0])).packet(0)
     items = dict(spec_items(spec_frame(packet)[1]))
     assert list(items) == [0x2013 | bits, 0x2033 | bits, 0x4023]
-    want = Rotation.from_matrix(_FROM_NED[frame]) * ned
+    want = Rotation.from_matrix(_FROM_NED[frame]) * ned * Rotation.from_rotvec([math.pi, 0.0, 0.0])
     qw, qx, qy, qz = spec_reals(items[0x2013 | bits], 3)                             # w first
     assert (want.inv() * Rotation.from_quat([qx, qy, qz, qw])).magnitude() < 1e-12
     yaw, pitch, roll = want.as_euler("ZYX")
@@ -175,7 +179,7 @@ def test_extended_length_when_payload_exceeds_254():
     mid, payload = spec_frame(packet)
     assert len(payload) > 254 and len(packet) == 6 + len(payload) + 1 == encoder.bytes_per_sample
     items = dict(spec_items(payload))
-    theta = np.array([1e-3, 2e-3, -3e-3])
+    theta = np.array([1e-3, 2e-3, -3e-3]) * FLU
     angle = np.linalg.norm(theta)
     expected_dq = [math.cos(angle / 2), *(np.sin(angle / 2) * theta / angle)]
     assert spec_reals(items[0x8033], 3) == pytest.approx(expected_dq, abs=1e-15)
@@ -230,8 +234,8 @@ def test_float_round_trip_and_saturation(vectors, precision):
     encoder = XsensEncoder(items="acceleration,rate_of_turn", precision=precision)
     batch = encoder.encode(Samples(np.arange(n, dtype=np.int64), accel, gyro))
     limit = F32_MAX if precision == "float32" else np.finfo(np.float64).max
-    expect_accel = np.clip(accel, -limit, limit).astype(np.float32 if precision == "float32" else np.float64)
-    expect_gyro = np.clip(gyro, -limit, limit).astype(expect_accel.dtype)
+    expect_accel = np.clip(accel * FLU, -limit, limit).astype(np.float32 if precision == "float32" else np.float64)
+    expect_gyro = np.clip(gyro * FLU, -limit, limit).astype(expect_accel.dtype)
     packets = XsensDecoder().feed(batch.data)
     assert len(packets) == n
     for i, p in enumerate(packets):
@@ -249,7 +253,7 @@ def test_fixed_point_round_trip_and_saturation(values, precision):
     width = 32 if precision == "fp1220" else 48
     encoder = XsensEncoder(items=("acceleration",), precision=precision)
     packet = encoder.encode(Samples.single(0, values, [0, 0, 0])).packet(0)
-    raw = [round(v * 2 ** frac) for v in values]
+    raw = [round(v * 2 ** frac) for v in values * FLU]
     lo, hi = -2 ** (width - 1), 2 ** (width - 1) - 1
     expected = [min(max(r, lo), hi) / 2 ** frac for r in raw]
     items = dict(spec_items(spec_frame(packet)[1]))
@@ -273,7 +277,7 @@ def test_integer_items_and_time_round_trip(time_ns, pressure, mag_reference):
     assert struct.unpack(">I", items[0x3010])[0] == expected_pa
     assert encoder.saturated.counts.get("baro_pressure", 0) == int(expected_pa != round(pressure))
     (decoded,) = XsensDecoder(mag_reference_gauss=mag_reference).feed(packet)
-    assert decoded.fields["mag"] == pytest.approx((0.2, -0.1, 0.45), rel=1e-15)
+    assert decoded.fields["mag"] == pytest.approx((0.2, 0.1, -0.45), rel=1e-15)
     assert decoded.fields["pressure_pa"] == expected_pa
 
 

@@ -44,6 +44,7 @@ import struct
 import numpy as np
 
 from firmware_protocols import attitude
+from firmware_protocols.axes import to_body_axes
 from firmware_protocols.base import Samples
 from firmware_protocols.devices.base import Device, SinceLastOutput, single
 from firmware_protocols.registry import attach_device
@@ -62,10 +63,11 @@ _IDENTITY = (1.0, 0.0, 0.0, 0.0)
 
 
 def aligned(one: Samples, sensor, local, frame: str) -> Samples:
-    """One sample as an MTi with alignment rotations outputs it. `sensor` (RotSensor, q_OS) rotates sensor-frame
+    """One sample (in the sensor frame S, forward-left-up: axes.to_body_axes) as an MTi with alignment rotations
+    outputs it. `sensor` (RotSensor, q_OS) rotates sensor-frame
     vectors into the object frame O: x_O = q_OS x_S q_OS*, and the orientation becomes q_LO = q_LS (x) q_OS*.
     `local` (RotLocal, q_L'L) turns the declared reference frame L (ENU, NED or NWU): q_L'O = q_L'L (x) q_LO,
-    done here on the Samples' NED attitude as q_NL (x) q_L'L (x) q_LN. Velocity stays in the unturned frame;
+    done here on the sample's S -> NED attitude as q_NL (x) q_L'L (x) q_LN. Velocity stays in the unturned frame;
     an absent attitude is the documented default (identity). UNVERIFIED: which way each quaternion turns
     (q_OS or q_SO) is this module's reading, not checked against Xsens' manual; ArduPilot's two rotations
     (local (0, 1/sqrt 2, 1/sqrt 2, 0): ENU -> NED; sensor (0, 1, 0, 0): FLU -> FRD) are half-turns, the same
@@ -110,6 +112,7 @@ class XsensDevice(Device):
         self.firmware = bytes(int(p) & 0xFF for p in str(firmware).split("."))[:3].ljust(3, b"\0")
         self.measuring = True
         self.alignment = {0: _IDENTITY, 1: _IDENTITY}
+        self._block = self._block_in_s = None     # the last block given to output, and it in sensor axes
         # The configuration as the client would read it back: XDI with precision/frame bits, frequency.
         every = [n for n in encoder.items if n in ("packet_counter", "sample_time_fine", "sample_time_coarse")]
         self.config = [(self._xdi(n, precision, frame), 0xFFFF if n in every else min(0xFFFE, int(round(rate_hz))))
@@ -166,6 +169,11 @@ class XsensDevice(Device):
     def output(self, samples: Samples, i: int) -> bytes:
         tick = self.tick
         self.tick += 1
+        # The MTi's sensor frame S (forward-left-up) first, once per block: the alignment rotations are defined
+        # on S, and the increments summed since the last packet are the same sums seen from S.
+        if samples is not self._block:
+            self._block, self._block_in_s = samples, to_body_axes(samples, XsensEncoder.body_axes)
+        samples = self._block_in_s
         self.increments.add(samples, i)
         if not self.measuring or not self.plan:
             return b""
@@ -179,7 +187,7 @@ class XsensDevice(Device):
         one = self.increments.attach(single(samples, i))
         if self.alignment[0] != _IDENTITY or self.alignment[1] != _IDENTITY:
             one = aligned(one, self.alignment[0], self.alignment[1], self.frame)
-        data = encoder.encode(one).data
+        data = encoder.encode_sensor_axes(one).data
         self.increments.sent(encoder)
         return data
 

@@ -25,8 +25,9 @@ T77_TT1_IMU_C/Core/Src/main.c, Crc8Saej1850 over 7 bytes) and common on Bosch au
 its README still lists the checksum as undecided. Receivers that ignore the CRC (Bosch's own) are unaffected.
 
 Axes: Bosch's driver maps yaw -> +z, pitch -> +y, roll -> -x ("Roll is received negative as per
-right-hand rule"), AX/AY/AZ -> +x/+y/+z of a forward-left-up frame (ROS REP-103). The default AxisMaps
-reproduce that for a forward-left-up sensor frame (the ENU scene setting); pass others for other frames.
+right-hand rule"), AX/AY/AZ -> +x/+y/+z of a forward-left-up frame (ROS REP-103). The encoder re-expresses the
+forward-right-down Samples in those forward-left-up chip axes first (`body_axes`), and the AxisMaps (default:
+that driver's mapping) read them; the decoder's `gyro`/`accel` are in the same forward-left-up axes.
 """
 from __future__ import annotations
 
@@ -34,6 +35,7 @@ import math
 
 import numpy as np
 
+from firmware_protocols.axes import to_body_axes
 from firmware_protocols.base import CanStreamDecoder, DecoderStats, Packet, SaturationStats, Samples
 from firmware_protocols.can_signals import CRC8_J1850_TABLE, AxisMap, Signal, SignalLayout, axis_map
 from firmware_protocols.registry import FormatInfo, register
@@ -60,6 +62,12 @@ def crc8_sae_j1850(data: bytes) -> int:
 
 
 class BoschMM7Encoder:
+    # Axes: the chip's axes are forward-left-up (at rest AZ reads +1 g): Bosch's ROS driver maps AX/AY/AZ to
+    # +x/+y/+z of REP 103's forward-left-up frame (module docstring). The AxisMaps read those axes, so encode
+    # re-expresses the FRD Samples in FLU first. No attitude.
+    body_axes, reference = "FLU", None
+    axes_source = "Bosch off_highway_mm7p10 receiver.cpp: AX/AY/AZ, rates on forward-left-up (REP 103) axes"
+
     def __init__(self, rate_axes=DEFAULT_RATE_MAP, accel_axes=DEFAULT_ACCEL_MAP, counter: int = 0):
         self.rate_axes = axis_map(rate_axes)
         self.accel_axes = axis_map(accel_axes)
@@ -81,6 +89,7 @@ class BoschMM7Encoder:
 
     def encode(self, samples: Samples) -> np.ndarray:
         samples.require_finite(("gyro", "accel", "temperature_c"))
+        samples = to_body_axes(samples, self.body_axes)
         temperature = samples.field_or("temperature_c", 25.0)
         frames = self.layout.pack(np.column_stack((samples.gyro, samples.accel, temperature)), self.counter,
                                   self.saturated)

@@ -287,6 +287,12 @@ def can_id_for(dtid: int, node_id: int, priority: int) -> int:
 
 class _DroneCanEncoder:
     """Shared by the three messages: options, transfer id state, framing and saturation bookkeeping."""
+    # Axes: uavcan.equipment.ahrs.RawIMU (dronecan's dsdl_specs, 1003.RawIMU.uavcan): "linear acceleration along X
+    # (forward positive) ... Y (right positive) ... Z (down positive)", rates about the same axes; Solution is
+    # "Inertial data and orientation in body frame", its orientation w.r.t. NED as the autopilots read it.
+    body_axes, reference = "FRD", "NED"
+    axes_source = "DSDL 1003.RawIMU: X forward, Y right, Z down positive; Solution: body frame, NED"
+
 
     message: _Message
 

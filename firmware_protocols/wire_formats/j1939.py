@@ -69,6 +69,11 @@ class J1939Encoder:
     Figures of merit: 0 fully functional (default), 1 degraded, 2 error, 3 not available.
     latency_s: the ARI latency byte (0.5 ms per bit, 0..125 ms); default 2.5 ms as in the spec's vector.
     """
+    # Axes: the AxisMaps read FRD vectors (the module docstring: vertical = -accel z puts +g up at rest); J1939
+    # itself names quantities (pitch, roll, yaw rate; lateral, longitudinal, vertical), not axes. No attitude.
+    body_axes, reference = "FRD", None
+    axes_source = "SAE J1939-71 ARI/ACCS name quantities, not axes: the rate_axes/accel_axes maps read FRD"
+
 
     def __init__(self, source_address: int = 0x90, ari_priority: int = 3, accs_priority: int = 2,
                  rate_axes=DEFAULT_RATE_MAP, accel_axes=DEFAULT_ACCEL_MAP,

@@ -407,6 +407,12 @@ def _byte_option(name: str, value: int) -> int:
 class MavlinkEncoder:
     """Samples -> MAVLink 2 frames of one message type. Stateful: the sequence number (and the
     signing timestamp) continue across `encode` calls."""
+    # Axes (common.xml as pymavlink bundles it): HIGHRES_IMU and HIL_SENSOR are "The IMU readings in SI units in NED
+    # body frame"; SCALED_IMU* and RAW_IMU name no axes and are filled by the autopilots from the same body frame;
+    # ATTITUDE* are "in the aeronautical frame (right-handed, Z-down, Y-right, X-front)". Samples are already so.
+    body_axes, reference = "FRD", "NED"
+    axes_source = "MAVLink common.xml: 'IMU readings in SI units in NED body frame'; attitude: aeronautical frame"
+
 
     def __init__(self, message: str = "mavlink-highres", sysid: int = 1, compid: int = 1, seq: int = 0,
                  id: int | None = None, signing_key=None, link_id: int = 0, signing_link: SigningLink | None = None,

@@ -198,6 +198,11 @@ def _derive(samples: Samples, names: set, filter_states: tuple, filter_state: in
 
 class MipEncoder:
     """Samples -> one MIP packet per sample (of the chosen descriptor set), fields in the order given."""
+    # Axes: the MIP sensor frame is x forward, y right, z down (at rest, level, scaled accel z reads -1 g) and the
+    # attitude is vehicle -> NED (mip_sdk data_sensor.h: p_veh = q^-1 p_ned q). Samples are already so.
+    body_axes, reference = "FRD", "NED"
+    axes_source = "MicroStrain MIP DCP: sensor frame x forward y right z down (-1 g on z at rest); data_sensor.h NED"
+
 
     def __init__(self, fields=DEFAULT_FIELDS, gps_week_offset: int = 0, gps_flags: int = GPS_FLAGS_DEFAULT,
                  descriptor_set: int = SENSOR_DATA_SET, filter_family: str = "gq7", filter_state: int | None = None):

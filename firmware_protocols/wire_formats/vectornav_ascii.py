@@ -10,6 +10,7 @@ simply widen the field, as printf does; `bytes_per_sample` is the nominal (fixed
 """
 from __future__ import annotations
 
+import functools
 import struct
 from dataclasses import dataclass
 
@@ -49,6 +50,9 @@ def _check_kind(checksum: str) -> str:
 
 class AsciiEncoder:
     """Samples -> $VNYMR or $VNIMU lines, one per sample."""
+    body_axes, reference = "FRD", "NED"      # as vectornav_binary.BinaryEncoder (one device, two encodings)
+    axes_source = "VN-100 User Manual UM001 4.4.3-4.4.5: body frame w.r.t. NED (so x fwd, y right, z down)"
+
 
     def __init__(self, name: str, checksum: str = "xor"):
         self.spec = _SENTENCES[name]
@@ -179,7 +183,7 @@ for _name in ("VNYMR", "VNIMU"):      # VNYPR only for the device's register 6 (
     register(FormatInfo(
         name=f"vectornav-{_name.lower()}", kind="serial",
         description=f"VectorNav ${_name} ASCII sentence",
-        encoder=lambda checksum="xor", _n=_name: AsciiEncoder(_n, checksum),
+        encoder=functools.partial(AsciiEncoder, _name),
         decoder=AsciiDecoder,
         bytes_per_sample=AsciiEncoder(_name).bytes_per_sample,
         options={"checksum": "'xor' (8-bit, 2 hex digits) or 'crc' (CRC-16/XMODEM, 4 hex digits)"},

@@ -575,6 +575,13 @@ def _constant(name: str, value) -> np.ndarray:
 
 class BinaryEncoder:
     """Samples -> VectorNav binary packets for one output configuration (`fields`, see parse_fields)."""
+    # Axes: yaw/pitch/roll and the quaternion describe "the body frame with respect to the local North East Down
+    # (NED) frame" (VN-100 User Manual UM001 §4.4.3-4.4.4), and accel/gyro are "expressed in the body frame" (§4.4.5):
+    # a unit level and facing north reads yaw, pitch, roll 0 only if its body axes are x forward, y right, z down.
+    # Samples are already so.
+    body_axes, reference = "FRD", "NED"
+    axes_source = "VN-100 User Manual UM001 4.4.3-4.4.5: body frame w.r.t. NED (so x fwd, y right, z down)"
+
 
     def __init__(self, fields=None, sample_period_s: float | None = None, gps_week_offset: int = 0,
                  constants: dict | None = None):

@@ -21,7 +21,9 @@ bits 2-3 coordinate system (0 ENU, 4 NED, 8 NWU). The SDK names the coordinate-s
 coordinate system part of the orientation data identifier" (xstypes/xsdataidentifier.h) and sets it only
 on orientation (and velocity/position) items when converting legacy packets, so this encoder declares the
 frame on Quaternion, EulerAngles and VelocityXYZ. Samples carry sensor -> NED attitude and NED velocity (as for
-every format); the encoder re-expresses both in the declared frame.
+every format); the encoder re-expresses both in the declared frame. The vectors (acceleration, rate of turn,
+magnetic field, increments) go out in the MTi's sensor frame S, x forward, y left, z up whatever the frame (the
+coordinate-system setting turns the reference frame only): Samples' forward-right-down vectors are re-expressed.
 
 Fixed point (xstypes/xsmessage.c, XsMessage_setDataF1220 / XsMessage_setDataFP1632):
 - 12.20: int32 = value * 2**20, range [-2048, 2048 - 2**-20].
@@ -81,6 +83,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from firmware_protocols.axes import to_body_axes
 from firmware_protocols.base import (INCREMENT_FIELDS, DecoderStats, Packet, SaturationStats, Samples,
                                      SerialBatch)
 from firmware_protocols import attitude
@@ -210,6 +213,13 @@ def receiver_pvt(samples: Samples, settings: dict) -> np.ndarray:
 
 class XsensEncoder:
     """Samples -> MTData2 packets, one per sample. Stateful: the packet counter continues across calls."""
+    # Axes: the MTi's sensor-fixed frame S is x forward, y left, z up as printed on the housing (at rest
+    # acceleration z reads +9.81); orientation is S -> L with L ENU by default, NED or NWU by the coordinate-system
+    # bits (the `frame` option): choosing NED or NWU turns L only ("apply the following rotation matrix in
+    # RotLocal", MTi User Manual MT0605P.E §4.2.3/5.4), never S. So encode re-expresses the FRD Samples in FLU.
+    body_axes, reference = "FLU", "ENU"     # reference: the `frame` option's (the instance's self.reference)
+    axes_source = "Xsens MT0605P.E 4.2: sensor frame S x fwd y left z up; L by option frame: ENU, NED, NWU"
+
 
     def __init__(self, items=DEFAULT_ITEMS, precision: str = "float32", frame: str = "ENU",
                  mag_reference_gauss: float = 0.5, status_word: int = 0, packet_counter_start: int = 0,
@@ -231,6 +241,7 @@ class XsensEncoder:
         if not 0 <= status_word <= 0xFFFFFFFF:
             raise ValueError(f"status_word: must fit in 32 bits, got {status_word!r}")
         self.precision, self.frame = precision, frame
+        self.reference = frame                  # the declared reference follows the configuration
         self.mag_reference_gauss = mag_reference_gauss
         self.status_word = status_word
         self.packet_counter = packet_counter_start & 0xFFFF
@@ -290,6 +301,12 @@ class XsensEncoder:
         return self._packer.packet_size
 
     def encode(self, samples: Samples) -> SerialBatch:
+        """Samples (FRD, attitude FRD -> NED) -> packets in the MTi's own sensor axes and declared frame."""
+        return self.encode_sensor_axes(to_body_axes(samples, self.body_axes))
+
+    def encode_sensor_axes(self, samples: Samples) -> SerialBatch:
+        """Samples already in the MTi's sensor frame S (forward-left-up; attitude S -> NED): what the device
+        calls after its alignment rotations, which are defined on S."""
         extra = {}
         if self._wants_delta_q and samples.attitude_change is not None:
             samples.require_finite(["attitude_change"])

@@ -75,6 +75,8 @@ def cmd_check(args) -> int:
     gravity = f"(0, 0, {'+' if scene.frame == 'ENU' else '-'}g)"
     print(f"  frame      {scene.frame} (body {body}; at rest and level f = {gravity}, g = {scene.gravity_mps2!r} m/s²)")
     print("  attitude   z-y-x: R = Rz(yaw)·Ry(pitch)·Rx(roll) maps body to navigation; gyros give body-frame rate")
+    print("  wires      each in its manual's axes: an unmounted IMU reads as the part upright, facing forward "
+          "(`formats --details`)")
     from imu_emulator.motion import earth_truth
     from imu_emulator.scene.earth import model_on
     if model_on(scene):

@@ -1,6 +1,7 @@
 """`imu-emulator formats`: the wire formats, with their size per sample, whether a device answers the driver
 ([device]) and the named presets (`--option preset=NAME`); `--details` adds each format's encoder options with the
-defaults read from the encoder's signature."""
+defaults read from the encoder's signature, and the body axes and reference frame the format declares (from its
+manual: firmware_protocols.axes)."""
 from __future__ import annotations
 
 
@@ -29,6 +30,15 @@ def option_rows(info) -> list[tuple[str, str, str]]:
     return [(name, _show(defaults[name]), text) for name, text in info.options.items()]
 
 
+def axes_row(info) -> str:
+    """`axes FRD, reference NED (source)`: what the format declares (firmware_protocols.axes)."""
+    from firmware_protocols.axes import declared
+    cls = getattr(info.encoder, "func", info.encoder)
+    body, reference = declared(info.encoder)
+    return (f"axes {body or 'undeclared'}, reference {reference or 'none (no attitude)'}"
+            f" ({getattr(cls, 'axes_source', '') or 'no source'})")
+
+
 def _show(value) -> str:
     # An AxisMap default is written the way a scene file gives it: (axes, signs).
     if hasattr(value, "axes") and hasattr(value, "signs"):
@@ -51,6 +61,7 @@ def cmd_formats(args) -> int:
             print(f"{'':24} preset={preset}: {text}")
         if args.details is None:
             continue
+        print(f"    {axes_row(info)}")
         for option, default, text in option_rows(info):
             print(f"    {option:22} default {default:24} {text}")
         if not info.options:

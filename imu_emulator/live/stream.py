@@ -56,23 +56,31 @@ class Stream:
         self.transport = open_target(self.spec, self.info.kind, self.config.target_options)
 
     def samples(self, block, time_ns: np.ndarray):
+        """The block's samples of this stream's IMU as every format takes them (firmware_protocols.Samples): the
+        part's forward-right-down axes, attitude FRD -> NED, the IMU's own clock. An ENU scene's body is
+        forward-left-up: its vectors and attitude are re-expressed here, once (axes.reexpress), so an IMU without
+        mounting reads like the real part sitting upright, facing forward, in any scene frame. NED, ECEF and ECI
+        scenes already have a forward-right-down body referenced to (local) NED."""
         from firmware_protocols import Samples
+        from firmware_protocols.axes import reexpress
         i = self.imu_index
         time_ns = time_ns + block.imu_offset_ns(i)      # the IMU's own clock ([[imu]] time_offset_s)
         # the simulated temperature (temperature effect) for formats that carry one
         temperature = None if block.temperature_c is None else block.temperature_c[i]
-        # Wire formats reference attitude to NED (Samples.quat is sensor -> NED): an ENU scene's is converted.
-        # (ECEF and ECI scenes give attitude relative to local NED already)
+        body = "FLU" if self.frame == "ENU" else "FRD"
+        # sensor -> navigation in the scene's frame -> sensor -> NED (ECEF and ECI scenes' attitude is w.r.t. local
+        # NED already); the body side is turned by reexpress below
         quat = attitude.to_ned(block.quat[i], "ENU" if self.frame == "ENU" else "NED")
-        quat, temperature, companion = _companion_fields(block, i, quat, temperature)
         increments = {}
         if block.dtheta is not None:   # over one sample period, by the sensor's own (nominal) clock
+            # from the true attitude: the increments are the sensor's, not the unit's estimate's
             increments = {"delta_theta": block.dtheta[i], "delta_velocity": block.dvel[i],
                           "delta_time_s": np.full(len(time_ns), self.period_s),
                           "attitude_change": self._attitude_change(block, quat)}
+        quat, temperature, companion = _companion_fields(block, i, quat, temperature)
         if self.device is None:
-            return Samples(time_ns, block.accel[i], block.gyro[i], quat=quat, temperature_c=temperature,
-                           **increments, **companion)
+            return reexpress(Samples(time_ns, block.accel[i], block.gyro[i], quat=quat, temperature_c=temperature,
+                                     **increments, **companion), body, "FRD")
         # imported here: rotations pulls in numba, which every command would pay for at start-up otherwise
         from imu_emulator.geo.rotations import quat_to_euler, quat_to_matrix
         # A device may be asked for any field its format knows at any moment: give it all we have.
@@ -81,14 +89,17 @@ class Stream:
             specific_force = np.einsum("nij,nj->ni", quat_to_matrix(block.quat[i]), block.accel[i])
             nav = device_navigation(block.truth["position"], block.truth["velocity"], specific_force,
                                     *self.navigation)
-        return Samples(time_ns, block.accel[i], block.gyro[i], quat=quat, euler=quat_to_euler(quat),
-                       temperature_c=temperature, **{**nav, **companion}, **increments)
+        # the unit's own estimate (companion INS) replaces the truth's position and velocity
+        samples = reexpress(Samples(time_ns, block.accel[i], block.gyro[i], quat=quat, temperature_c=temperature,
+                                    **{**nav, **companion}, **increments), body, "FRD")
+        samples.euler = quat_to_euler(samples.quat)
+        return samples
 
     def _attitude_change(self, block, quat: np.ndarray) -> np.ndarray:
-        """Each interval's attitude change from the true attitudes at its ends (attitude.attitude_change); the
-        last sample of the previous block is kept for the next block's first interval. The stream's first
-        sample, and the first after a loop restarts the scene, has no attitude before it: its change is the
-        rotation by its increment."""
+        """Each interval's attitude change from the true attitudes at its ends (attitude.attitude_change), in the
+        scene's body axes (reexpress turns it with the rest); the last sample of the previous block is kept for the
+        next block's first interval. The stream's first sample, and the first after a loop restarts the scene, has
+        no attitude before it: its change is the rotation by its increment."""
         dtheta = block.dtheta[self.imu_index]
         if self._before is not None and self._before[0] == block.k0:
             quat_first, dtheta_first = self._before[1], self._before[2]
