@@ -23,7 +23,7 @@ import time
 import numpy as np
 import pytest
 
-from test_stream_support import Emulator, write_scene
+from test_stream_support import Emulator, wire_attitude, write_scene
 
 GRAVITY_MSS = 9.80665
 # MAVLink GPS_FIX_TYPE, as AP_MicroStrain stores it
@@ -258,13 +258,13 @@ def run_driver(fd: int, driver: APMicroStrain, seconds: float, t0: float):
 
 
 def _expected_attitudes(scene_path):
-    """The scene's true attitude, sensor -> NED, at every sample (what the wire formats carry)."""
-    from firmware_protocols import attitude
+    """The scene's true attitude, the upright part's FRD axes -> NED, at every sample (what the wire formats carry),
+    w first."""
     from imu_emulator.runtime.simulation import Simulation
     from imu_emulator.scene.load import load_scene
     scene = load_scene(scene_path)
     block = Simulation(scene).block(0, scene.n_samples)
-    return attitude.to_ned(block.quat[0], "ENU" if scene.frame == "ENU" else "NED")
+    return wire_attitude(scene, block.quat[0]).as_quat()[:, [3, 0, 1, 2]]
 
 
 @pytest.mark.parametrize("preset, driver_class, rates", [

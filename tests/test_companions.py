@@ -453,10 +453,16 @@ def test_stream_samples_carry_the_companions_and_the_units_estimate(run):
     stream.frame = scene.frame
     samples = stream.samples(whole, whole.time_ns())
     c = whole.companion[0]
-    np.testing.assert_array_equal(samples.mag, c["mag"])
+    # The wire's axes are the upright part's forward-right-down: the ENU scene's forward-left-up turned by pi about x
+    flu_to_frd = np.array([1.0, -1.0, -1.0])
+    np.testing.assert_array_equal(samples.mag, c["mag"] * flu_to_frd)
     np.testing.assert_array_equal(samples.pressure_pa, c["pressure_pa"])
     np.testing.assert_array_equal(samples.temperature_c, c["baro_temperature_c"])
     np.testing.assert_array_equal(samples.gnss_llh, c["gnss_llh"])
     np.testing.assert_array_equal(samples.ins_mode, c["ins_mode"])
+    from scipy.spatial.transform import Rotation
     truth_q = attitude.to_ned(whole.quat[0], "ENU")
-    np.testing.assert_allclose(samples.quat, estimate_quat(truth_q, c["ins_attitude_error_rad"]))
+    expected = Rotation.from_quat(estimate_quat(truth_q, c["ins_attitude_error_rad"])[:, [1, 2, 3, 0]]) \
+        * Rotation.from_matrix(np.diag(flu_to_frd))
+    got = Rotation.from_quat(samples.quat[:, [1, 2, 3, 0]])
+    assert np.max((got.inv() * expected).magnitude()) < 1e-12

@@ -13,7 +13,7 @@ from functools import reduce
 import numpy as np
 import pytest
 
-from test_stream_support import Emulator, read_for, reference, write_scene
+from test_stream_support import Emulator, read_for, reference, wire_attitude, write_scene
 
 _LINE = re.compile(rb"\$VN[A-Z]{3}[^$\r\n]*\*[0-9A-F]{2,4}\r\n")
 
@@ -116,7 +116,6 @@ def ardupilot_start(model: str) -> list:
 ARDUPILOT_IMU = bytes.fromhex("012107")        # TimeStartup, AngularRate, Accel, Imu, MagPres: 82 bytes
 ARDUPILOT_AHRS = bytes.fromhex("1101000601")   # TimeStartup; YawPitchRoll, Quaternion, YprU: 56 bytes
 # NED coordinates of the test scene's ENU vectors: north = y, east = x, down = -z
-NED_FROM_ENU = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
 
 def healthy_throughout(imu_ns, ekf_ns, gnss_ns=None) -> bool:
@@ -130,13 +129,13 @@ def healthy_throughout(imu_ns, ekf_ns, gnss_ns=None) -> bool:
 
 
 def scene_attitude(scene_path, k):
-    """The scene's attitude at samples k, body -> NED (scipy Rotation), as the wire must carry it."""
-    from scipy.spatial.transform import Rotation
-
+    """The scene's attitude at samples k, the upright part's FRD axes -> NED (scipy Rotation), as the wire must
+    carry it."""
     from imu_emulator.runtime.simulation import Simulation
     from imu_emulator.scene.load import load_scene
-    block = Simulation(load_scene(scene_path)).block(0, int(np.max(k)) + 1)
-    return Rotation.from_matrix(NED_FROM_ENU) * Rotation.from_quat(block.quat[0][k][:, [1, 2, 3, 0]])
+    scene = load_scene(scene_path)
+    block = Simulation(scene).block(0, int(np.max(k)) + 1)
+    return wire_attitude(scene, block.quat[0][k])
 
 
 def test_ardupilot_vn100_start_up_sequence_and_the_packets_it_then_parses(tmp_path):

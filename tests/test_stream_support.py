@@ -209,3 +209,15 @@ def read_until_closed(fd, timeout=60.0) -> bytes:
             chunks.append(data)
     os.close(fd)
     return b"".join(chunks)
+
+
+def wire_attitude(scene, quat):
+    """The attitude a wire carries for the scene's attitude quaternions `quat` (n, 4; w first, body -> the scene's
+    frame): the upright part's forward-right-down axes w.r.t. NED, as a scipy Rotation (the oracle: REP-free matrices,
+    not firmware_protocols.axes). An ENU scene's body is forward-left-up: turned by pi about x."""
+    from scipy.spatial.transform import Rotation
+    body = Rotation.from_quat(np.asarray(quat)[..., [1, 2, 3, 0]])
+    if scene.frame != "ENU":
+        return body
+    ned_from_enu = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+    return Rotation.from_matrix(ned_from_enu) * body * Rotation.from_matrix(np.diag(FRD_FROM_SCENE["ENU"]))
