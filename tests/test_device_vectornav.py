@@ -115,7 +115,6 @@ def ardupilot_start(model: str) -> list:
 
 ARDUPILOT_IMU = bytes.fromhex("012107")        # TimeStartup, AngularRate, Accel, Imu, MagPres: 82 bytes
 ARDUPILOT_AHRS = bytes.fromhex("1101000601")   # TimeStartup; YawPitchRoll, Quaternion, YprU: 56 bytes
-# NED coordinates of the test scene's ENU vectors: north = y, east = x, down = -z
 
 
 def healthy_throughout(imu_ns, ekf_ns, gnss_ns=None) -> bool:
