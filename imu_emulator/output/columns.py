@@ -156,3 +156,20 @@ def block_columns(block, imu_names, layout: Layout, time_ns: bool = False) -> di
     for i, name in enumerate(layout.names()):
         columns[name] = values[:, i]
     return columns
+
+
+def named_columns(block, layout: Layout) -> dict[str, tuple[bool, np.ndarray]]:
+    """Each float64 column of a block by name: (per_imu, its values), (n_imu, n) per IMU or (n,) shared; views
+    where the block's arrays allow (a writer that wants some columns by name, as MCAP's companion topics)."""
+    found = {}
+    for group in layout.groups():
+        names = iter(group.names)
+        for values in group.arrays(block):
+            for i in range(values.shape[-1]):
+                found[next(names)] = (group.per_imu, values[..., i])
+    return found
+
+
+def described(layout: Layout) -> list[Column]:
+    """Every column of an output in order, with its unit and what it is (the files state them)."""
+    return [TIME, IMU] + [column for group in layout.groups() for column in group.columns]

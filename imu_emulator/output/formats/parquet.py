@@ -12,8 +12,6 @@ dictionary pages can add up to about 6 % (the test allows 25 %).
 from __future__ import annotations
 
 import json
-import platform
-from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -21,32 +19,10 @@ import numpy as np
 from imu_emulator.output.atomic import AtomicOutput, FinishOnExit, output_error
 from imu_emulator.output.base import Contents, Format
 from imu_emulator.output.columns import TIME, block_columns, scene_layout
+from imu_emulator.output.run_record import run_metadata, versions  # noqa: F401  (batch and tests read them here)
 from imu_emulator.runtime.samples import SampleBlock
 
 METADATA_KEY = b"imu_emulator"
-
-
-@lru_cache(maxsize=1)
-def versions() -> dict[str, str]:
-    """The versions whose code shaped the samples (read once per process: a batch writes many files)."""
-    # here, not at the top: importlib.metadata pulls in email, csv and zipfile, and every command that finds the
-    # output formats (check, generate) imports this module
-    from importlib import metadata as importlib_metadata
-    found = {"python": platform.python_version()}
-    for package in ("imu-emulator", "numpy", "numba", "pyarrow"):
-        try:
-            found[package] = importlib_metadata.version(package)
-        except importlib_metadata.PackageNotFoundError:
-            found[package] = "unknown"
-    return found
-
-
-def run_metadata(scene, **extra) -> dict:
-    """What a Parquet file records about the run that made it."""
-    from imu_emulator.scene.digest import scene_digest
-    return {"scene_sha256": scene_digest(scene), "scene_path": scene.path, "seed": scene.seed,
-            "rate_hz": scene.rate_hz, "t0_s": scene.t0_s, "n_samples": scene.n_samples,
-            "imu_names": list(scene.imu_names), "versions": dict(versions()), **extra}
 
 
 def read_metadata(path: str | Path) -> dict:

@@ -1,0 +1,103 @@
+"""Where a ROS 2 bag's axes, frame names and time stamps are decided, once, at the file's edge.
+
+REP 103 (https://www.ros.org/reps/rep-0103.html): bodies are x forward, y left, z up (FLU) and the world is
+ENU. REP 105 names the frames: a world-fixed frame ("world" here, ENU), the body "base_link", "earth" for
+ECEF. The scene's frames are converted, whatever they are: an ENU scene's body is already FLU; a NED scene's
+body is forward-right-down (FRD) and its world NED; ECEF and ECI scenes keep their world axes (named "earth"
+and "eci") and have an FRD body. With `axes="scene"` nothing is converted and the frame ids say so: "<imu>_frd",
+"base_link_frd", "world_ned" (REP 103's suffix convention for frames that are not its own).
+
+Time: ROS tools treat a stamp of 0 as "unset" (tf2, message_filters), so stamps are on a real epoch: a sample
+at scene time t is stamped start + t, start being `generate --start-time` (ISO 8601 or "now") or DEFAULT_START,
+2024-01-01T00:00:00Z, a fixed instant so that the same scene and seed give the same bytes.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from datetime import datetime, timezone
+
+import numpy as np
+
+#: the default instant of scene time 0: 2024-01-01T00:00:00Z, in Unix nanoseconds
+DEFAULT_START = "2024-01-01T00:00:00Z"
+DEFAULT_START_NS = 1_704_067_200 * 10**9
+AXES = ("rep103", "scene")
+
+_FRD_FROM_FLU = np.diag([1.0, -1.0, -1.0])             # its own inverse
+_ENU_FROM_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])   # its own inverse
+_WORLD = {"ENU": "world", "NED": "world", "ECEF": "earth", "ECI": "eci"}
+
+
+def parse_start_time(text: str) -> int:
+    """`--start-time`: ISO 8601 ("2026-03-01T12:00:00Z", "2026-03-01T12:00:00.5+01:00"; no zone is UTC) or
+    "now", as Unix nanoseconds. ValueError naming the text otherwise, or before 1970 or from 2038 on
+    (builtin_interfaces/Time's sec is an int32)."""
+    if text.strip().lower() == "now":
+        from time import time_ns
+        return time_ns()
+    try:
+        when = datetime.fromisoformat(text.strip().replace("Z", "+00:00").replace("z", "+00:00"))
+    except ValueError:
+        raise ValueError(f"{text!r} is not an ISO 8601 time (like {DEFAULT_START}) or 'now'") from None
+    if when.tzinfo is None:
+        when = when.replace(tzinfo=timezone.utc)
+    delta = when - datetime(1970, 1, 1, tzinfo=timezone.utc)
+    ns = (delta.days * 86_400 + delta.seconds) * 10**9 + delta.microseconds * 1000
+    if not 0 <= ns < 2**31 * 10**9:
+        raise ValueError(f"{text!r}: a ROS time stamp holds 1970-01-01 to 2038-01-19 (int32 seconds)")
+    return ns
+
+
+@dataclass(frozen=True)
+class Axes:
+    """How a scene's vectors become the bag's: v_bag = body @ v (body vectors, IMU and body frames) and
+    p_bag = world @ p (navigation-frame vectors); frame ids to match."""
+    body: np.ndarray            # (3, 3)
+    world: np.ndarray           # (3, 3)
+    world_id: str
+    base_link: str
+    suffix: str                 # appended to each IMU's frame id
+
+    @property
+    def converts_body(self) -> bool:
+        return not np.array_equal(self.body, np.eye(3))
+
+    def imu_frame(self, token: str) -> str:
+        return token + self.suffix
+
+    def quaternions(self, q: np.ndarray) -> np.ndarray:
+        """(n, 4) scalar-first attitudes (scene body or sensor -> navigation) -> (n, 4) x, y, z, w of the bag's
+        body -> the bag's world: q_world (x) q (x) q_body^-1 as one 4x4 matrix (both factors are constant)."""
+        return q @ _ros_order(self.world, self.body).T
+
+    def rotation(self, matrix: np.ndarray) -> np.ndarray:
+        """A rotation between two scene-body frames (mounting: sensor -> body) in the bag's body axes."""
+        return self.body @ matrix @ self.body.T
+
+
+def axes_for(frame: str | None, axes: str = "rep103") -> Axes:
+    """frame: the scene's ("ENU", "NED", "ECEF", "ECI"; None, as for replayed logs, is ENU)."""
+    frame = frame or "ENU"
+    body_frd = frame != "ENU"
+    if axes == "scene":
+        return Axes(np.eye(3), np.eye(3), _WORLD[frame] + ("_ned" if frame == "NED" else ""),
+                    "base_link_frd" if body_frd else "base_link", "_frd" if body_frd else "")
+    return Axes(_FRD_FROM_FLU if body_frd else np.eye(3), _ENU_FROM_NED if frame == "NED" else np.eye(3),
+                _WORLD[frame], "base_link", "")
+
+
+def _quaternion_matrices(q):
+    """L(q) and R(q): q (x) p = L(q) p and p (x) q = R(q) p, scalar-first."""
+    w, x, y, z = q
+    left = np.array([[w, -x, -y, -z], [x, w, -z, y], [y, z, w, -x], [z, -y, x, w]])
+    right = np.array([[w, -x, -y, -z], [x, w, z, -y], [y, -z, w, x], [z, y, -x, w]])
+    return left, right
+
+
+def _ros_order(world: np.ndarray, body: np.ndarray) -> np.ndarray:
+    """The 4x4 map from a scene quaternion (w, x, y, z) to the bag's (x, y, z, w): q_world (x) q (x) q_body*,
+    where body maps the scene body's vectors to the bag's (so the bag body -> scene body is body^T)."""
+    from imu_emulator.geo.rotations import matrix_to_quat
+    left, _ = _quaternion_matrices(matrix_to_quat(world))
+    _, right = _quaternion_matrices(matrix_to_quat(np.ascontiguousarray(body.T)))
+    return np.roll(np.eye(4), -1, axis=0) @ left @ right
