@@ -176,7 +176,7 @@ class McapWriter(FinishOnExit):
         r["log_time"] = r["publish_time"] = ns
         for i, (lever_arm, mounting) in enumerate(placements):
             r[f"sec{i}"], r[f"nanosec{i}"] = divmod(ns, 1_000_000_000)
-            r[f"translation{i}"] = self.axes.body @ np.asarray(lever_arm, float)
+            r[f"translation{i}"] = self.axes.body_vectors(np.asarray(lever_arm, float))
             q = matrix_to_quat(np.ascontiguousarray(self.axes.rotation(np.asarray(mounting, float))))
             r[f"rotation{i}"] = np.roll(q, -1)                     # x, y, z, w
         self._bag.write_rows(rows)
@@ -204,8 +204,8 @@ class McapWriter(FinishOnExit):
             self._check_stamps(ns)
             imu_ns.append(ns)
             _stamp(r, ns)
-            r["angular_velocity"] = block.gyro[m] @ axes.body.T if axes.converts_body else block.gyro[m]
-            r["linear_acceleration"] = block.accel[m] @ axes.body.T if axes.converts_body else block.accel[m]
+            r["angular_velocity"] = axes.body_vectors(block.gyro[m])
+            r["linear_acceleration"] = axes.body_vectors(block.accel[m])
             r["orientation"] = axes.quaternions(block.quat[m]) if block.quat is not None else (0.0, 0.0, 0.0, 1.0)
         if self._odometry is not None:
             self._write_truth(rows[f"c{self._odometry.id}"], block, scene_ns)
@@ -221,10 +221,10 @@ class McapWriter(FinishOnExit):
         tr, axes = block.truth, self.axes
         R = euler_to_matrix(tr["euler"])
         _stamp(r, ns)
-        r["position"] = tr["position"] @ axes.world.T
+        r["position"] = axes.world_vectors(tr["position"])
         r["orientation"] = axes.quaternions(matrix_to_quat(R))
-        r["linear"] = np.einsum("nji,nj->ni", R, tr["velocity"]) @ axes.body.T     # R^T v: twist in the body
-        r["angular"] = tr["omega_body"] @ axes.body.T
+        r["linear"] = axes.body_vectors(np.einsum("nji,nj->ni", R, tr["velocity"]))     # R^T v: in the body
+        r["angular"] = axes.body_vectors(tr["omega_body"])
 
     def _write_earth_truth(self, rows, block: SampleBlock, ns) -> None:
         from imu_emulator.geo import frames
@@ -239,12 +239,12 @@ class McapWriter(FinishOnExit):
         fix = rows[f"c{self._fix_truth.id}"]
         _stamp(fix, ns)
         fix["position"] = llh
-        odom, body = rows[f"c{self._odometry_ecef.id}"], self.earth_axes.body
+        odom = rows[f"c{self._odometry_ecef.id}"]
         _stamp(odom, ns)
         odom["position"] = r_e
         odom["orientation"] = self.earth_axes.quaternions(matrix_to_quat(np.ascontiguousarray(c_eb)))
-        odom["linear"] = v_b @ body.T
-        odom["angular"] = w_eb @ body.T
+        odom["linear"] = self.earth_axes.body_vectors(v_b)
+        odom["angular"] = self.earth_axes.body_vectors(w_eb)
 
     def _to_earth_rate(self, tr) -> np.ndarray:
         """What to add (in local NED) to the kernel's body rate w to get omega_eb. w is the rate w.r.t. the
@@ -272,7 +272,7 @@ class McapWriter(FinishOnExit):
                 _stamp(r, imu_ns[m] if per_imu else scene_ns)
                 values = [columns[n][1][m] if per_imu else columns[n][1] for n in names]
                 if kind == "mag":       # gauss in the sensor frame -> tesla in the bag's IMU axes
-                    r["magnetic_field"] = (np.stack(values, axis=-1) * GAUSS_TO_TESLA) @ self.axes.body.T
+                    r["magnetic_field"] = self.axes.body_vectors(np.stack(values, axis=-1) * GAUSS_TO_TESLA)
                 else:
                     r["fluid_pressure"] = values[0]
 
@@ -386,7 +386,7 @@ def read_columns(path: Path, names: tuple[str, ...]) -> dict | None:
         from mcap_ros2.decoder import DecoderFactory
     except ImportError:
         raise ImuEmulatorError("reading .mcap needs mcap-ros2-support: pip install 'imu-emulator[logs]'") from None
-    from imu_emulator.output.ros2.conventions import axes_for
+    from imu_emulator.output.ros2.conventions import axes_for, turn
     meta = read_metadata(path)
     axes = axes_for(meta.get("scene_frame"), meta.get("axes", "rep103"))
     start_ns = int(meta.get("start_ns", 0))
@@ -397,21 +397,23 @@ def read_columns(path: Path, names: tuple[str, ...]) -> dict | None:
     imus = [topic for topic in topics if re.fullmatch(r"/imu/[^/]+", topic)]   # written first-to-last
     n = min((len(topics[topic]) for topic in imus), default=0)
 
-    def rows(per_imu):                  # (n_imu, n[, 3]) -> (n * n_imu[, 3]), IMU fastest
-        a = np.asarray(per_imu, dtype=np.float64)
+    def rows(per_imu, dtype=np.float64):     # (n_imu, n[, 3]) -> (n * n_imu[, 3]), IMU fastest
+        a = np.asarray(per_imu, dtype=dtype)
         return np.swapaxes(a, 0, 1).reshape((-1,) + a.shape[2:])
 
-    stamps = rows([[m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in topics[t][:n]] for t in imus])
-    columns = {"t": (stamps.astype(np.int64) - start_ns) / np.float64(1e9),
+    stamps = rows([[m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in topics[t][:n]] for t in imus],
+                  np.int64)      # Unix ns need 61 bits: subtract the start before they become doubles
+    columns = {"t": (stamps - start_ns) / np.float64(1e9),
                "imu": np.tile(np.array([t[len("/imu/"):] for t in imus], dtype=object), n)}
     for prefix, field in (("a", "linear_acceleration"), ("g", "angular_velocity")):
         values = rows([[[getattr(getattr(m, field), axis) for axis in "xyz"] for m in topics[t][:n]] for t in imus])
-        values = values.reshape(-1, 3) @ axes.body     # body is orthogonal: body^T turns the bag's back
+        values = turn(axes.body.T, values.reshape(-1, 3))     # orthogonal: body^T turns the bag's back
         for i, axis in enumerate("xyz"):
             columns[prefix + axis] = values[:, i]
     if "/truth/odometry" in topics:
         position = np.array([[m.pose.pose.position.x, m.pose.pose.position.y, m.pose.pose.position.z]
-                             for m in topics["/truth/odometry"][:n]]) @ axes.world
+                             for m in topics["/truth/odometry"][:n]])
+        position = turn(axes.world.T, position)
         for i, axis in enumerate("xyz"):
             columns["p" + axis] = np.repeat(position[:, i], len(imus)).astype(np.float64)
     return {name: columns[name] for name in names} if set(names) <= set(columns) else None

@@ -58,9 +58,13 @@ class Axes:
     base_link: str
     suffix: str                 # appended to each IMU's frame id
 
-    @property
-    def converts_body(self) -> bool:
-        return not np.array_equal(self.body, np.eye(3))
+    def body_vectors(self, v: np.ndarray) -> np.ndarray:
+        """(..., 3) scene body (or sensor) vectors in the bag's axes."""
+        return turn(self.body, v)
+
+    def world_vectors(self, v: np.ndarray) -> np.ndarray:
+        """(..., 3) navigation-frame vectors in the bag's world axes."""
+        return turn(self.world, v)
 
     def imu_frame(self, token: str) -> str:
         return token + self.suffix
@@ -73,6 +77,16 @@ class Axes:
     def rotation(self, matrix: np.ndarray) -> np.ndarray:
         """A rotation between two scene-body frames (mounting: sensor -> body) in the bag's body axes."""
         return self.body @ matrix @ self.body.T
+
+
+def turn(matrix: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """matrix @ v for a signed permutation (every frame change here is one), by picking and negating components:
+    exact, signed zeros included (a product sums +0 terms in and turns -0 into +0), and cheaper than a product."""
+    columns = np.abs(matrix).argmax(axis=1)
+    signs = matrix[np.arange(3), columns]
+    if np.array_equal(columns, [0, 1, 2]) and (signs == 1).all():
+        return v
+    return np.asarray(v)[..., columns] * signs
 
 
 def axes_for(frame: str | None, axes: str = "rep103") -> Axes:
