@@ -19,7 +19,7 @@ import numpy as np
 from imu_emulator.output.atomic import AtomicOutput, FinishOnExit, output_error
 from imu_emulator.output.base import Contents, Format
 from imu_emulator.output.columns import TIME, block_columns, scene_layout
-from imu_emulator.output.run_record import run_metadata, versions  # noqa: F401  (batch and tests read them here)
+from imu_emulator.output.run_record import run_metadata
 from imu_emulator.runtime.samples import SampleBlock
 
 METADATA_KEY = b"imu_emulator"

@@ -58,6 +58,9 @@ class Axes:
     base_link: str
     suffix: str                 # appended to each IMU's frame id
 
+    def __post_init__(self):
+        object.__setattr__(self, "_quaternion_map", _ros_order(self.world, self.body).T.copy())
+
     def body_vectors(self, v: np.ndarray) -> np.ndarray:
         """(..., 3) scene body (or sensor) vectors in the bag's axes."""
         return turn(self.body, v)
@@ -72,7 +75,7 @@ class Axes:
     def quaternions(self, q: np.ndarray) -> np.ndarray:
         """(n, 4) scalar-first attitudes (scene body or sensor -> navigation) -> (n, 4) x, y, z, w of the bag's
         body -> the bag's world: q_world (x) q (x) q_body^-1 as one 4x4 matrix (both factors are constant)."""
-        return q @ _ros_order(self.world, self.body).T
+        return q @ self._quaternion_map
 
     def rotation(self, matrix: np.ndarray) -> np.ndarray:
         """A rotation between two scene-body frames (mounting: sensor -> body) in the bag's body axes."""
@@ -100,6 +103,24 @@ def axes_for(frame: str | None, axes: str = "rep103") -> Axes:
                 _WORLD[frame], "base_link", "")
 
 
+def _quaternion(matrix: np.ndarray) -> np.ndarray:
+    """The unit quaternion (w, x, y, z) of one rotation matrix (Shepperd's method: the largest of the four
+    candidates' squares, so no division by a small number)."""
+    m = np.asarray(matrix, float)
+    squares = np.array([1 + m[0, 0] + m[1, 1] + m[2, 2], 1 + m[0, 0] - m[1, 1] - m[2, 2],
+                        1 - m[0, 0] + m[1, 1] - m[2, 2], 1 - m[0, 0] - m[1, 1] + m[2, 2]])
+    i = int(squares.argmax())
+    r = np.sqrt(squares[i])
+    differences = {0: (m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]),
+                   1: (m[2, 1] - m[1, 2], m[0, 1] + m[1, 0], m[0, 2] + m[2, 0]),
+                   2: (m[0, 2] - m[2, 0], m[0, 1] + m[1, 0], m[1, 2] + m[2, 1]),
+                   3: (m[1, 0] - m[0, 1], m[0, 2] + m[2, 0], m[1, 2] + m[2, 1])}[i]
+    q = np.empty(4)
+    q[i] = r / 2
+    q[[k for k in range(4) if k != i]] = np.array(differences) / (2 * r)
+    return q
+
+
 def _quaternion_matrices(q):
     """L(q) and R(q): q (x) p = L(q) p and p (x) q = R(q) p, scalar-first."""
     w, x, y, z = q
@@ -111,7 +132,6 @@ def _quaternion_matrices(q):
 def _ros_order(world: np.ndarray, body: np.ndarray) -> np.ndarray:
     """The 4x4 map from a scene quaternion (w, x, y, z) to the bag's (x, y, z, w): q_world (x) q (x) q_body*,
     where body maps the scene body's vectors to the bag's (so the bag body -> scene body is body^T)."""
-    from imu_emulator.geo.rotations import matrix_to_quat
-    left, _ = _quaternion_matrices(matrix_to_quat(world))
-    _, right = _quaternion_matrices(matrix_to_quat(np.ascontiguousarray(body.T)))
+    left, _ = _quaternion_matrices(_quaternion(world))
+    _, right = _quaternion_matrices(_quaternion(body.T))
     return np.roll(np.eye(4), -1, axis=0) @ left @ right
