@@ -165,6 +165,8 @@ def named_columns(block, layout: Layout) -> dict[str, tuple[bool, np.ndarray]]:
     for group in layout.groups():
         names = iter(group.names)
         for values in group.arrays(block):
+            if not group.per_imu and values.ndim == 1:       # a shared scalar: (n,)
+                values = values[:, None]
             for i in range(values.shape[-1]):
                 found[next(names)] = (group.per_imu, values[..., i])
     return found
