@@ -148,7 +148,7 @@ def test_plot_of_an_output_draws_the_frame_its_conventions_state_and_says_when_n
     data = plotting.from_output(str(tmp_path / "flat.csv"))
     fig = plotting.draw(data, tmp_path / "flat.png")
     ax3d = next(ax for ax in fig.axes if ax.name == "3d")
-    assert data.frame == plotting.UNSTATED and "does not state its frame" in ax3d.get_title()
+    assert data.frame == "NED" and "NED frame" in ax3d.get_title()      # every output states its frame now
 
 
 def _toml(table: dict) -> str:

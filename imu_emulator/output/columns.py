@@ -80,7 +80,14 @@ def earth_group() -> Group:
     docstring gives their units and frames)."""
     from imu_emulator.motion.earth_truth import COLUMNS
     return Group("earth", False, True, tuple(COLUMNS),
-                 tuple(Column(name, "", f"Earth truth {key}") for key, names in COLUMNS.items() for name in names))
+                 tuple(Column(name, unit, f"Earth truth {key}") for key, names in COLUMNS.items()
+                       for name, unit in zip(names, _EARTH_UNITS.get(key, ("",) * len(names)))))
+
+
+#: the Earth truth's units, as imu_emulator.motion.earth_truth's docstring gives them
+_EARTH_UNITS = {"geodetic": ("deg", "deg", "m"), "position_ecef": ("m",) * 3, "velocity_ned": ("m/s",) * 3,
+                "velocity_ecef": ("m/s",) * 3, "euler_ned": ("rad",) * 3, "earth_rate_ned": ("rad/s",) * 3,
+                "transport_rate_ned": ("rad/s",) * 3, "coriolis_ned": ("m/s^2",) * 3, "gravity_ned": ("m/s^2",) * 3}
 
 
 #: the column names of each group (the writers' and readers' spelling of today's constants)
