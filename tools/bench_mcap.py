@@ -2,7 +2,7 @@
 `write_message` with a dict per message, as imu_emulator wrote bags before issue 25) against the block path
 (imu_emulator.output.formats.mcap: whole blocks of messages as numpy rows of CDR records, zstd chunks).
 
-    .venv/bin/python tools/bench_mcap.py [--samples 60000] [--imus 1] [--rounds 5] [--truth]
+    .venv/bin/python tools/bench_mcap.py [--samples 60000] [--imus 1] [--rounds 5] [--variants block]
 
 Both write the same random samples (sensor-frame attitude included) to an in-memory file; the variants are
 interleaved in one process (A, B, A, B, ...) and timed with thread CPU time (the work is single-threaded) beside
@@ -100,12 +100,13 @@ def main() -> None:
     parser.add_argument("--imus", type=int, default=1)
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--block", type=int, default=65536, help="samples per writer.write (generate's default)")
+    parser.add_argument("--variants", default="per-message,block", help="comma-separated: per-message, block")
     args = parser.parse_args()
     BLOCK = args.block
     names = [f"imu{i}" for i in range(args.imus)]
     block = make_block(args.samples, args.imus, np.random.default_rng(25))
     messages = args.samples * args.imus
-    variants = {"per-message": per_message, "block": block_path}
+    variants = {name: {"per-message": per_message, "block": block_path}[name] for name in args.variants.split(",")}
     for run in variants.values():                   # warm: imports, numba's cached functions
         run(make_block(100, args.imus, np.random.default_rng(0)), names)
     cpu = {name: [] for name in variants}
@@ -128,8 +129,9 @@ def main() -> None:
         best = min(cpu[name])
         print(f"{name:12s} {best:11.3f} {statistics.median(cpu[name]):11.3f}  "
               f"{min(wall[name]):11.3f} {statistics.median(wall[name]):11.3f}  {1e6 / best:16,.0f} {sizes[name]:12d}")
-    ratios = [a / b for a, b in zip(cpu["per-message"], cpu["block"])]
-    print(f"per-message / block CPU ratio per round: min {min(ratios):.1f}, median {statistics.median(ratios):.1f}")
+    if len(variants) == 2:
+        ratios = [a / b for a, b in zip(cpu["per-message"], cpu["block"])]
+        print(f"per-message / block CPU ratio per round: min {min(ratios):.1f}, median {statistics.median(ratios):.1f}")
 
 
 if __name__ == "__main__":
