@@ -198,14 +198,15 @@ def test_output_replaces_a_file_keeping_its_permissions_and_a_symlink_itself(tmp
     code, _, err = _cli(capsys, "generate", REPO / "examples/helix.toml", "-o", real, "--quiet")
     assert code == 0, err
     assert real.stat().st_mode & 0o777 == 0o640
-    # README: one row per IMU per sample, round(T·f) = 1000 samples of the helix, plus the header.
-    assert len(real.read_text().splitlines()) == 1001
+    # README: one row per IMU per sample, round(T·f) = 1000 samples of the helix, plus the header (after the
+    # '#' lines stating frames and units).
+    assert len([line for line in real.read_text().splitlines() if not line.startswith("#")]) == 1001
     link = tmp_path / "link.csv"
     link.symlink_to(real)
     real.write_text("old")
     code, _, err = _cli(capsys, "generate", REPO / "examples/helix.toml", "-o", link, "--quiet")
     assert code == 0, err
-    assert not link.is_symlink() and len(link.read_text().splitlines()) == 1001
+    assert not link.is_symlink() and len([x for x in link.read_text().splitlines() if not x.startswith("#")]) == 1001
     assert real.read_text() == "old"
 
 

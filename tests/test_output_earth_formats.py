@@ -142,7 +142,7 @@ def test_parquet_equals_npz_column_by_column_in_an_earth_scene(run):
 def test_ros2_bag_carries_the_earth_truth(run):
     """/truth/navsatfix and /truth/odometry_ecef, decoded by rosbags, against the NPZ of the same run and pymap3d:
     the fix is the NPZ's geodetic truth, pymap3d puts it at the odometry's ECEF position; the odometry's
-    orientation is body FRD -> ECEF (pymap3d's NED axes times the NPZ's attitude w.r.t. local NED), its twist the
+    orientation is body FLU -> ECEF (pymap3d's NED axes times the NPZ's attitude w.r.t. local NED, FRD), its twist the
     ECEF velocity in body axes and a body rate that turns its own orientations (checked by differencing them)."""
     pymap3d = pytest.importorskip("pymap3d")
     from scipy.spatial.transform import Rotation
@@ -157,7 +157,7 @@ def test_ros2_bag_carries_the_earth_truth(run):
     assert _same_bits(llh, geodetic)
     assert {(f.status.status, f.position_covariance_type, f.header.frame_id) for f in fixes} == {(0, 3, "earth")}
     odom = [m for _, m in topics["/truth/odometry_ecef"]]
-    assert {(d.header.frame_id, d.child_frame_id) for d in odom} == {("earth", "base_link_frd")}
+    assert {(d.header.frame_id, d.child_frame_id) for d in odom} == {("earth", "base_link")}   # REP 103: FLU
     pos = np.array([[d.pose.pose.position.x, d.pose.pose.position.y, d.pose.pose.position.z] for d in odom])
     assert _same_bits(pos, r_ecef)
     np.testing.assert_allclose(pos, np.array(pymap3d.geodetic2ecef(*llh.T)).T, rtol=0, atol=1e-6)
@@ -167,7 +167,8 @@ def test_ros2_bag_carries_the_earth_truth(run):
     # C_n^e from pymap3d: row i holds the NED components of ECEF axis i
     c_ne = np.array([np.column_stack(pymap3d.ecef2nedv(*np.eye(3), la, lo)) for la, lo, _ in llh])
     c_bn = Rotation.from_euler("ZYX", euler_ned[:, ::-1]).as_matrix()
-    np.testing.assert_allclose(c_be.as_matrix(), c_ne @ c_bn, rtol=0, atol=1e-12)
+    flu_from_frd = np.diag([1.0, -1.0, -1.0])
+    np.testing.assert_allclose(c_be.as_matrix(), c_ne @ c_bn @ flu_from_frd, rtol=0, atol=1e-12)
     v_b = np.array([[d.twist.twist.linear.x, d.twist.twist.linear.y, d.twist.twist.linear.z] for d in odom])
     np.testing.assert_allclose(c_be.apply(v_b), v_ecef, rtol=0, atol=1e-9)
     _twist_moves_the_pose(odom, t)

@@ -127,7 +127,8 @@ def test_plot_of_a_parquet_output_equals_that_of_its_csv(tmp_path):
 def test_plot_of_an_output_draws_the_frame_its_conventions_state_and_says_when_none_is_stated(tmp_path):
     """examples/earth_turn.toml (NED, 1000 m up: pz = -1000) written with --truth states its frame in its
     conventions: down is drawn down (the z axis inverted, as for the scene itself). A flat scene's output states
-    none, and the title says so instead of naming a frame it cannot know."""
+    its frame too (issue 24: every file states its frames; two_imus.toml is NED); a file stating none gets a title
+    that says so instead of naming a frame it cannot know."""
     import tomllib
     earth = tomllib.loads((ROOT / "examples" / "earth_turn.toml").read_text())
     earth["scene"]["duration_s"] = 2.0
@@ -148,7 +149,7 @@ def test_plot_of_an_output_draws_the_frame_its_conventions_state_and_says_when_n
     data = plotting.from_output(str(tmp_path / "flat.csv"))
     fig = plotting.draw(data, tmp_path / "flat.png")
     ax3d = next(ax for ax in fig.axes if ax.name == "3d")
-    assert data.frame == plotting.UNSTATED and "does not state its frame" in ax3d.get_title()
+    assert data.frame == "NED" and "NED frame" in ax3d.get_title()      # every output states its frame now
 
 
 def _toml(table: dict) -> str:

@@ -206,8 +206,8 @@ def test_cli_generate_csv_layout_and_values(tmp_path):
     path = _write(tmp_path, text)
     result = _cli("generate", str(path), "-o", str(tmp_path / "out.csv"), "--quiet")
     assert result.returncode == 0, result.stderr
-    lines = (tmp_path / "out.csv").read_text().splitlines()
-    assert lines[0] == "t,imu,ax,ay,az,gx,gy,gz"
+    lines = [line for line in (tmp_path / "out.csv").read_text().splitlines() if not line.startswith("#")]
+    assert lines[0] == "t,imu,ax,ay,az,gx,gy,gz"           # after the '#' lines stating frames and units
     assert len(lines) == 1 + 2 * 100
     assert [line.split(",")[1] for line in lines[1:5]] == ["imu0", "imu1", "imu0", "imu1"]
     # x = cos(2 pi t), gravity on, attitude level: ax = -(2 pi)^2 cos(2 pi t), az = g

@@ -22,10 +22,25 @@ def register(subparsers) -> None:
     gen.add_argument("--truth", action="store_true", help="add position, velocity, attitude and body rates "
                      "(and each IMU's realized bias when a bias effect is on)")
     add_increments_option(gen)
+    gen.add_argument("--start-time", type=_start_time, default=None, metavar="ISO8601|now",
+                     help="the instant of scene time 0 in a ROS 2 bag's stamps (\"2026-03-01T12:00:00Z\"; no zone "
+                     "is UTC; default 2024-01-01T00:00:00Z, never 0, which ROS treats as unset)")
+    gen.add_argument("--ros-axes", choices=("rep103", "scene"), default="rep103",
+                     help="a ROS 2 bag's axes: REP 103 (bodies forward-left-up, world ENU, whatever the scene's "
+                     "frame; default) or the scene's own, with frame ids saying so (<imu>_frd, world_ned)")
     gen.add_argument("--quiet", action="store_true", help="no progress bar or summary (warnings still show)")
     gen.add_argument("--allow-large", action="store_true", help="write a CSV larger than the free disk space")
     gen.add_argument("--block", type=number(1, 10_000_000, integer=True), default=65536, help=argparse.SUPPRESS)
     gen.set_defaults(func=cmd_generate)
+
+
+def _start_time(text: str) -> int:
+    """--start-time as Unix ns; argparse prints the one-line reason of a bad value."""
+    from imu_emulator.output.ros2.conventions import parse_start_time
+    try:
+        return parse_start_time(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def cmd_generate(args) -> int:
@@ -43,6 +58,7 @@ def cmd_generate(args) -> int:
 def _generate(args, scene, stopped) -> int:
     from imu_emulator.output.formats import check_output, format_of, open_writer
     from imu_emulator.output.columns import scene_companions
+    from imu_emulator.output.formats.mcap import placements
     from imu_emulator.runtime.samples import counts_text
     from imu_emulator.runtime.simulation import Simulation
 
@@ -62,7 +78,8 @@ def _generate(args, scene, stopped) -> int:
                      metadata=record.run_metadata(scene) if record.run_metadata else None, conventions=conventions,
                      covariances=variances(scene), frame=scene.frame,
                      attitude_reference=scene.attitude_reference, effects=scene.effects,
-                     companions=scene_companions(scene)) as writer:
+                     companions=scene_companions(scene), start_ns=args.start_time, ros_axes=args.ros_axes,
+                     placements=placements(scene)) as writer:
         check_output(scene, args.output, args.truth, args.allow_large, increments=bool(args.increments))
         attitude = record.attitude    # a ROS Imu message has an orientation field: the sensor frame's attitude
         with CompileStatus(scene, attitude=attitude, truth=args.truth, quiet=args.quiet, increments=args.increments):

@@ -38,6 +38,11 @@ class Contents:
     frame: str | None = None                # MCAP: the scene's frame (Earth truth's body axes)
     attitude_reference: str = "local_level"  # MCAP: what the truth's body rate is relative to
     effects: frozenset = frozenset()
+    #: MCAP (output.ros2.conventions): the Unix time of scene time 0, ns (None: the documented default), the
+    #: axes ("rep103" or "scene"), each IMU's (lever arm, mounting sensor -> body) in the scene's body axes
+    start_ns: int | None = None
+    ros_axes: str = "rep103"
+    placements: list | None = None
 
 
 @dataclass(frozen=True)

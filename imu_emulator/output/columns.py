@@ -114,7 +114,14 @@ def earth_group() -> Group:
     docstring gives their units and frames)."""
     from imu_emulator.motion.earth_truth import COLUMNS
     return Group("earth", False, True, tuple(COLUMNS),
-                 tuple(Column(name, "", f"Earth truth {key}") for key, names in COLUMNS.items() for name in names))
+                 tuple(Column(name, unit, f"Earth truth {key}") for key, names in COLUMNS.items()
+                       for name, unit in zip(names, _EARTH_UNITS.get(key, ("",) * len(names)))))
+
+
+#: the Earth truth's units, as imu_emulator.motion.earth_truth's docstring gives them
+_EARTH_UNITS = {"geodetic": ("deg", "deg", "m"), "position_ecef": ("m",) * 3, "velocity_ned": ("m/s",) * 3,
+                "velocity_ecef": ("m/s",) * 3, "euler_ned": ("rad",) * 3, "earth_rate_ned": ("rad/s",) * 3,
+                "transport_rate_ned": ("rad/s",) * 3, "coriolis_ned": ("m/s^2",) * 3, "gravity_ned": ("m/s^2",) * 3}
 
 
 #: the column names of each group (the writers' and readers' spelling of today's constants)
@@ -199,3 +206,22 @@ def block_columns(block, imu_names, layout: Layout, time_ns: bool = False) -> di
     for i, name in enumerate(layout.names()):
         columns[name] = values[:, i]
     return columns
+
+
+def named_columns(block, layout: Layout) -> dict[str, tuple[bool, np.ndarray]]:
+    """Each float64 column of a block by name: (per_imu, its values), (n_imu, n) per IMU or (n,) shared; views
+    where the block's arrays allow (a writer that wants some columns by name, as MCAP's companion topics)."""
+    found = {}
+    for group in layout.groups():
+        names = iter(group.names)
+        for values in group.arrays(block):
+            if not group.per_imu and values.ndim == 1:       # a shared scalar: (n,)
+                values = values[:, None]
+            for i in range(values.shape[-1]):
+                found[next(names)] = (group.per_imu, values[..., i])
+    return found
+
+
+def described(layout: Layout) -> list[Column]:
+    """Every column of an output in order, with its unit and what it is (the files state them)."""
+    return [TIME, IMU] + [column for group in layout.groups() for column in group.columns]

@@ -52,11 +52,12 @@ def check_path(path: str | Path) -> Path:
 def open_writer(path: str | Path, imu_names, truth: bool, bias_truth: bool = False, temperature: bool = False,
                 increments: bool = False, metadata: dict | None = None, conventions: list[str] | None = None,
                 covariances: dict | None = None, frame: str | None = None, attitude_reference: str = "local_level",
-                effects=(), companions=()):
+                effects=(), companions=(), start_ns: int | None = None, ros_axes: str = "rep103", placements=None):
     """The writer for the output file's suffix (see each format's module). `conventions` (Earth scenes with
     truth) adds the Earth truth; `metadata` is what Parquet records in its footer; `covariances`, `frame`,
-    `attitude_reference` and `effects` are what MCAP needs beyond the columns; `companions` the companion sensors'
-    column groups (imu_emulator.output.columns.scene_companions)."""
+    `attitude_reference`, `effects`, `start_ns`, `ros_axes` and `placements` are what MCAP needs beyond the
+    columns (output.base.Contents); `companions` the companion sensors' column groups
+    (imu_emulator.output.columns.scene_companions)."""
     path = check_path(path)
     record = format_of(path)
     if increments and not record.increments:
@@ -66,7 +67,8 @@ def open_writer(path: str | Path, imu_names, truth: bool, bias_truth: bool = Fal
                     earth=bool(truth and conventions), companions=tuple(companions))
     return record.open(path, Contents(list(imu_names), layout, list(conventions) if layout.earth else [],
                                       metadata=metadata, covariances=covariances, frame=frame,
-                                      attitude_reference=attitude_reference, effects=frozenset(effects)))
+                                      attitude_reference=attitude_reference, effects=frozenset(effects),
+                                      start_ns=start_ns, ros_axes=ros_axes, placements=placements))
 
 
 def check_output(scene, output: str | Path, truth: bool, allow_large: bool = False, increments: bool = False) -> None:

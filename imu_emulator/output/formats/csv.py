@@ -1,6 +1,6 @@
-"""Samples as CSV (`-o run.csv`), streamed block by block: a header row of the columns
-(imu_emulator.output.columns), then one row per IMU per sample. Earth scenes with truth start with '#' lines
-stating the frame and sign conventions. Numbers are the shortest text that reads back as the same double
+"""Samples as CSV (`-o run.csv`), streamed block by block: '#' lines stating the frames, sign conventions and
+units (imu_emulator.output.statement), a header row of the columns (imu_emulator.output.columns), then one row
+per IMU per sample. Numbers are the shortest text that reads back as the same double
 (imu_emulator.output.csv_text).
 
 Size: CSV_CHARS_PER_NUMBER characters a number, an estimate (shortest round-trip text is 16-17 significant
@@ -20,6 +20,7 @@ import numpy as np
 from imu_emulator.output.atomic import AtomicOutput, FinishOnExit
 from imu_emulator.output.base import Contents, Format
 from imu_emulator.output.columns import IMU, TIME, Layout, block_columns, scene_layout
+from imu_emulator.output.statement import statement
 from imu_emulator.runtime.memory import RunSizeError, gib
 from imu_emulator.runtime.samples import SampleBlock
 
@@ -42,7 +43,7 @@ class CsvWriter(FinishOnExit):
         self._options = astuple(self.layout)
         self._out = AtomicOutput(self.path, "wb")
         self._rows = RowWriter(self.imu_names)
-        self._out.write("".join(f"# {line}\n" for line in contents.conventions).encode())
+        self._out.write("".join(f"# {line}\n" for line in statement(contents)).encode())
         self._out.write((",".join((TIME.name, IMU.name) + self.layout.names()) + "\n").encode())
 
     def write(self, block: SampleBlock) -> None:

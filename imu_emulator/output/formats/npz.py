@@ -1,13 +1,15 @@
 """Samples as NPZ (`-o run.npz`): numpy arrays of the whole run, collected in memory and saved on close: t (n,),
 imu_names, accel and gyro (imu, n, 3), quat when the simulation has the attitude, temperature_c (imu, n),
 dtheta and dvel (--increments), t_imu (imu, n) when an IMU has its own time_offset_s, the truth's keys
-(--truth; imu_emulator.runtime.simulation.TRUTH_KEYS, the realized biases, the Earth truth) and "conventions".
+(--truth; imu_emulator.runtime.simulation.TRUTH_KEYS, the realized biases, the Earth truth), "conventions" (the
+frames and units: imu_emulator.output.statement) and "units" (one line per array: its key, unit and meaning).
 
 Size: the arrays' bytes plus NPZ_ARRAY_OVERHEAD per array: exact to within that overhead. The whole run must
 fit in memory twice (the blocks, then the joined arrays): checked before the run.
 """
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +31,9 @@ class NpzWriter(FinishOnExit):
         self.path = Path(path)
         self.imu_names = list(contents.imu_names)
         self.layout = contents.layout
-        self.conventions = list(contents.conventions)
+        from imu_emulator.output.statement import statement
+        self.conventions = statement(contents)
+        self.units = unit_lines(contents.layout)
         self.blocks: list[SampleBlock] = []
         self._out = AtomicOutput(self.path, "wb")
 
@@ -66,12 +70,34 @@ class NpzWriter(FinishOnExit):
             if group.in_companion:
                 arrays.update({key: array[:, :, 0] if array.shape[2] == 1 else array
                                for key, array in zip(group.keys, group.arrays(data))})
-        if self.conventions:
-            arrays["conventions"] = np.array(self.conventions)
+        arrays["conventions"] = np.array(self.conventions)
+        arrays["units"] = np.array([self.units[key] for key in arrays if key in self.units])
         try:
             np.savez(self._out.file, **arrays)
         except OSError as exc:
             raise output_error(self.path, exc) from None
+
+
+def unit_lines(layout) -> dict[str, str]:
+    """Each array's unit and meaning as a line, by its key: "<key>: <unit> (<what>)", from the column schema's
+    groups (an array holds a group's key, its columns' values along its last axis)."""
+    lines = {"t": "t: s (sample time on the scene's time base)", "imu_names": "imu_names: the IMUs, in order",
+             "t_imu": "t_imu: s (each IMU's stamps: t plus its time_offset_s)",
+             "quat": "quat: 1 (attitude sensor -> navigation, scalar first)",
+             "alpha_body": "alpha_body: rad/s^2 (angular acceleration of the body, body frame)"}
+    for group in layout.groups():
+        per_key = len(group.columns) // len(group.keys)
+        for i, key in enumerate(group.keys):
+            columns = group.columns[i * per_key:(i + 1) * per_key]
+            units = ", ".join(dict.fromkeys(c.unit for c in columns))
+            what = re.sub(r", [xyz]$", "", columns[0].what)         # the quantity, not its first axis
+            lines[key] = f"{key}: {units} ({what})"
+    return lines
+
+
+def _text_bytes(lines) -> int:
+    """A numpy unicode array of these lines: 4 bytes a character of the longest."""
+    return 4 * max((len(line) for line in lines), default=0) * len(lines)
 
 
 def estimated_bytes(scene, truth: bool, increments: bool = False) -> int:
@@ -94,6 +120,7 @@ def estimated_bytes(scene, truth: bool, increments: bool = False) -> int:
             parts.append((len(group.columns) * n_imu, len(group.keys)))
     if any(imu.companions for imu in scene.imus):
         parts.append((4 * n_imu, 1))      # quat: the kernel computes the attitude the companions read
+    conventions = []
     if truth:
         parts.append((3 * len(TRUTH_KEYS), len(TRUTH_KEYS)))
         if EffectPlan(scene).bias_truth:
@@ -101,9 +128,16 @@ def estimated_bytes(scene, truth: bool, increments: bool = False) -> int:
         if model_on(scene):
             from imu_emulator.motion import earth_truth
             parts.append((3 * len(earth_truth.KEYS), len(earth_truth.KEYS)))
-            lines = earth_truth.conventions(scene)
-            text += 4 * max(len(line) for line in lines) * len(lines)
-    arrays = 1 + sum(count for _, count in parts) + (truth and model_on(scene))
+            conventions = earth_truth.conventions(scene)
+    from imu_emulator.output.columns import scene_layout
+    from imu_emulator.output.statement import statement
+    layout = scene_layout(scene, truth, increments)
+    text += _text_bytes(statement(Contents(list(scene.imu_names), layout, conventions, frame=scene.frame)))
+    keys = ["t", "imu_names", *(["t_imu"] if any(imu.time_offset_s for imu in scene.imus) else [])]
+    units = unit_lines(layout)
+    truth_keys = ["alpha_body"] if truth else []          # in the truth, not a column
+    text += _text_bytes([units[key] for key in keys + [k for g in layout.groups() for k in g.keys] + truth_keys])
+    arrays = 3 + sum(count for _, count in parts)            # imu_names, conventions, units
     return 8 * n * sum(numbers for numbers, _ in parts) + text + NPZ_ARRAY_OVERHEAD * arrays
 
 

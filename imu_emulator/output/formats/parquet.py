@@ -2,8 +2,8 @@
 with the run. Columns: t_ns (int64, ns on the scene's time base), imu (dictionary-encoded name), ax ay az (m/s^2),
 gx gy gz (rad/s), then as in CSV the increments (--increments), temp_c, truth, realized-bias and (a scene on the
 Earth, with --truth) Earth truth columns. The footer's key "imu_emulator" holds JSON: the scene's hash and seed,
-the versions that wrote it, whatever the caller adds (a batch's draws) and, with Earth truth, "conventions" (the
-lines a CSV starts with).
+the versions that wrote it, whatever the caller adds (a batch's draws) and "conventions" (the frames and units, the
+lines a CSV starts with: imu_emulator.output.statement); each field's metadata holds its "unit" and "description".
 
 Size: the uncompressed bytes of every value (8 a number, 4 for the IMU's dictionary index). The file is
 compressed (Snappy) and comes out smaller, 0.1-0.7 of it, except a short file of noisy numbers, whose
@@ -12,8 +12,6 @@ dictionary pages can add up to about 6 % (the test allows 25 %).
 from __future__ import annotations
 
 import json
-import platform
-from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -21,32 +19,10 @@ import numpy as np
 from imu_emulator.output.atomic import AtomicOutput, FinishOnExit, output_error
 from imu_emulator.output.base import Contents, Format
 from imu_emulator.output.columns import TIME, block_columns, scene_layout
+from imu_emulator.output.run_record import run_metadata
 from imu_emulator.runtime.samples import SampleBlock
 
 METADATA_KEY = b"imu_emulator"
-
-
-@lru_cache(maxsize=1)
-def versions() -> dict[str, str]:
-    """The versions whose code shaped the samples (read once per process: a batch writes many files)."""
-    # here, not at the top: importlib.metadata pulls in email, csv and zipfile, and every command that finds the
-    # output formats (check, generate) imports this module
-    from importlib import metadata as importlib_metadata
-    found = {"python": platform.python_version()}
-    for package in ("imu-emulator", "numpy", "numba", "pyarrow"):
-        try:
-            found[package] = importlib_metadata.version(package)
-        except importlib_metadata.PackageNotFoundError:
-            found[package] = "unknown"
-    return found
-
-
-def run_metadata(scene, **extra) -> dict:
-    """What a Parquet file records about the run that made it."""
-    from imu_emulator.scene.digest import scene_digest
-    return {"scene_sha256": scene_digest(scene), "scene_path": scene.path, "seed": scene.seed,
-            "rate_hz": scene.rate_hz, "t0_s": scene.t0_s, "n_samples": scene.n_samples,
-            "imu_names": list(scene.imu_names), "versions": dict(versions()), **extra}
 
 
 def read_metadata(path: str | Path) -> dict:
@@ -63,8 +39,13 @@ class ParquetWriter(FinishOnExit):
         self.path = Path(path)
         self.imu_names = list(contents.imu_names)
         self.layout = contents.layout
-        metadata = dict(contents.metadata or {}, **({"conventions": contents.conventions} if self.layout.earth
-                                                     else {}))
+        from imu_emulator.output.columns import described
+        from imu_emulator.output.statement import statement
+        metadata = dict(contents.metadata or {}, conventions=statement(contents))
+        #: each field's unit and meaning, in the field's own metadata (what pyarrow and Arrow tools show)
+        self.field_metadata = {("t_ns" if c.name == TIME.name else c.name): {
+            b"unit": b"ns" if c.name == TIME.name else c.unit.encode(), b"description": c.what.encode()}
+            for c in described(self.layout)}
         self.metadata = {METADATA_KEY: json.dumps(metadata, sort_keys=True).encode()}
         self._out = AtomicOutput(self.path, "wb")
         self._writer = None     # opened on the first block, when the schema is known
@@ -73,9 +54,12 @@ class ParquetWriter(FinishOnExit):
         import pyarrow as pa
         import pyarrow.parquet as pq
         table = pa.table(block_columns(block, self.imu_names, self.layout, time_ns=True))
+        schema = pa.schema([f.with_metadata(self.field_metadata.get(f.name, {})) for f in table.schema],
+                           metadata=self.metadata)
+        table = pa.Table.from_arrays(table.columns, schema=schema)
         try:
             if self._writer is None:
-                self._writer = pq.ParquetWriter(self._out.file, table.schema.with_metadata(self.metadata))
+                self._writer = pq.ParquetWriter(self._out.file, schema)
             self._writer.write_table(table)
         except OSError as exc:
             raise output_error(self.path, exc) from None
