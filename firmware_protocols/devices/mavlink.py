@@ -39,14 +39,14 @@ import hashlib
 import math
 import re
 import struct
-import time
 
 
 from firmware_protocols.base import Samples
 from firmware_protocols.crc import crc16_mcrf4xx_bytes
 from firmware_protocols.devices.base import Device, Divider, Periodic, single
-from firmware_protocols.wire_formats.mavlink import (EPOCH_2015_NS, HEADER_LEN, INCOMPAT_SIGNED, MESSAGES, P_COMPID,
-                                                     P_SEQ, P_SYSID, SIGNATURE_LEN, STX_V1, STX_V2, MavlinkEncoder)
+from firmware_protocols.wire_formats.mavlink import (HEADER_LEN, INCOMPAT_SIGNED, MESSAGES, P_COMPID, P_SEQ, P_SYSID,
+                                                     SIGNATURE_LEN, STX_V1, STX_V2, MavlinkEncoder)
+from firmware_protocols.wire_formats.mavlink import pack_frame as wire_frame
 from firmware_protocols.registry import attach_device
 
 HEARTBEAT, COMMAND_LONG, COMMAND_ACK, MESSAGE_INTERVAL = 0, 76, 77, 244
@@ -61,22 +61,9 @@ _STX = re.compile(bytes([ord("["), STX_V2, STX_V1, ord("]")]))
 _INT32_MAX = 2 ** 31 - 1     # MESSAGE_INTERVAL.interval_us is an int32: a longer interval could not be read back
 
 
-def _signed_tail(link, frame: bytes) -> bytes:
-    """link_id, timestamp (10 us since 2015, strictly increasing on the link), SHA-256 signature[:6]."""
-    stamp = max((time.time_ns() - EPOCH_2015_NS) // 10_000, int(link.state[0]) + 1)
-    link.state[0] = stamp
-    head = frame + bytes([link.link_id]) + stamp.to_bytes(6, "little")
-    return head[len(frame):] + hashlib.sha256(link.secret_key + head).digest()[:6]
-
-
 def pack_frame(msgid: int, payload: bytes, seq: int, sysid: int, compid: int, link=None) -> bytes:
-    """One MAVLink 2 frame of a message whose CRC_EXTRA is in _CRC_EXTRA (trailing zeros cut, >= 1 byte)."""
-    payload = payload.rstrip(b"\0") or b"\0"
-    header = bytes([STX_V2, len(payload), INCOMPAT_SIGNED if link is not None else 0, 0, seq & 0xFF, sysid,
-                    compid]) + msgid.to_bytes(3, "little")
-    crc = crc16_mcrf4xx_bytes(header[1:] + payload + bytes([_CRC_EXTRA[msgid]]))
-    frame = header + payload + crc.to_bytes(2, "little")
-    return frame + _signed_tail(link, frame) if link is not None else frame
+    """One MAVLink 2 frame of a message whose CRC_EXTRA is in _CRC_EXTRA, signed with the wall clock's time."""
+    return wire_frame(msgid, _CRC_EXTRA[msgid], payload, seq, sysid, compid, link)
 
 
 class _FrameReader:
