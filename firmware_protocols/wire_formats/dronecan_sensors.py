@@ -1,0 +1,396 @@
+"""DroneCAN air data and GNSS, and the GNSS/compass/baro node they make together.
+
+Messages (DSDL as shipped with pydronecan, dronecan/dsdl_specs/uavcan/equipment/):
+
+- 1028 air_data.StaticPressure, signature 0xCDC7C43412BDC89A: float32 static_pressure (Pa) |
+  float16 static_pressure_variance (Pa^2, the `pressure_variance_pa2` option, default 0) = 6 bytes, one frame.
+- 1029 air_data.StaticTemperature, signature 0x49272A6477D96271: float16 static_temperature (K, = degC +
+  273.15) | float16 static_temperature_variance (K^2, `temperature_variance_k2`, default 0) = 4 bytes.
+- 1063 gnss.Fix2, signature 0xCA41E7000F37435F, bit-packed (each field's little-endian bits written most
+  significant bit first, libcanard's canardEncodeScalar): uint56 timestamp | uint56 gnss_timestamp |
+  uint3 gnss_time_standard | void13 | uint8 num_leap_seconds | int37 longitude_deg_1e8 | int37 latitude_deg_1e8 |
+  int27 height_ellipsoid_mm | int27 height_msl_mm | float32[3] ned_velocity | uint6 sats_used | uint2 status |
+  uint4 mode | uint6 sub_mode | float16[<=36] covariance (6-bit length) | float16 pdop |
+  ECEFPositionVelocity[<=1] (empty; the tail array, so no length on classic CAN) = 62 bytes, 10 frames.
+  Classic CAN only here (a CAN FD Fix2 is refused with a one-line error).
+
+Fix2 values: timestamp = gnss_timestamp = the solution's time of validity, (time_ns - gnss_age_s) // 1000 us,
+with gnss_time_standard UTC (2) (time_ns read as Unix-epoch ns, as gnss_time does) and num_leap_seconds =
+gnss_time.GNSS_DEFAULTS["leap_seconds"]; longitude/latitude x 1e8, heights in mm (no geoid model: height_msl =
+ellipsoid height, as gnss_time's records); ned_velocity m/s; sats_used (0..63); status from Samples.gnss_fix
+(0 no fix, 2 2D, 3 3D); mode SINGLE; covariance the diagonal [h^2, h^2, v^2, s^2, s^2, s^2] of the horizontal,
+vertical and speed 1-sigma accuracies (what ArduPilot's AP_GPS_DroneCAN reads back as sqrt(cov[0]), sqrt(cov[2]),
+sqrt(mean(cov[3:6]))); pdop = hypot(HDOP, VDOP). Absent quality fields take gnss_time.GNSS_DEFAULTS, an absent
+receiver solution the sample's position_llh/velocity_ned (as MAVLink's GNSS messages do), neither: status NO_FIX.
+
+The node ("dronecan-gnss-compass-baro"): one node id publishing ahrs.MagneticFieldStrength2 (gauss) at
+`mag_rate_hz`, StaticPressure then StaticTemperature at `baro_rate_hz` (None: every sample), and Fix2 at each new
+GNSS solution (gnss_new; every sample without it). A message whose inputs are absent (no mag, no pressure, no
+temperature, no position at all) is not sent. What ArduPilot expects (libraries/AP_Baro/AP_Baro_DroneCAN.cpp at
+19351d4b, AP_Compass/AP_Compass_DroneCAN.cpp, AP_GPS/AP_GPS_DroneCAN.cpp at 00bc4884): a baro is registered by
+the first StaticPressure from a node; StaticTemperature is taken only from a node already registered, in K
+(KELVIN_TO_C); compass field in gauss (x 1000 to mGauss); Fix2 status 2/3 with lat/lon_deg_1e8 / 10, height_msl,
+ned_velocity, covariance of 6, sats_used, pdop used for HDOP/VDOP when no Auxiliary message is seen.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from firmware_protocols.base import EncodeError, SaturationStats, Samples, empty_frames, saturate
+from firmware_protocols.crc import crc16_ccitt_bytes
+from firmware_protocols.gnss_time import GNSS_DEFAULTS
+from firmware_protocols.registry import FormatInfo, register
+from firmware_protocols.update_rate import UpdateTicks
+from firmware_protocols.wire_formats.dronecan import (_COMMON_OPTIONS, OP_F16, OP_F32, OP_U8, DroneCanDecoder,
+                                                      MagneticFieldStrength2Encoder, _DroneCanEncoder,
+                                                      _f16_from_f32_bits, _Message, _half, _single, can_id_for,
+                                                      transfer_frames)
+
+KELVIN_OFFSET = 273.15
+FLOAT16_MAX = 65504.0
+STATIC_PRESSURE_ID, STATIC_PRESSURE_SIGNATURE = 1028, 0xCDC7C43412BDC89A
+STATIC_TEMPERATURE_ID, STATIC_TEMPERATURE_SIGNATURE = 1029, 0x49272A6477D96271
+FIX2_ID, FIX2_SIGNATURE = 1063, 0xCA41E7000F37435F
+TIME_STANDARD_UTC = 2
+STATUS_NO_FIX = 0
+
+
+def f16_bits(value: float) -> int:
+    """libuavcan's float16 (ties away from zero) of a finite value within +-65504."""
+    return int(_f16_from_f32_bits(int(np.array(value, dtype=np.float32).view(np.uint32))))
+
+
+def _variance_ops(name: str, value: float) -> list:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= FLOAT16_MAX:
+        raise ValueError(f"{name}: a number 0..{FLOAT16_MAX:g}, got {value!r}")
+    bits = f16_bits(value)
+    return [(OP_U8, 0, bits & 0xFF, 0), (OP_U8, 0, bits >> 8, 0)]
+
+
+class StaticPressureEncoder(_DroneCanEncoder):
+    """Static pressure in Pa from Samples.pressure_pa (101325 Pa when absent)."""
+
+    def __init__(self, pressure_variance_pa2: float = 0.0, **options):
+        self.message = _Message("uavcan.equipment.air_data.StaticPressure", STATIC_PRESSURE_ID,
+                                STATIC_PRESSURE_SIGNATURE,
+                                [(OP_F32, 0, 0, 0)] + _variance_ops("pressure_variance_pa2", pressure_variance_pa2),
+                                sources=["pressure_pa"], counters=["static_pressure"], tail_array=False)
+        super().__init__(**options)
+
+    def _program(self, samples: Samples):
+        return self.message, (samples.field_or("pressure_pa", 101325.0).reshape(-1, 1),)
+
+
+class StaticTemperatureEncoder(_DroneCanEncoder):
+    """Static temperature in K from Samples.temperature_c (25 degC when absent)."""
+
+    def __init__(self, temperature_variance_k2: float = 0.0, **options):
+        self.message = _Message("uavcan.equipment.air_data.StaticTemperature", STATIC_TEMPERATURE_ID,
+                                STATIC_TEMPERATURE_SIGNATURE,
+                                [(OP_F16, 0, 0, 0)] + _variance_ops("temperature_variance_k2", temperature_variance_k2),
+                                sources=["temperature_c"], counters=["static_temperature"], tail_array=False)
+        super().__init__(**options)
+
+    def _program(self, samples: Samples):
+        return self.message, ((samples.field_or("temperature_c", 25.0) + KELVIN_OFFSET).reshape(-1, 1),)
+
+
+# --- Fix2 ---------------------------------------------------------------------------------------
+
+class _Bits:
+    """A DSDL bit stream: each value's little-endian bytes, the last one holding only its low bits, copied most
+    significant bit first (libcanard canardEncodeScalar + copyBitArray)."""
+
+    def __init__(self):
+        self.bits: list = []
+
+    def put(self, value: int, width: int) -> None:
+        value &= (1 << width) - 1
+        raw = value.to_bytes((width + 7) // 8, "little")
+        for k in range(width):
+            byte, rest = divmod(k, 8)
+            used = min(8, width - 8 * byte)          # bits of this byte in the field (the last may be short)
+            self.bits.append((raw[byte] >> (used - 1 - rest)) & 1)
+
+    def bytes(self) -> bytes:
+        bits = self.bits + [0] * (-len(self.bits) % 8)
+        return bytes(int("".join(map(str, bits[k:k + 8])), 2) for k in range(0, len(bits), 8))
+
+
+def _f32_bits(value: float) -> int:
+    return int(np.array(value, dtype=np.float32).view(np.uint32))
+
+
+class _Fix2Message:
+    """What the decoder needs of Fix2 (its layout is written by Fix2Encoder, read by _parse_fix2)."""
+
+    name = "uavcan.equipment.gnss.Fix2"
+    dtid = FIX2_ID
+    signature = FIX2_SIGNATURE
+    signature_crc = crc16_ccitt_bytes(FIX2_SIGNATURE.to_bytes(8, "little"), 0xFFFF)
+    payload_len = {False: 62}
+
+
+FIX2 = _Fix2Message()
+_INT_RANGES = {"longitude_deg_1e8": 37, "latitude_deg_1e8": 37, "height_ellipsoid_mm": 27, "height_msl_mm": 27}
+
+
+def _signed_range(bits: int) -> tuple:
+    return -(1 << (bits - 1)), (1 << (bits - 1)) - 1
+
+
+class Fix2Encoder:
+    """Samples -> gnss.Fix2 transfers (classic CAN), one at each new solution; frame rows as the other encoders."""
+
+    _CHECKED = ("gnss_llh", "gnss_velocity_ned", "gnss_fix", "gnss_satellites", "gnss_hdop", "gnss_vdop",
+                "gnss_horizontal_accuracy_m", "gnss_vertical_accuracy_m", "gnss_speed_accuracy_mps", "gnss_new",
+                "gnss_age_s", "position_llh", "velocity_ned")
+
+    def __init__(self, node_id: int = 42, priority: int = 31, fd: bool = False, transfer_id: int = 0):
+        if fd:
+            raise ValueError("fd: Fix2 is sent on classic CAN only here (its 62 bytes need a multi-frame FD transfer)")
+        if not 1 <= int(node_id) <= 127:
+            raise ValueError(f"node_id must be 1..127 (0 is anonymous), got {node_id}")
+        if not 0 <= int(priority) <= 31:
+            raise ValueError(f"priority must be 0..31, got {priority}")
+        self.node_id, self.priority, self.fd = int(node_id), int(priority), False
+        self.transfer_id = int(transfer_id) & 0x1F
+        self.can_id = can_id_for(FIX2_ID, self.node_id, self.priority)
+        self.saturated = SaturationStats()
+        self._lengths = tuple(len(f) for f in transfer_frames(bytes(FIX2.payload_len[False]), FIX2_SIGNATURE, 0))
+
+    @property
+    def frames_per_sample(self) -> tuple:
+        return tuple((length, True, False) for length in self._lengths)
+
+    def _solution(self, samples: Samples) -> dict:
+        n, d = len(samples), GNSS_DEFAULTS
+        if samples.gnss_llh is not None:
+            llh, vel = samples.gnss_llh, samples.field_or("gnss_velocity_ned", (0.0, 0.0, 0.0))
+            status = samples.field_or("gnss_fix", d["fix_type"])
+        elif samples.position_llh is not None:
+            llh, vel = samples.position_llh, samples.field_or("velocity_ned", (0.0, 0.0, 0.0))
+            status = np.full(n, float(d["fix_type"]))
+        else:
+            llh, vel, status = np.zeros((n, 3)), np.zeros((n, 3)), np.full(n, float(STATUS_NO_FIX))
+        hdop = samples.field_or("gnss_hdop", math.hypot(d["dop_n"], d["dop_e"]))
+        return {"llh": llh, "vel": vel, "status": np.where(np.isin(status, (2, 3)), status, STATUS_NO_FIX),
+                "sats": samples.field_or("gnss_satellites", d["num_sats"]),
+                "pdop": np.hypot(hdop, samples.field_or("gnss_vdop", d["dop_v"])),
+                "h": samples.field_or("gnss_horizontal_accuracy_m", d["h_acc_m"]),
+                "v": samples.field_or("gnss_vertical_accuracy_m", d["v_acc_m"]),
+                "s": samples.field_or("gnss_speed_accuracy_mps", d["s_acc_mps"])}
+
+    def _int(self, value: float, name: str, bits: int | None = None, lo: int = 0, hi: int = 0) -> int:
+        if bits is not None:
+            lo, hi = _signed_range(bits)
+        return int(saturate(np.array([round(value)], dtype=np.float64), lo, hi, name, self.saturated)[0])
+
+    def _f16(self, value: float, name: str) -> int:
+        return f16_bits(float(saturate(np.array([value]), -FLOAT16_MAX, FLOAT16_MAX, name, self.saturated)[0]))
+
+    def payload(self, samples: Samples, i: int, g: dict) -> bytes:
+        age_ns = 0 if samples.gnss_age_s is None else round(float(samples.gnss_age_s[i]) * 1e9)
+        usec = (int(samples.time_ns[i]) - age_ns) // 1000
+        if usec < 0:
+            self.saturated.add("timestamp", 1)
+            usec = 0
+        lat, lon, height = (float(v) for v in g["llh"][i])
+        bits = _Bits()
+        bits.put(usec, 56)
+        bits.put(usec, 56)
+        bits.put(TIME_STANDARD_UTC, 3)
+        bits.put(0, 13)
+        bits.put(int(GNSS_DEFAULTS["leap_seconds"]), 8)
+        bits.put(self._int(lon * 1e8, "longitude_deg_1e8", 37), 37)
+        bits.put(self._int(lat * 1e8, "latitude_deg_1e8", 37), 37)
+        height_mm = self._int(height * 1e3, "height_ellipsoid_mm", 27)
+        bits.put(height_mm, 27)
+        bits.put(height_mm, 27)
+        for v in g["vel"][i]:
+            bits.put(_f32_bits(float(v)), 32)
+        bits.put(self._int(float(g["sats"][i]), "sats_used", lo=0, hi=63), 6)
+        bits.put(int(g["status"][i]), 2)
+        bits.put(0, 4)           # MODE_SINGLE
+        bits.put(0, 6)
+        h2, v2, s2 = (float(g[k][i]) ** 2 for k in ("h", "v", "s"))
+        bits.put(6, 6)           # covariance: the diagonal of position N, E, D and velocity N, E, D
+        for value in (h2, h2, v2, s2, s2, s2):
+            bits.put(self._f16(value, "covariance"), 16)
+        bits.put(self._f16(float(g["pdop"][i]), "pdop"), 16)
+        return bits.bytes()
+
+    def encode(self, samples: Samples) -> np.ndarray:
+        samples.require_finite(self._CHECKED)
+        due = np.ones(len(samples), bool) if samples.gnss_new is None else samples.gnss_new != 0
+        picked = np.flatnonzero(due)
+        frames = empty_frames(len(picked) * len(self._lengths))
+        if not len(picked):
+            return frames
+        g = self._solution(samples)
+        row = 0
+        for i in picked.tolist():
+            for chunk in transfer_frames(self.payload(samples, i, g), FIX2_SIGNATURE, self.transfer_id):
+                frames[row]["sample"], frames[row]["can_id"], frames[row]["extended"] = i, self.can_id, True
+                frames[row]["length"] = len(chunk)
+                frames[row]["data"][:len(chunk)] = np.frombuffer(chunk, dtype=np.uint8)
+                row += 1
+            self.transfer_id = (self.transfer_id + 1) & 0x1F
+        return frames[:row]
+
+
+# --- the node -----------------------------------------------------------------------------------
+
+class GnssCompassBaroEncoder:
+    """One node's messages: MagneticFieldStrength2, StaticPressure, StaticTemperature, Fix2, each at its rate."""
+
+    def __init__(self, node_id: int = 42, priority: int = 31, fd: bool = False, transfer_id: int = 0,
+                 sensor_id: int = 0, mag_rate_hz: float | None = None, baro_rate_hz: float | None = None,
+                 pressure_variance_pa2: float = 0.0, temperature_variance_k2: float = 0.0):
+        common = dict(node_id=node_id, priority=priority, fd=fd, transfer_id=transfer_id)
+        self.mag = MagneticFieldStrength2Encoder(sensor_id=sensor_id, **common)
+        self.pressure = StaticPressureEncoder(pressure_variance_pa2, **common)
+        self.temperature = StaticTemperatureEncoder(temperature_variance_k2, **common)
+        self.fix = Fix2Encoder(**common)
+        self.node_id, self.fd = self.mag.node_id, self.mag.fd
+        self._mag_ticks = UpdateTicks(mag_rate_hz, "mag_rate_hz")
+        self._baro_ticks = UpdateTicks(baro_rate_hz, "baro_rate_hz")
+        self.saturated = SaturationStats()
+
+    @property
+    def frames_per_sample(self) -> tuple:
+        """The worst case: every message due at one sample."""
+        return sum((e.frames_per_sample for e in (self.mag, self.pressure, self.temperature, self.fix)), ())
+
+    def encode(self, samples: Samples) -> np.ndarray:
+        parts = []
+        mag_due, baro_due = self._mag_ticks.due(samples.time_ns), self._baro_ticks.due(samples.time_ns)
+        if samples.mag is not None:
+            parts.append(self._at(self.mag, samples, mag_due))
+        if samples.pressure_pa is not None:
+            parts.append(self._at(self.pressure, samples, baro_due))
+            if samples.temperature_c is not None:     # ArduPilot takes temperature only from a registered baro
+                parts.append(self._at(self.temperature, samples, baro_due))
+        if samples.gnss_llh is not None or samples.position_llh is not None:
+            parts.append(self.fix.encode(samples))
+        for encoder in (self.mag, self.pressure, self.temperature, self.fix):
+            for name, count in encoder.saturated.counts.items():
+                self.saturated.add(name, count)
+            encoder.saturated.counts.clear()
+        if not parts:
+            return empty_frames(0, self.fd)
+        if len({p.dtype for p in parts}) > 1:
+            parts = [p.astype(parts[0].dtype) if p.dtype != parts[0].dtype else p for p in parts]
+        frames = np.concatenate(parts)
+        # by sample; within a sample mag, pressure, temperature, fix, each transfer's frames in order
+        return frames[np.argsort(frames["sample"], kind="stable")]
+
+    @staticmethod
+    def _at(encoder, samples: Samples, due: np.ndarray) -> np.ndarray:
+        index = np.flatnonzero(due)
+        if len(index) == len(samples):
+            return encoder.encode(samples)
+        kw = {name: getattr(samples, name)[index] for name in ("accel", "gyro")}
+        for name in ("mag", "pressure_pa", "temperature_c"):
+            value = getattr(samples, name)
+            kw[name] = None if value is None else value[index]
+        frames = encoder.encode(Samples(samples.time_ns[index], **kw))
+        frames["sample"] = index[frames["sample"]]
+        return frames
+
+
+# --- decoding -----------------------------------------------------------------------------------
+
+def _parse_static_pressure(p: bytes) -> dict:
+    return {"pressure_pa": float(_single(p, 0, 1)[0]), "variance": float(_half(p, 4, 1)[0])}
+
+
+def _parse_static_temperature(p: bytes) -> dict:
+    kelvin = float(_half(p, 0, 1)[0])
+    return {"temperature_c": kelvin - KELVIN_OFFSET, "temperature_k": kelvin, "variance": float(_half(p, 2, 1)[0])}
+
+
+class _BitReader:
+    def __init__(self, data: bytes):
+        self.bits = "".join(f"{b:08b}" for b in data)
+        self.pos = 0
+
+    def get(self, width: int, signed: bool = False) -> int:
+        chunk = self.bits[self.pos:self.pos + width]
+        if len(chunk) < width:
+            raise EncodeError("Fix2 payload too short")      # caught by the decoder: counted as ignored
+        self.pos += width
+        raw = bytearray()
+        for byte in range((width + 7) // 8):
+            part = chunk[8 * byte:8 * byte + 8]
+            raw.append(int(part, 2))
+        value = int.from_bytes(bytes(raw), "little")
+        if signed and value >> (width - 1):
+            value -= 1 << width
+        return value
+
+
+def _parse_fix2(p: bytes) -> dict:
+    r = _BitReader(p)
+    timestamp, gnss_timestamp, standard = r.get(56), r.get(56), r.get(3)
+    r.get(13)
+    leap = r.get(8)
+    lon, lat = r.get(37, True) / 1e8, r.get(37, True) / 1e8
+    h_ell, h_msl = r.get(27, True) / 1e3, r.get(27, True) / 1e3
+    vel = [float(np.array(r.get(32), dtype=np.uint32).view(np.float32)) for _ in range(3)]
+    sats, status, mode, sub_mode = r.get(6), r.get(2), r.get(4), r.get(6)
+    cov = [float(np.array(r.get(16), dtype=np.uint16).view(np.float16)) for _ in range(r.get(6))]
+    pdop = float(np.array(r.get(16), dtype=np.uint16).view(np.float16))
+    return {"time_ns": timestamp * 1000, "gnss_timestamp_us": gnss_timestamp, "gnss_time_standard": standard,
+            "num_leap_seconds": leap, "llh": (lat, lon, h_ell), "height_msl_m": h_msl, "velocity_ned": vel,
+            "sats_used": sats, "status": status, "mode": mode, "sub_mode": sub_mode, "covariance": cov, "pdop": pdop}
+
+
+SENSOR_MESSAGES = {
+    STATIC_PRESSURE_ID: (StaticPressureEncoder().message, _parse_static_pressure),
+    STATIC_TEMPERATURE_ID: (StaticTemperatureEncoder().message, _parse_static_temperature),
+    FIX2_ID: (FIX2, _parse_fix2),
+}
+
+
+def _decoder(*ids):
+    return lambda **_: DroneCanDecoder(ids, messages=SENSOR_MESSAGES)
+
+
+def _frames(encoder) -> tuple:
+    return encoder.frames_per_sample
+
+
+register(FormatInfo(
+    name="dronecan-static-pressure", kind="can",
+    description="DroneCAN uavcan.equipment.air_data.StaticPressure (id 1028): static pressure, Pa",
+    encoder=StaticPressureEncoder, decoder=_decoder(STATIC_PRESSURE_ID), frames_per_sample=_frames(
+        StaticPressureEncoder()),
+    options={**_COMMON_OPTIONS, "pressure_variance_pa2": "static_pressure_variance to send, Pa^2 (default 0)"},
+))
+register(FormatInfo(
+    name="dronecan-static-temperature", kind="can",
+    description="DroneCAN uavcan.equipment.air_data.StaticTemperature (id 1029): static temperature, K",
+    encoder=StaticTemperatureEncoder, decoder=_decoder(STATIC_TEMPERATURE_ID),
+    frames_per_sample=_frames(StaticTemperatureEncoder()),
+    options={**_COMMON_OPTIONS, "temperature_variance_k2": "static_temperature_variance to send, K^2 (default 0)"},
+))
+register(FormatInfo(
+    name="dronecan-fix2", kind="can",
+    description="DroneCAN uavcan.equipment.gnss.Fix2 (id 1063): the GNSS fix, on each new solution",
+    encoder=Fix2Encoder, decoder=_decoder(FIX2_ID), frames_per_sample=_frames(Fix2Encoder()),
+    options={k: v for k, v in _COMMON_OPTIONS.items() if k != "fd"},
+))
+register(FormatInfo(
+    name="dronecan-gnss-compass-baro", kind="can",
+    description="DroneCAN GNSS/compass/baro node: MagneticFieldStrength2, StaticPressure/Temperature, Fix2",
+    encoder=GnssCompassBaroEncoder, decoder=_decoder(1002, STATIC_PRESSURE_ID, STATIC_TEMPERATURE_ID, FIX2_ID),
+    frames_per_sample=_frames(GnssCompassBaroEncoder()),
+    options={**{k: v for k, v in _COMMON_OPTIONS.items() if k != "fd"}, "sensor_id": "compass sensor id 0..255",
+             "mag_rate_hz": "MagneticFieldStrength2 rate, Hz (None: every sample)",
+             "baro_rate_hz": "StaticPressure/StaticTemperature rate, Hz (None: every sample)",
+             "pressure_variance_pa2": "static_pressure_variance, Pa^2 (default 0)",
+             "temperature_variance_k2": "static_temperature_variance, K^2 (default 0)"},
+))
