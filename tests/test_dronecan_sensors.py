@@ -184,10 +184,14 @@ def test_fix2_without_a_fix_and_out_of_range_values():
     block = head(n=1)
     block.gnss_fix[:] = 0
     block.gnss_satellites[:] = 99                      # uint6: saturates at 63, counted
+    block.gnss_velocity_ned[0, 1] = -1e39              # beyond float32: the largest float32, counted, never inf
+    block.gnss_llh[0, 2] = 1e6                         # int27 mm: +-67 km
     encoder = Fix2Encoder()
     ((_, t),) = transfers(encoder.encode(block))
     assert t.payload.status == 0 and t.payload.sats_used == 63
-    assert encoder.saturated.counts == {"sats_used": 1}
+    assert t.payload.ned_velocity[1] == -float(np.finfo(np.float32).max)
+    assert t.payload.height_ellipsoid_mm == 2**26 - 1
+    assert encoder.saturated.counts == {"sats_used": 1, "ned_velocity": 1, "height_ellipsoid_mm": 1}
 
 
 @pytest.mark.parametrize("make, needle", [

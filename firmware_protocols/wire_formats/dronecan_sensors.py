@@ -50,6 +50,7 @@ from firmware_protocols.wire_formats.dronecan import (_COMMON_OPTIONS, OP_F16, O
 
 KELVIN_OFFSET = 273.15
 FLOAT16_MAX = 65504.0
+FLOAT32_MAX = float(np.finfo(np.float32).max)
 STATIC_PRESSURE_ID, STATIC_PRESSURE_SIGNATURE = 1028, 0xCDC7C43412BDC89A
 STATIC_TEMPERATURE_ID, STATIC_TEMPERATURE_SIGNATURE = 1029, 0x49272A6477D96271
 FIX2_ID, FIX2_SIGNATURE = 1063, 0xCA41E7000F37435F
@@ -144,6 +145,8 @@ def _signed_range(bits: int) -> tuple:
 class Fix2Encoder:
     """Samples -> gnss.Fix2 transfers (classic CAN), one at each new solution; frame rows as the other encoders."""
 
+    frames_vary = True     # a transfer only at samples with a new solution
+
     _CHECKED = ("gnss_llh", "gnss_velocity_ned", "gnss_fix", "gnss_satellites", "gnss_hdop", "gnss_vdop",
                 "gnss_horizontal_accuracy_m", "gnss_vertical_accuracy_m", "gnss_speed_accuracy_mps", "gnss_new",
                 "gnss_age_s", "position_llh", "velocity_ned")
@@ -209,7 +212,7 @@ class Fix2Encoder:
         height_mm = self._int(height * 1e3, "height_ellipsoid_mm", 27)
         bits.put(height_mm, 27)
         bits.put(height_mm, 27)
-        for v in g["vel"][i]:
+        for v in saturate(g["vel"][i], -FLOAT32_MAX, FLOAT32_MAX, "ned_velocity", self.saturated):
             bits.put(_f32_bits(float(v)), 32)
         bits.put(self._int(float(g["sats"][i]), "sats_used", lo=0, hi=63), 6)
         bits.put(int(g["status"][i]), 2)
@@ -245,6 +248,8 @@ class Fix2Encoder:
 
 class GnssCompassBaroEncoder:
     """One node's messages: MagneticFieldStrength2, StaticPressure, StaticTemperature, Fix2, each at its rate."""
+
+    frames_vary = True     # frames_per_sample is the worst case (every message due at one sample)
 
     def __init__(self, node_id: int = 42, priority: int = 31, fd: bool = False, transfer_id: int = 0,
                  sensor_id: int = 0, mag_rate_hz: float | None = None, baro_rate_hz: float | None = None,
