@@ -103,14 +103,16 @@ def expected_fix2(block, i):
     return fix
 
 
-def test_fix2_byte_for_byte_on_new_solutions_only():
+@pytest.mark.parametrize("fd, per_fix", [(False, 10), (True, 1)])     # 62 bytes + CRC: 10 classic frames; 1 FD
+def test_fix2_byte_for_byte_on_new_solutions_only(fd, per_fix):
     block = head()
-    frames = Fix2Encoder(transfer_id=30).encode(block)
+    frames = Fix2Encoder(transfer_id=30, fd=fd).encode(block)
     new = np.flatnonzero(block.gnss_new)
     assert sorted(set(frames["sample"].tolist())) == new.tolist()
     for k, i in enumerate(new):
-        assert ours(frames[frames["sample"] == i]) == oracle(expected_fix2(block, i), transfer_id=(30 + k) % 32)
-    assert len(frames) == 10 * len(new)                # 62 bytes + CRC: 10 classic frames
+        assert ours(frames[frames["sample"] == i]) == oracle(expected_fix2(block, i), transfer_id=(30 + k) % 32,
+                                                             fd=fd)
+    assert len(frames) == per_fix * len(new)
 
 
 # --- what ArduPilot makes of the node -----------------------------------------------------------
@@ -195,7 +197,6 @@ def test_fix2_without_a_fix_and_out_of_range_values():
 
 
 @pytest.mark.parametrize("make, needle", [
-    (lambda: Fix2Encoder(fd=True), "fd: Fix2 is sent on classic CAN only"),
     (lambda: StaticPressureEncoder(pressure_variance_pa2=-1.0), "pressure_variance_pa2: a number 0..65504"),
     (lambda: GnssCompassBaroEncoder(baro_rate_hz=-5.0), "baro_rate_hz: a positive number of Hz"),
     (lambda: GnssCompassBaroEncoder(node_id=0), "node_id must be 1..127"),

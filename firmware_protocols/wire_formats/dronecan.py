@@ -284,12 +284,17 @@ def can_id_for(dtid: int, node_id: int, priority: int) -> int:
     return (priority & 0x1F) << 24 | (dtid & 0xFFFF) << 8 | (node_id & 0x7F)
 
 
-def transfer_frames(payload: bytes, signature: int, transfer_id: int) -> list:
-    """A classic-CAN transfer's frame payloads: single frame up to 7 bytes, else CRC-prefixed (CRC-16/CCITT-FALSE
+def transfer_frames(payload: bytes, signature: int, transfer_id: int, fd: bool = False) -> list:
+    """A transfer's frame payloads: single frame up to 7 bytes, else CRC-prefixed (CRC-16/CCITT-FALSE
     seeded with the data type signature) and split in 7-byte chunks, each followed by the tail byte (start 0x80,
-    end 0x40, toggle 0x20 alternating from 0, transfer id). For transfers built one at a time in Python (node
-    status, service replies, GNSS fixes); the IMU messages go through _encode_transfers."""
+    end 0x40, toggle 0x20 alternating from 0, transfer id). CAN FD: one frame up to 63 bytes, zero-padded before
+    the tail byte to the next FD data length (longer FD transfers are not built here). For transfers built one at
+    a time in Python (node status, service replies, GNSS fixes); the IMU messages go through _encode_transfers."""
     tid = transfer_id & 0x1F
+    if fd:
+        if len(payload) > 63:
+            raise ValueError(f"a {len(payload)}-byte payload needs a multi-frame FD transfer (unsupported)")
+        return [payload.ljust(int(FD_LENGTH_TABLE[len(payload) + 1]) - 1, b"\0") + bytes([0xC0 | tid])]
     if len(payload) <= 7:
         return [payload + bytes([0xC0 | tid])]
     crc = crc16_ccitt_bytes(signature.to_bytes(8, "little") + payload, 0xFFFF)

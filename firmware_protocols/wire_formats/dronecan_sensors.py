@@ -12,7 +12,8 @@ Messages (DSDL as shipped with pydronecan, dronecan/dsdl_specs/uavcan/equipment/
   int27 height_ellipsoid_mm | int27 height_msl_mm | float32[3] ned_velocity | uint6 sats_used | uint2 status |
   uint4 mode | uint6 sub_mode | float16[<=36] covariance (6-bit length) | float16 pdop |
   ECEFPositionVelocity[<=1] (empty; the tail array, so no length on classic CAN) = 62 bytes, 10 frames.
-  Classic CAN only here (a CAN FD Fix2 is refused with a one-line error).
+  On CAN FD pydronecan packs without the tail array optimisation: the empty array's 1-bit length makes 63
+  bytes, one 64-byte frame.
 
 Fix2 values: timestamp = gnss_timestamp = the solution's time of validity, (time_ns - gnss_age_s) // 1000 us,
 with gnss_time_standard UTC (2) (time_ns read as Unix-epoch ns, as gnss_time does) and num_leap_seconds =
@@ -131,7 +132,7 @@ class _Fix2Message:
     dtid = FIX2_ID
     signature = FIX2_SIGNATURE
     signature_crc = crc16_ccitt_bytes(FIX2_SIGNATURE.to_bytes(8, "little"), 0xFFFF)
-    payload_len = {False: 62}
+    payload_len = {False: 62, True: 63}
 
 
 FIX2 = _Fix2Message()
@@ -152,17 +153,16 @@ class Fix2Encoder:
                 "gnss_age_s", "position_llh", "velocity_ned")
 
     def __init__(self, node_id: int = 42, priority: int = 31, fd: bool = False, transfer_id: int = 0):
-        if fd:
-            raise ValueError("fd: Fix2 is sent on classic CAN only here (its 62 bytes need a multi-frame FD transfer)")
         if not 1 <= int(node_id) <= 127:
             raise ValueError(f"node_id must be 1..127 (0 is anonymous), got {node_id}")
         if not 0 <= int(priority) <= 31:
             raise ValueError(f"priority must be 0..31, got {priority}")
-        self.node_id, self.priority, self.fd = int(node_id), int(priority), False
+        self.node_id, self.priority, self.fd = int(node_id), int(priority), bool(fd)
         self.transfer_id = int(transfer_id) & 0x1F
         self.can_id = can_id_for(FIX2_ID, self.node_id, self.priority)
         self.saturated = SaturationStats()
-        self._lengths = tuple(len(f) for f in transfer_frames(bytes(FIX2.payload_len[False]), FIX2_SIGNATURE, 0))
+        self._lengths = tuple(len(f) for f in transfer_frames(bytes(FIX2.payload_len[self.fd]), FIX2_SIGNATURE, 0,
+                                                              self.fd))
 
     @property
     def frames_per_sample(self) -> tuple:
@@ -223,20 +223,23 @@ class Fix2Encoder:
         for value in (h2, h2, v2, s2, s2, s2):
             bits.put(self._f16(value, "covariance"), 16)
         bits.put(self._f16(float(g["pdop"][i]), "pdop"), 16)
+        if self.fd:
+            bits.put(0, 1)       # ecef_position_velocity's length: no tail array optimisation on FD
         return bits.bytes()
 
     def encode(self, samples: Samples) -> np.ndarray:
         samples.require_finite(self._CHECKED)
         due = np.ones(len(samples), bool) if samples.gnss_new is None else samples.gnss_new != 0
         picked = np.flatnonzero(due)
-        frames = empty_frames(len(picked) * len(self._lengths))
+        frames = empty_frames(len(picked) * len(self._lengths), self.fd)
         if not len(picked):
             return frames
         g = self._solution(samples)
         row = 0
         for i in picked.tolist():
-            for chunk in transfer_frames(self.payload(samples, i, g), FIX2_SIGNATURE, self.transfer_id):
+            for chunk in transfer_frames(self.payload(samples, i, g), FIX2_SIGNATURE, self.transfer_id, self.fd):
                 frames[row]["sample"], frames[row]["can_id"], frames[row]["extended"] = i, self.can_id, True
+                frames[row]["fd"] = self.fd
                 frames[row]["length"] = len(chunk)
                 frames[row]["data"][:len(chunk)] = np.frombuffer(chunk, dtype=np.uint8)
                 row += 1
@@ -386,14 +389,14 @@ register(FormatInfo(
     name="dronecan-fix2", kind="can",
     description="DroneCAN uavcan.equipment.gnss.Fix2 (id 1063): the GNSS fix, on each new solution",
     encoder=Fix2Encoder, decoder=_decoder(FIX2_ID), frames_per_sample=_frames(Fix2Encoder()),
-    options={k: v for k, v in _COMMON_OPTIONS.items() if k != "fd"},
+    options=dict(_COMMON_OPTIONS),
 ))
 register(FormatInfo(
     name="dronecan-gnss-compass-baro", kind="can",
     description="DroneCAN GNSS/compass/baro node: MagneticFieldStrength2, StaticPressure/Temperature, Fix2",
     encoder=GnssCompassBaroEncoder, decoder=_decoder(1002, STATIC_PRESSURE_ID, STATIC_TEMPERATURE_ID, FIX2_ID),
     frames_per_sample=_frames(GnssCompassBaroEncoder()),
-    options={**{k: v for k, v in _COMMON_OPTIONS.items() if k != "fd"}, "sensor_id": "compass sensor id 0..255",
+    options={**_COMMON_OPTIONS, "sensor_id": "compass sensor id 0..255",
              "mag_rate_hz": "MagneticFieldStrength2 rate, Hz (None: every sample)",
              "baro_rate_hz": "StaticPressure/StaticTemperature rate, Hz (None: every sample)",
              "pressure_variance_pa2": "static_pressure_variance, Pa^2 (default 0)",
