@@ -171,8 +171,11 @@ def test_absent_sensors_are_not_sent_and_our_decoder_reads_the_rest():
     block.pressure_pa = None
     block.gnss_llh = None
     frames = registry.create_encoder("dronecan-gnss-compass-baro").encode(block)
-    kinds = {t.payload._type.full_name for _, t in transfers(frames)}
-    assert kinds == {"uavcan.equipment.ahrs.MagneticFieldStrength2"}      # no pressure: no temperature either
+    sent = [t.payload for _, t in transfers(frames)]
+    # no pressure: no temperature either; the receiver reports without a position, as "no fix"
+    assert {m._type.full_name for m in sent} == {"uavcan.equipment.ahrs.MagneticFieldStrength2",
+                                                "uavcan.equipment.gnss.Fix2"}
+    assert {m.status for m in sent if m._type.full_name.endswith("Fix2")} == {0}
     full = head(n=40)
     packets = registry.get("dronecan-gnss-compass-baro").decoder().feed_frames(
         registry.create_encoder("dronecan-gnss-compass-baro").encode(full))

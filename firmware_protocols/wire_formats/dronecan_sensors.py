@@ -26,8 +26,9 @@ receiver solution the sample's position_llh/velocity_ned (as MAVLink's GNSS mess
 
 The node ("dronecan-gnss-compass-baro"): one node id publishing ahrs.MagneticFieldStrength2 (gauss) at
 `mag_rate_hz`, StaticPressure then StaticTemperature at `baro_rate_hz` (None: every sample), and Fix2 at each new
-GNSS solution (gnss_new; every sample without it). A message whose inputs are absent (no mag, no pressure, no
-temperature, no position at all) is not sent. What ArduPilot expects (libraries/AP_Baro/AP_Baro_DroneCAN.cpp at
+GNSS solution (gnss_new; every sample without it). A compass or baro message whose inputs are absent (no mag,
+no pressure, no temperature) is not sent; Fix2 always is, with status NO_FIX when there is no position at all
+(a receiver without a fix still reports, and ArduPilot then shows the GPS as present without a fix). What ArduPilot expects (libraries/AP_Baro/AP_Baro_DroneCAN.cpp at
 19351d4b, AP_Compass/AP_Compass_DroneCAN.cpp, AP_GPS/AP_GPS_DroneCAN.cpp at 00bc4884): a baro is registered by
 the first StaticPressure from a node; StaticTemperature is taken only from a node already registered, in K
 (KELVIN_TO_C); compass field in gauss (x 1000 to mGauss); Fix2 status 2/3 with lat/lon_deg_1e8 / 10, height_msl,
@@ -281,8 +282,7 @@ class GnssCompassBaroEncoder:
             parts.append(self._at(self.pressure, samples, baro_due))
             if samples.temperature_c is not None:     # ArduPilot takes temperature only from a registered baro
                 parts.append(self._at(self.temperature, samples, baro_due))
-        if samples.gnss_llh is not None or samples.position_llh is not None:
-            parts.append(self.fix.encode(samples))
+        parts.append(self.fix.encode(samples))
         for encoder in (self.mag, self.pressure, self.temperature, self.fix):
             for name, count in encoder.saturated.counts.items():
                 self.saturated.add(name, count)
