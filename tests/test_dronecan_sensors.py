@@ -7,8 +7,9 @@ ArduPilot, transcribed (ArduPilot/ardupilot):
   creates the backend for a node (get_dronecan_backend(..., create_new=true)) and accumulates static_pressure in
   Pa; handle_temperature() looks the node up with create_new=false (a temperature before any pressure is
   dropped) and stores KELVIN_TO_C(static_temperature).
-- libraries/AP_Compass/AP_Compass_DroneCAN.cpp: handle_mag_msg(): raw_field = magnetic_field_ga * 1000 (mGauss),
-  the node and sensor_id naming the compass.
+- libraries/AP_Compass/AP_Compass_DroneCAN.cpp (commit ee0da68ca14c90d923bbb28406c65b736c3932e2):
+  handle_magnetic_field_2() looks the compass up by (node, sensor_id); handle_mag_msg(): raw_field =
+  magnetic_field_ga * 1000 (mGauss).
 - libraries/AP_GPS/AP_GPS_DroneCAN.cpp (commit 00bc48841c2292adefdc6b536344d3da0eb9018c) handle_fix2_msg():
   status 2 -> 2D, 3 -> 3D (else NO_FIX, nothing used); loc.lat = latitude_deg_1e8 / 10, lng likewise (integer
   division), alt_amsl_cm = height_msl_mm / 10; velocity = ned_velocity; with covariance.len == 6:

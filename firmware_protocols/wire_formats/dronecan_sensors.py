@@ -28,8 +28,9 @@ The node ("dronecan-gnss-compass-baro"): one node id publishing ahrs.MagneticFie
 `mag_rate_hz`, StaticPressure then StaticTemperature at `baro_rate_hz` (None: every sample), and Fix2 at each new
 GNSS solution (gnss_new; every sample without it). A compass or baro message whose inputs are absent (no mag,
 no pressure, no temperature) is not sent; Fix2 always is, with status NO_FIX when there is no position at all
-(a receiver without a fix still reports, and ArduPilot then shows the GPS as present without a fix). What ArduPilot expects (libraries/AP_Baro/AP_Baro_DroneCAN.cpp at
-19351d4b, AP_Compass/AP_Compass_DroneCAN.cpp, AP_GPS/AP_GPS_DroneCAN.cpp at 00bc4884): a baro is registered by
+(a receiver without a fix still reports, and ArduPilot then shows the GPS as present without a fix).
+What ArduPilot expects (ArduPilot/ardupilot libraries/AP_Baro/AP_Baro_DroneCAN.cpp at 19351d4b,
+AP_Compass/AP_Compass_DroneCAN.cpp at ee0da68c, AP_GPS/AP_GPS_DroneCAN.cpp at 00bc4884): a baro is registered by
 the first StaticPressure from a node; StaticTemperature is taken only from a node already registered, in K
 (KELVIN_TO_C); compass field in gauss (x 1000 to mGauss); Fix2 status 2/3 with lat/lon_deg_1e8 / 10, height_msl,
 ned_velocity, covariance of 6, sats_used, pdop used for HDOP/VDOP when no Auxiliary message is seen.
