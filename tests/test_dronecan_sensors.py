@@ -211,9 +211,9 @@ def test_bad_options_are_one_line_errors(make, needle):
 
 
 def test_non_finite_fix_is_named():
-    block = head(n=5)
-    block.gnss_velocity_ned[4, 2] = np.nan
-    with pytest.raises(EncodeError, match="'gnss_velocity_ned' at sample 4, component 2"):
+    block = head(n=45)
+    block.gnss_velocity_ned[40, 2] = np.nan          # sample 40 carries a new solution
+    with pytest.raises(EncodeError, match="'gnss_velocity_ned' at sample 40, component 2"):
         Fix2Encoder().encode(block)
 
 

@@ -41,7 +41,7 @@ import math
 
 import numpy as np
 
-from firmware_protocols.base import EncodeError, SaturationStats, Samples, empty_frames, saturate
+from firmware_protocols.base import EncodeError, SaturationStats, Samples, empty_frames, saturate, to_int_field
 from firmware_protocols.crc import crc16_ccitt_bytes
 from firmware_protocols.gnss_time import GNSS_DEFAULTS
 from firmware_protocols.registry import FormatInfo, register
@@ -105,26 +105,24 @@ class StaticTemperatureEncoder(_DroneCanEncoder):
 
 class _Bits:
     """A DSDL bit stream: each value's little-endian bytes, the last one holding only its low bits, copied most
-    significant bit first (libcanard canardEncodeScalar + copyBitArray)."""
+    significant bit first (libcanard canardEncodeScalar + copyBitArray). Kept as one Python integer."""
 
     def __init__(self):
-        self.bits: list = []
+        self.value = 0
+        self.count = 0
 
     def put(self, value: int, width: int) -> None:
         value &= (1 << width) - 1
-        raw = value.to_bytes((width + 7) // 8, "little")
-        for k in range(width):
-            byte, rest = divmod(k, 8)
-            used = min(8, width - 8 * byte)          # bits of this byte in the field (the last may be short)
-            self.bits.append((raw[byte] >> (used - 1 - rest)) & 1)
+        sequence = 0
+        for shift in range(0, width, 8):
+            used = min(8, width - shift)                 # bits of this byte in the field (the last may be short)
+            sequence = (sequence << used) | ((value >> shift) & ((1 << used) - 1))
+        self.value = (self.value << width) | sequence
+        self.count += width
 
     def bytes(self) -> bytes:
-        bits = self.bits + [0] * (-len(self.bits) % 8)
-        return bytes(int("".join(map(str, bits[k:k + 8])), 2) for k in range(0, len(bits), 8))
-
-
-def _f32_bits(value: float) -> int:
-    return int(np.array(value, dtype=np.float32).view(np.uint32))
+        pad = -self.count % 8
+        return (self.value << pad).to_bytes((self.count + pad) // 8, "big")
 
 
 class _Fix2Message:
@@ -151,8 +149,8 @@ class Fix2Encoder:
     frames_vary = True     # a transfer only at samples with a new solution
 
     _CHECKED = ("gnss_llh", "gnss_velocity_ned", "gnss_fix", "gnss_satellites", "gnss_hdop", "gnss_vdop",
-                "gnss_horizontal_accuracy_m", "gnss_vertical_accuracy_m", "gnss_speed_accuracy_mps", "gnss_new",
-                "gnss_age_s", "position_llh", "velocity_ned")
+                "gnss_horizontal_accuracy_m", "gnss_vertical_accuracy_m", "gnss_speed_accuracy_mps", "gnss_age_s",
+                "position_llh", "velocity_ned")
 
     def __init__(self, node_id: int = 42, priority: int = 31, fd: bool = False, transfer_id: int = 0):
         if not 1 <= int(node_id) <= 127:
@@ -188,65 +186,78 @@ class Fix2Encoder:
                 "v": samples.field_or("gnss_vertical_accuracy_m", d["v_acc_m"]),
                 "s": samples.field_or("gnss_speed_accuracy_mps", d["s_acc_mps"])}
 
-    def _int(self, value: float, name: str, bits: int | None = None, lo: int = 0, hi: int = 0) -> int:
-        if bits is not None:
-            lo, hi = _signed_range(bits)
-        return int(saturate(np.array([round(value)], dtype=np.float64), lo, hi, name, self.saturated)[0])
+    def _require_finite(self, samples: Samples, index: np.ndarray) -> None:
+        """EncodeError naming the first non-finite input among the samples sent (block sample numbers)."""
+        for name in self._CHECKED:
+            values = getattr(samples, name)
+            if values is None:
+                continue
+            bad = ~np.isfinite(values[index])
+            if bad.any():
+                where = np.argwhere(bad)[0]
+                component = f", component {where[1]}" if bad.ndim == 2 else ""
+                raise EncodeError(f"non-finite value in field '{name}' at sample {index[where[0]]}{component}")
 
-    def _f16(self, value: float, name: str) -> int:
-        return f16_bits(float(saturate(np.array([value]), -FLOAT16_MAX, FLOAT16_MAX, name, self.saturated)[0]))
+    def _wire(self, samples: Samples, index: np.ndarray) -> dict:
+        """The block's wire values at `index`, saturated (and counted) in one pass per field."""
+        g = {k: v[index] for k, v in self._solution(samples).items()}
+        sat = self.saturated
+        age_ns = np.rint(samples.field_or("gnss_age_s", 0.0)[index] * 1e9).astype(np.int64)
+        usec = (samples.time_ns[index] - age_ns) // 1000
+        sat.add("timestamp", int(np.count_nonzero(usec < 0)))
+        llh = g["llh"]
+        ints = {name: to_int_field(values, scale, 0, *_signed_range(bits), name, sat, np.int64)
+                for name, values, scale, bits in (("longitude_deg_1e8", llh[:, 1], 1e-8, 37),
+                                                  ("latitude_deg_1e8", llh[:, 0], 1e-8, 37),
+                                                  ("height_ellipsoid_mm", llh[:, 2], 1e-3, 27))}
+        variances = np.column_stack([g["h"] ** 2, g["h"] ** 2, g["v"] ** 2, g["s"] ** 2, g["s"] ** 2, g["s"] ** 2])
+        halves = np.column_stack([saturate(variances, -FLOAT16_MAX, FLOAT16_MAX, "covariance", sat),
+                                  saturate(g["pdop"], -FLOAT16_MAX, FLOAT16_MAX, "pdop", sat)])
+        return {"usec": np.maximum(usec, 0), **ints,
+                "velocity": saturate(g["vel"], -FLOAT32_MAX, FLOAT32_MAX, "ned_velocity", sat).astype(np.float32)
+                .view(np.uint32).astype(np.int64),
+                "sats": to_int_field(g["sats"], 1, 0, 0, 63, "sats_used", sat, np.int64),
+                "status": g["status"].astype(np.int64),
+                "halves": [[f16_bits(v) for v in row] for row in halves.tolist()]}
 
-    def payload(self, samples: Samples, i: int, g: dict) -> bytes:
-        age_ns = 0 if samples.gnss_age_s is None else round(float(samples.gnss_age_s[i]) * 1e9)
-        usec = (int(samples.time_ns[i]) - age_ns) // 1000
-        if usec < 0:
-            self.saturated.add("timestamp", 1)
-            usec = 0
-        lat, lon, height = (float(v) for v in g["llh"][i])
+    def payload(self, w: dict, k: int) -> bytes:
+        """Transfer k of the block's wire values `w` as DSDL bytes."""
+        usec = int(w["usec"][k])
+        height_mm = int(w["height_ellipsoid_mm"][k])
         bits = _Bits()
-        bits.put(usec, 56)
-        bits.put(usec, 56)
-        bits.put(TIME_STANDARD_UTC, 3)
-        bits.put(0, 13)
-        bits.put(int(GNSS_DEFAULTS["leap_seconds"]), 8)
-        bits.put(self._int(lon * 1e8, "longitude_deg_1e8", 37), 37)
-        bits.put(self._int(lat * 1e8, "latitude_deg_1e8", 37), 37)
-        height_mm = self._int(height * 1e3, "height_ellipsoid_mm", 27)
-        bits.put(height_mm, 27)
-        bits.put(height_mm, 27)
-        for v in saturate(g["vel"][i], -FLOAT32_MAX, FLOAT32_MAX, "ned_velocity", self.saturated):
-            bits.put(_f32_bits(float(v)), 32)
-        bits.put(self._int(float(g["sats"][i]), "sats_used", lo=0, hi=63), 6)
-        bits.put(int(g["status"][i]), 2)
-        bits.put(0, 4)           # MODE_SINGLE
-        bits.put(0, 6)
-        h2, v2, s2 = (float(g[k][i]) ** 2 for k in ("h", "v", "s"))
-        bits.put(6, 6)           # covariance: the diagonal of position N, E, D and velocity N, E, D
-        for value in (h2, h2, v2, s2, s2, s2):
-            bits.put(self._f16(value, "covariance"), 16)
-        bits.put(self._f16(float(g["pdop"][i]), "pdop"), 16)
+        for value, width in ((usec, 56), (usec, 56), (TIME_STANDARD_UTC, 3), (0, 13),
+                             (int(GNSS_DEFAULTS["leap_seconds"]), 8), (int(w["longitude_deg_1e8"][k]), 37),
+                             (int(w["latitude_deg_1e8"][k]), 37), (height_mm, 27), (height_mm, 27),
+                             *((int(v), 32) for v in w["velocity"][k]), (int(w["sats"][k]), 6),
+                             (int(w["status"][k]), 2), (0, 4), (0, 6),       # MODE_SINGLE, sub_mode
+                             (6, 6),            # covariance: the diagonal of position N, E, D and velocity N, E, D
+                             *((h, 16) for h in w["halves"][k])):             # six variances, then pdop
+            bits.put(value, width)
         if self.fd:
             bits.put(0, 1)       # ecef_position_velocity's length: no tail array optimisation on FD
         return bits.bytes()
 
     def encode(self, samples: Samples) -> np.ndarray:
-        samples.require_finite(self._CHECKED)
+        samples.require_finite(("gnss_new",))
         due = np.ones(len(samples), bool) if samples.gnss_new is None else samples.gnss_new != 0
         picked = np.flatnonzero(due)
-        frames = empty_frames(len(picked) * len(self._lengths), self.fd)
+        per = len(self._lengths)
+        frames = empty_frames(len(picked) * per, self.fd)
         if not len(picked):
-            return frames
-        g = self._solution(samples)
-        row = 0
-        for i in picked.tolist():
-            for chunk in transfer_frames(self.payload(samples, i, g), FIX2_SIGNATURE, self.transfer_id, self.fd):
-                frames[row]["sample"], frames[row]["can_id"], frames[row]["extended"] = i, self.can_id, True
-                frames[row]["fd"] = self.fd
-                frames[row]["length"] = len(chunk)
-                frames[row]["data"][:len(chunk)] = np.frombuffer(chunk, dtype=np.uint8)
-                row += 1
+            return frames          # the held solution between fixes is not sent, so not checked either
+        self._require_finite(samples, picked)
+        wire = self._wire(samples, picked)
+        width = frames["data"].shape[1]
+        data = bytearray()
+        for k in range(len(picked)):
+            for chunk in transfer_frames(self.payload(wire, k), FIX2_SIGNATURE, self.transfer_id, self.fd):
+                data += chunk.ljust(width, b"\0")
             self.transfer_id = (self.transfer_id + 1) & 0x1F
-        return frames[:row]
+        frames["data"] = np.frombuffer(bytes(data), dtype=np.uint8).reshape(-1, width)
+        frames["sample"] = np.repeat(picked, per)
+        frames["can_id"], frames["extended"], frames["fd"] = self.can_id, True, self.fd
+        frames["length"] = np.tile(self._lengths, len(picked))
+        return frames
 
 
 # --- the node -----------------------------------------------------------------------------------
@@ -322,20 +333,23 @@ def _parse_static_temperature(p: bytes) -> dict:
 
 
 class _BitReader:
+    """The inverse of _Bits."""
+
     def __init__(self, data: bytes):
-        self.bits = "".join(f"{b:08b}" for b in data)
-        self.pos = 0
+        self.value = int.from_bytes(data, "big")
+        self.left = 8 * len(data)
 
     def get(self, width: int, signed: bool = False) -> int:
-        chunk = self.bits[self.pos:self.pos + width]
-        if len(chunk) < width:
+        if width > self.left:
             raise EncodeError("Fix2 payload too short")      # caught by the decoder: counted as ignored
-        self.pos += width
-        raw = bytearray()
-        for byte in range((width + 7) // 8):
-            part = chunk[8 * byte:8 * byte + 8]
-            raw.append(int(part, 2))
-        value = int.from_bytes(bytes(raw), "little")
+        self.left -= width
+        sequence = (self.value >> self.left) & ((1 << width) - 1)
+        value, shift = 0, 0
+        for start in range(0, width, 8):
+            used = min(8, width - start)
+            byte = (sequence >> (width - start - used)) & ((1 << used) - 1)
+            value |= byte << shift
+            shift += 8
         if signed and value >> (width - 1):
             value -= 1 << width
         return value
