@@ -189,9 +189,11 @@ def test_signed_frames_share_the_link_and_pass_pymavlinks_check():
 
 
 def test_bad_input_and_options_are_one_line_errors():
-    block = gnss_block(n=5)
-    block.gnss_llh[3, 1] = np.inf
-    with pytest.raises(EncodeError, match="'gnss_llh' at sample 3, component 1"):
+    block = gnss_block(n=25)                          # new solutions at samples 0, 10, 20
+    block.gnss_llh[3, 1] = np.inf                     # not sent: not checked
+    assert len(decode(MavlinkNavEncoder("mavlink-hil-gps").encode(block).data)) == 3
+    block.gnss_llh[20, 1] = np.inf
+    with pytest.raises(EncodeError, match="'gnss_llh' at sample 20, component 1"):
         MavlinkNavEncoder("mavlink-hil-gps").encode(block)
     for options, needle in ((dict(message="mavlink-attitude", id=1), "id: ATTITUDE has no id field"),
                             (dict(message="mavlink-hil-gps", baro_rate_hz=5), "baro_rate_hz: HIL_GPS carries no"),

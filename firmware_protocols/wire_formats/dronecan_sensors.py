@@ -186,18 +186,6 @@ class Fix2Encoder:
                 "v": samples.field_or("gnss_vertical_accuracy_m", d["v_acc_m"]),
                 "s": samples.field_or("gnss_speed_accuracy_mps", d["s_acc_mps"])}
 
-    def _require_finite(self, samples: Samples, index: np.ndarray) -> None:
-        """EncodeError naming the first non-finite input among the samples sent (block sample numbers)."""
-        for name in self._CHECKED:
-            values = getattr(samples, name)
-            if values is None:
-                continue
-            bad = ~np.isfinite(values[index])
-            if bad.any():
-                where = np.argwhere(bad)[0]
-                component = f", component {where[1]}" if bad.ndim == 2 else ""
-                raise EncodeError(f"non-finite value in field '{name}' at sample {index[where[0]]}{component}")
-
     def _wire(self, samples: Samples, index: np.ndarray) -> dict:
         """The block's wire values at `index`, saturated (and counted) in one pass per field."""
         g = {k: v[index] for k, v in self._solution(samples).items()}
@@ -245,7 +233,7 @@ class Fix2Encoder:
         frames = empty_frames(len(picked) * per, self.fd)
         if not len(picked):
             return frames          # the held solution between fixes is not sent, so not checked either
-        self._require_finite(samples, picked)
+        samples.require_finite(self._CHECKED, picked)
         wire = self._wire(samples, picked)
         width = frames["data"].shape[1]
         data = bytearray()

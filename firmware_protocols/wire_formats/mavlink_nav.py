@@ -185,7 +185,7 @@ def _fill_attitude_quaternion(encoder, samples: Samples) -> dict:
 
 _GNSS_INPUTS = ("gnss_llh", "gnss_velocity_ned", "gnss_fix", "gnss_satellites", "gnss_hdop", "gnss_vdop",
                 "gnss_horizontal_accuracy_m", "gnss_vertical_accuracy_m", "gnss_speed_accuracy_mps", "gnss_age_s",
-                "gnss_new", "position_llh", "velocity_ned")
+                "position_llh", "velocity_ned")
 _INPUTS = {"gnss": _GNSS_INPUTS, "baro": ("pressure_pa", "differential_pressure_pa", "temperature_c"),
            "every": ("gyro", "quat", "euler")}
 
@@ -256,8 +256,10 @@ class MavlinkNavEncoder:
 
     def encode(self, samples: Samples) -> SerialBatch:
         n = len(samples)
-        samples.require_finite(_INPUTS[self.spec.source] + ("gyro",))
+        samples.require_finite(("gnss_new",))
         due = np.flatnonzero(self._due(samples))
+        # only what is sent is checked (a GNSS message between fixes or a pressure between readings is not)
+        samples.require_finite(_INPUTS[self.spec.source] + ("gyro",), None if len(due) == n else due)
         picked = samples if len(due) == n else _rows(samples, due)
         payloads = np.zeros(len(due), dtype=self.spec.dtype)
         for name, values in self.spec.fill(self, picked).items():
