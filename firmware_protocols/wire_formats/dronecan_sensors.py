@@ -46,7 +46,7 @@ from firmware_protocols.crc import crc16_ccitt_bytes
 from firmware_protocols.gnss_time import GNSS_DEFAULTS
 from firmware_protocols.registry import FormatInfo, register
 from firmware_protocols.update_rate import UpdateTicks
-from firmware_protocols.wire_formats.dronecan import (_COMMON_OPTIONS, OP_F16, OP_F32, OP_U8, DroneCanDecoder,
+from firmware_protocols.wire_formats.dronecan import (_COMMON_OPTIONS, OP_F16, OP_F32, DroneCanDecoder,
                                                       MagneticFieldStrength2Encoder, _DroneCanEncoder,
                                                       _f16_from_f32_bits, _Message, _half, _single, can_id_for,
                                                       transfer_frames)
@@ -66,39 +66,48 @@ def f16_bits(value: float) -> int:
     return int(_f16_from_f32_bits(int(np.array(value, dtype=np.float32).view(np.uint32))))
 
 
-def _variance_ops(name: str, value: float) -> list:
+def _variance(name: str, value: float) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= FLOAT16_MAX:
         raise ValueError(f"{name}: a number 0..{FLOAT16_MAX:g}, got {value!r}")
-    bits = f16_bits(value)
-    return [(OP_U8, 0, bits & 0xFF, 0), (OP_U8, 0, bits >> 8, 0)]
+    return float(value)
+
+
+# value then variance, each a source column the kernel converts (float16 as libuavcan rounds it)
+STATIC_PRESSURE = _Message("uavcan.equipment.air_data.StaticPressure", STATIC_PRESSURE_ID, STATIC_PRESSURE_SIGNATURE,
+                           [(OP_F32, 0, 0, 0), (OP_F16, 1, 0, 1)], sources=["pressure_pa", "pressure_variance_pa2"],
+                           counters=["static_pressure", "static_pressure_variance"], tail_array=False)
+STATIC_TEMPERATURE = _Message("uavcan.equipment.air_data.StaticTemperature", STATIC_TEMPERATURE_ID,
+                              STATIC_TEMPERATURE_SIGNATURE, [(OP_F16, 0, 0, 0), (OP_F16, 1, 0, 1)],
+                              sources=["temperature_c", "temperature_variance_k2"],
+                              counters=["static_temperature", "static_temperature_variance"], tail_array=False)
 
 
 class StaticPressureEncoder(_DroneCanEncoder):
     """Static pressure in Pa from Samples.pressure_pa (101325 Pa when absent)."""
 
+    message = STATIC_PRESSURE
+
     def __init__(self, pressure_variance_pa2: float = 0.0, **options):
-        self.message = _Message("uavcan.equipment.air_data.StaticPressure", STATIC_PRESSURE_ID,
-                                STATIC_PRESSURE_SIGNATURE,
-                                [(OP_F32, 0, 0, 0)] + _variance_ops("pressure_variance_pa2", pressure_variance_pa2),
-                                sources=["pressure_pa"], counters=["static_pressure"], tail_array=False)
+        self.variance = _variance("pressure_variance_pa2", pressure_variance_pa2)
         super().__init__(**options)
 
     def _program(self, samples: Samples):
-        return self.message, (samples.field_or("pressure_pa", 101325.0).reshape(-1, 1),)
+        return self.message, (samples.field_or("pressure_pa", 101325.0).reshape(-1, 1),
+                              np.full((len(samples), 1), self.variance))
 
 
 class StaticTemperatureEncoder(_DroneCanEncoder):
     """Static temperature in K from Samples.temperature_c (25 degC when absent)."""
 
+    message = STATIC_TEMPERATURE
+
     def __init__(self, temperature_variance_k2: float = 0.0, **options):
-        self.message = _Message("uavcan.equipment.air_data.StaticTemperature", STATIC_TEMPERATURE_ID,
-                                STATIC_TEMPERATURE_SIGNATURE,
-                                [(OP_F16, 0, 0, 0)] + _variance_ops("temperature_variance_k2", temperature_variance_k2),
-                                sources=["temperature_c"], counters=["static_temperature"], tail_array=False)
+        self.variance = _variance("temperature_variance_k2", temperature_variance_k2)
         super().__init__(**options)
 
     def _program(self, samples: Samples):
-        return self.message, ((samples.field_or("temperature_c", 25.0) + KELVIN_OFFSET).reshape(-1, 1),)
+        return self.message, ((samples.field_or("temperature_c", 25.0) + KELVIN_OFFSET).reshape(-1, 1),
+                              np.full((len(samples), 1), self.variance))
 
 
 # --- Fix2 ---------------------------------------------------------------------------------------
@@ -360,8 +369,8 @@ def _parse_fix2(p: bytes) -> dict:
 
 
 SENSOR_MESSAGES = {
-    STATIC_PRESSURE_ID: (StaticPressureEncoder().message, _parse_static_pressure),
-    STATIC_TEMPERATURE_ID: (StaticTemperatureEncoder().message, _parse_static_temperature),
+    STATIC_PRESSURE_ID: (STATIC_PRESSURE, _parse_static_pressure),
+    STATIC_TEMPERATURE_ID: (STATIC_TEMPERATURE, _parse_static_temperature),
     FIX2_ID: (FIX2, _parse_fix2),
 }
 
