@@ -89,3 +89,23 @@ def test_nav_message_alone_is_a_device_too():
     device = registry.get("mavlink-gps-raw-int").device(RATE)
     kinds = [m.get_type() for m in parse(run(device, head_block(), 0, 100))]
     assert kinds.count("GPS_RAW_INT") == 5 and kinds.count("HEARTBEAT") == 1
+
+
+def test_streamed_on_a_pty_with_the_position_the_scene_gives(tmp_path):
+    """The emulator in its own process: HIL_SENSOR with also=HIL_GPS and ATTITUDE_QUATERNION on one pty. Without a
+    GNSS receiver in the scene the fix carries the navigation the streamer computes (fix_type 3)."""
+    import os
+    from test_stream_support import Emulator, read_for, write_scene
+    scene = write_scene(tmp_path, rate=100, duration=30.0)
+    with Emulator(scene, "--format", "mavlink-hil-sensor", "--to", "pty", "--duration", "5",
+                  "--option", "also=mavlink-hil-gps,mavlink-attitude-quaternion") as emu:
+        fd = os.open(emu.targets[0], os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        data = read_for(fd, 2.0)
+    messages = parse(data)
+    kinds = [m.get_type() for m in messages]
+    assert kinds.count("HIL_SENSOR") > 50
+    assert kinds.count("HIL_GPS") == kinds.count("ATTITUDE_QUATERNION") == kinds.count("HIL_SENSOR")
+    fixes = [m for m in messages if m.get_type() == "HIL_GPS"]
+    assert {m.fix_type for m in fixes} == {3} and all(m.lat != 0 and m.lon != 0 for m in fixes)
+    seqs = [m.get_seq() for m in messages]
+    assert all((b - a) % 256 == 1 for a, b in zip(seqs, seqs[1:]))

@@ -341,8 +341,8 @@ _DEVICE_OPTIONS = {
 }
 _DEVICE_OPTIONS["also"] = ("more messages on the link, comma-separated: " + ", ".join(NAV_MESSAGES)
                            + " (GNSS on new fixes, SCALED_PRESSURE at baro_rate_hz)")
-for _name in MESSAGES:
-    attach_device(_name, lambda rate_hz, _m=_name, **options: MavlinkDevice(rate_hz, _m, **options), _DEVICE_OPTIONS)
-for _name in NAV_MESSAGES:     # these carry position/attitude: the streamer computes the navigation for them
+# Every MAVLink device may carry GNSS messages (also=): the streamer computes the navigation their fix falls back on
+# when the scene gives no GNSS receiver.
+for _name in (*MESSAGES, *NAV_MESSAGES):
     attach_device(_name, lambda rate_hz, _m=_name, **options: MavlinkDevice(rate_hz, _m, **options), _DEVICE_OPTIONS,
                   navigation=True)
