@@ -37,13 +37,12 @@ ned_velocity, covariance of 6, sats_used, pdop used for HDOP/VDOP when no Auxili
 """
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
 from firmware_protocols.base import EncodeError, SaturationStats, Samples, empty_frames, saturate, to_int_field
 from firmware_protocols.crc import crc16_ccitt_bytes
-from firmware_protocols.gnss_time import GNSS_DEFAULTS
+from firmware_protocols.gnss_time import GNSS_DEFAULTS, receiver_solution
 from firmware_protocols.registry import FormatInfo, register
 from firmware_protocols.update_rate import UpdateTicks
 from firmware_protocols.wire_formats.dronecan import (_COMMON_OPTIONS, OP_F16, OP_F32, DroneCanDecoder,
@@ -145,7 +144,6 @@ class _Fix2Message:
 
 
 FIX2 = _Fix2Message()
-_INT_RANGES = {"longitude_deg_1e8": 37, "latitude_deg_1e8": 37, "height_ellipsoid_mm": 27, "height_msl_mm": 27}
 
 
 def _signed_range(bits: int) -> tuple:
@@ -177,27 +175,12 @@ class Fix2Encoder:
     def frames_per_sample(self) -> tuple:
         return tuple((length, True, False) for length in self._lengths)
 
-    def _solution(self, samples: Samples) -> dict:
-        n, d = len(samples), GNSS_DEFAULTS
-        if samples.gnss_llh is not None:
-            llh, vel = samples.gnss_llh, samples.field_or("gnss_velocity_ned", (0.0, 0.0, 0.0))
-            status = samples.field_or("gnss_fix", d["fix_type"])
-        elif samples.position_llh is not None:
-            llh, vel = samples.position_llh, samples.field_or("velocity_ned", (0.0, 0.0, 0.0))
-            status = np.full(n, float(d["fix_type"]))
-        else:
-            llh, vel, status = np.zeros((n, 3)), np.zeros((n, 3)), np.full(n, float(STATUS_NO_FIX))
-        hdop = samples.field_or("gnss_hdop", math.hypot(d["dop_n"], d["dop_e"]))
-        return {"llh": llh, "vel": vel, "status": np.where(np.isin(status, (2, 3)), status, STATUS_NO_FIX),
-                "sats": samples.field_or("gnss_satellites", d["num_sats"]),
-                "pdop": np.hypot(hdop, samples.field_or("gnss_vdop", d["dop_v"])),
-                "h": samples.field_or("gnss_horizontal_accuracy_m", d["h_acc_m"]),
-                "v": samples.field_or("gnss_vertical_accuracy_m", d["v_acc_m"]),
-                "s": samples.field_or("gnss_speed_accuracy_mps", d["s_acc_mps"])}
-
     def _wire(self, samples: Samples, index: np.ndarray) -> dict:
         """The block's wire values at `index`, saturated (and counted) in one pass per field."""
-        g = {k: v[index] for k, v in self._solution(samples).items()}
+        g = {k: v[index] for k, v in receiver_solution(samples).items()}
+        g["status"] = np.where(np.isin(g["fix"], (2, 3)), g["fix"], STATUS_NO_FIX)
+        g["pdop"] = np.hypot(g["hdop"], g["vdop"])
+        g["h"], g["v"], g["s"] = g["h_acc"], g["v_acc"], g["s_acc"]
         sat = self.saturated
         age_ns = np.rint(samples.field_or("gnss_age_s", 0.0)[index] * 1e9).astype(np.int64)
         usec = (samples.time_ns[index] - age_ns) // 1000

@@ -48,7 +48,7 @@ import numpy as np
 
 from firmware_protocols import attitude
 from firmware_protocols.base import SaturationStats, Samples, SerialBatch, to_float32_field, to_int_field
-from firmware_protocols.gnss_time import GNSS_DEFAULTS
+from firmware_protocols.gnss_time import receiver_solution
 from firmware_protocols.registry import FormatInfo, register
 from firmware_protocols.update_rate import UpdateTicks
 from firmware_protocols.wire_formats.mavlink import (_BY_MSGID, EPOCH_2015_NS, HEADER_LEN, SIGNATURE_LEN,
@@ -87,24 +87,10 @@ def _time_boot_ms(samples: Samples) -> np.ndarray:
 
 
 def _gnss_solution(samples: Samples) -> dict:
-    """The receiver's solution in SI, each absent piece replaced as the module docstring says."""
-    n = len(samples)
-    d = GNSS_DEFAULTS
-    if samples.gnss_llh is not None:
-        llh, vel = samples.gnss_llh, samples.field_or("gnss_velocity_ned", (0.0, 0.0, 0.0))
-        fix = samples.field_or("gnss_fix", d["fix_type"])
-    elif samples.position_llh is not None:
-        llh, vel = samples.position_llh, samples.field_or("velocity_ned", (0.0, 0.0, 0.0))
-        fix = np.full(n, float(d["fix_type"]))
-    else:
-        llh, vel, fix = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n)
-    return {"llh": llh, "vel": vel, "fix": np.where(fix >= 2, fix, _GPS_FIX_NO_FIX),
-            "sats": samples.field_or("gnss_satellites", d["num_sats"]),
-            "hdop": samples.field_or("gnss_hdop", float(np.hypot(d["dop_n"], d["dop_e"]))),
-            "vdop": samples.field_or("gnss_vdop", d["dop_v"]),
-            "h_acc": samples.field_or("gnss_horizontal_accuracy_m", d["h_acc_m"]),
-            "v_acc": samples.field_or("gnss_vertical_accuracy_m", d["v_acc_m"]),
-            "s_acc": samples.field_or("gnss_speed_accuracy_mps", d["s_acc_mps"])}
+    """The receiver's solution (gnss_time.receiver_solution), fix as GPS_FIX_TYPE: Samples' 0 is NO_FIX (1)."""
+    g = receiver_solution(samples)
+    g["fix"] = np.where(g["fix"] >= 2, g["fix"], _GPS_FIX_NO_FIX)
+    return g
 
 
 def _gnss_common(encoder, samples: Samples) -> tuple:
