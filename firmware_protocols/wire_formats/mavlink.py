@@ -475,6 +475,7 @@ class MavlinkEncoder:
                 raise ValueError(f"{name}: {spec.msg_name} has no fields_updated bits to mark new readings with")
         self._mag_ticks = UpdateTicks(mag_rate_hz, "mag_rate_hz")
         self._baro_ticks = UpdateTicks(baro_rate_hz, "baro_rate_hz")
+        self._gated = mag_rate_hz is not None or baro_rate_hz is not None
         if sign_time not in ("wall", "sample"):
             raise ValueError(f"sign_time: 'wall' or 'sample', got {sign_time!r}")
         if signing_link is None and signing_key is not None:
@@ -508,9 +509,7 @@ class MavlinkEncoder:
     def _updated_bits(self, time_ns: np.ndarray) -> np.ndarray:
         """Per sample, the fields_updated bits allowed: the magnetometer's and the barometer's (static and
         differential pressure, pressure altitude, temperature: PX4's SensorSource BARO and DIFF_PRESS) only
-        where that sensor has a new reading. Empty (all allowed) when both run at the sample rate."""
-        if self._mag_ticks.rate_hz is None and self._baro_ticks.rate_hz is None:
-            return _NO_BITS
+        where that sensor has a new reading (called only when a rate is set)."""
         allowed = np.full(len(time_ns), 0xFFFFFFFF, dtype=np.int64)
         allowed[~self._mag_ticks.due(time_ns)] &= ~_MAG_BITS
         allowed[~self._baro_ticks.due(time_ns)] &= ~_BARO_BITS
@@ -532,7 +531,8 @@ class MavlinkEncoder:
         arrays = (samples.time_ns, samples.accel, samples.gyro, _NO_ROWS3 if mag is None else mag,
                   pressure if pressure is not None and self._uses_pressure else _NO_ROWS,
                   diff if diff is not None and self._uses_pressure else _NO_ROWS,
-                  _NO_ROWS if temperature is None else temperature, self._updated_bits(samples.time_ns),
+                  _NO_ROWS if temperature is None else temperature,
+                  self._updated_bits(samples.time_ns) if self._gated else _NO_BITS,
                   self._layout, self._lsb, self._consts, params, link_state)
         offsets = np.empty(n + 1, dtype=np.int64)
         scratch, sat = self._scratch, self._sat
