@@ -129,16 +129,18 @@ class Samples:
         shape = (len(self),) if width == 0 else (len(self), width)
         return np.broadcast_to(np.asarray(default, dtype=np.float64), shape).copy()
 
-    def require_finite(self, names: Iterable[str]) -> None:
-        """Raise EncodeError naming the first non-finite value among the fields an encoder uses."""
+    def require_finite(self, names: Iterable[str], rows: np.ndarray | None = None) -> None:
+        """Raise EncodeError naming the first non-finite value among the fields an encoder uses (only in `rows`,
+        the samples it sends, when given; the error still names the block's sample number)."""
         for name in names:
             value = getattr(self, name)
             if value is None:
                 continue
-            bad = ~np.isfinite(value)
+            bad = ~np.isfinite(value if rows is None else value[rows])
             if bad.any():
                 index = np.argwhere(bad)[0]
-                where = f"sample {index[0]}" + (f", component {index[1]}" if value.ndim == 2 else "")
+                sample = index[0] if rows is None else rows[index[0]]
+                where = f"sample {sample}" + (f", component {index[1]}" if value.ndim == 2 else "")
                 raise EncodeError(f"non-finite value in field '{name}' at {where}")
 
 

@@ -99,3 +99,25 @@ def gnss_pvt_rows(time_ns: np.ndarray, position_llh: np.ndarray, velocity_ned: n
                const(s["s_acc_mps"] * 1e3), const(s["head_acc_deg"] * 1e5), const(0)]   # headVeh: not valid
     columns += [const(d * 100.0) for d in dop]
     return np.column_stack(columns).astype(np.float64)
+
+
+def receiver_solution(samples) -> dict:
+    """The GNSS receiver's solution of a Samples block in SI, for formats that send a fix: its gnss_* fields; without
+    gnss_llh, the block's position_llh / velocity_ned with a 3D fix; without either, zeros and fix 0. Each quality
+    figure that is None takes its GNSS_DEFAULTS value (HDOP = hypot(dop_n, dop_e), VDOP = dop_v). Keys: llh, vel,
+    fix (0 no fix, 2 2D, 3 3D), sats, hdop, vdop, h_acc, v_acc, s_acc (1-sigma, m and m/s)."""
+    n, d = len(samples), GNSS_DEFAULTS
+    if samples.gnss_llh is not None:
+        llh, vel = samples.gnss_llh, samples.field_or("gnss_velocity_ned", (0.0, 0.0, 0.0))
+        fix = samples.field_or("gnss_fix", d["fix_type"])
+    elif samples.position_llh is not None:
+        llh, vel = samples.position_llh, samples.field_or("velocity_ned", (0.0, 0.0, 0.0))
+        fix = np.full(n, float(d["fix_type"]))
+    else:
+        llh, vel, fix = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n)
+    return {"llh": llh, "vel": vel, "fix": fix, "sats": samples.field_or("gnss_satellites", d["num_sats"]),
+            "hdop": samples.field_or("gnss_hdop", math.hypot(d["dop_n"], d["dop_e"])),
+            "vdop": samples.field_or("gnss_vdop", d["dop_v"]),
+            "h_acc": samples.field_or("gnss_horizontal_accuracy_m", d["h_acc_m"]),
+            "v_acc": samples.field_or("gnss_vertical_accuracy_m", d["v_acc_m"]),
+            "s_acc": samples.field_or("gnss_speed_accuracy_mps", d["s_acc_mps"])}

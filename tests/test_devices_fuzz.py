@@ -21,10 +21,10 @@ import firmware_protocols
 from firmware_protocols import Samples
 from device_support import best_cpu
 
-def _mavlink_commands():
+def _mavlink_commands(msgid=105):
     from pymavlink.dialects.v20 import common as mavlink2
     mav = mavlink2.MAVLink(None, srcSystem=255, srcComponent=190)
-    return [mav.command_long_encode(1, 1, 511, 0, 105, 20000, 0, 0, 0, 0, 0).pack(mav),
+    return [mav.command_long_encode(1, 1, 511, 0, msgid, 20000, 0, 0, 0, 0, 0).pack(mav),
             mav.command_long_encode(1, 1, 512, 0, 0, 0, 0, 0, 0, 0, 0).pack(mav)]
 
 
@@ -42,10 +42,11 @@ def _mip_commands():
 SERIAL = {
     "vectornav-binary": [b"$VNRRG,01*XX\r\n", b"$VNWRG,75,3,4,01,0721*XX\r\n", b"$VNASY,0*XX\r\n", b"$VNRST*XX\r\n"],
     "mavlink-highres": _mavlink_commands(),
+    "mavlink-hil-gps": _mavlink_commands(113),
     "xsens-mtdata2": _xsens_commands(),
     "microstrain-mip": _mip_commands(),
 }
-CAN = ("dronecan-rawimu", "j1939")
+CAN = ("dronecan-rawimu", "dronecan-gnss-compass-baro", "j1939")
 
 
 def _samples(n=8):

@@ -36,7 +36,10 @@ def test_encoder_contract(name):
     else:
         assert info.kind == "can" and out.dtype in FRAME_DTYPES
         per_sample = encoder.frames_per_sample
-        assert len(out) == 5 * len(per_sample)
+        if getattr(encoder, "frames_vary", False):    # messages at their own sensors' rates: the worst case
+            assert 0 < len(out) <= 5 * len(per_sample)
+        else:
+            assert len(out) == 5 * len(per_sample)
         assert sorted(set(out["sample"].tolist())) == [0, 1, 2, 3, 4]
         assert all(can_bits_worst_case(length, ext, fd) > 0 for length, ext, fd in per_sample)
         assert out["length"].max() <= max(length for length, _, _ in per_sample)
@@ -59,5 +62,9 @@ def test_decoder_reads_back_what_the_encoder_wrote(name):
 @pytest.mark.parametrize("name", NAMES)
 def test_saturation_is_counted_not_wrapped(name):
     encoder = fp.create_encoder(name)
-    encoder.encode(_samples(scale=1e39))       # beyond float32 and every integer field
+    samples = _samples(scale=1e39)             # beyond float32 and every integer field
+    # the sensor head's other readings too: formats carrying only pressure, temperature or a GNSS fix saturate there
+    samples.pressure_pa, samples.temperature_c = samples.pressure_pa * 1e39, samples.temperature_c * 1e39
+    samples.gnss_llh = samples.gnss_velocity_ned = np.full((len(samples), 3), 1e39)
+    encoder.encode(samples)
     assert encoder.saturated.total > 0

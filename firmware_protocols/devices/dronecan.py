@@ -17,6 +17,10 @@ array optimisation (no length prefix), the certificate inside HardwareVersion ke
 - Frames for other nodes or other services are ignored (counted); a GetNodeInfo with a malformed tail is
   an error (counted, no reply: DroneCAN has no error reply).
 
+The same node serves every DroneCAN format here, the GNSS/compass/baro node ("dronecan-gnss-compass-baro",
+wire_formats.dronecan_sensors) included: NodeStatus and GetNodeInfo are what ArduPilot's and PX4's DroneCAN
+stacks need to list the node; the sensors' drivers then register it from its first message.
+
 Not done here: dynamic node-ID allocation as a client (the node needs its `node_id` option).
 """
 from __future__ import annotations
@@ -27,31 +31,14 @@ import struct
 import numpy as np
 
 from firmware_protocols.base import CLASSIC_FRAME_DTYPE, Samples
-from firmware_protocols.crc import crc16_ccitt_bytes
 from firmware_protocols.devices.base import Device, Periodic, single
-from firmware_protocols.wire_formats.dronecan import can_id_for
+from firmware_protocols.wire_formats.dronecan import can_id_for, transfer_frames
 from firmware_protocols.registry import attach_device, get
 
 NODE_STATUS_ID, NODE_STATUS_SIGNATURE = 341, 0x0F0868D0C1A7C6F1
 GET_NODE_INFO_ID, GET_NODE_INFO_SIGNATURE = 1, 0xEE468A8121C46A9E
 HEALTH_OK, MODE_OPERATIONAL = 0, 0
 STATUS_PRIORITY, SERVICE_PRIORITY = 24, 30
-
-
-def transfer_frames(payload: bytes, signature: int, transfer_id: int) -> list:
-    """A transfer's CAN payloads: single frame up to 7 bytes, else CRC-prefixed and split in 7-byte chunks,
-    each followed by the tail byte (start 0x80, end 0x40, toggle 0x20, transfer id)."""
-    tid = transfer_id & 0x1F
-    if len(payload) <= 7:
-        return [payload + bytes([0xC0 | tid])]
-    crc = crc16_ccitt_bytes(signature.to_bytes(8, "little") + payload, 0xFFFF)
-    data = crc.to_bytes(2, "little") + payload
-    chunks = [data[k:k + 7] for k in range(0, len(data), 7)]
-    frames = []
-    for index, chunk in enumerate(chunks):
-        tail = (0x80 if index == 0 else 0) | (0x40 if index == len(chunks) - 1 else 0) | (0x20 if index % 2 else 0)
-        frames.append(chunk + bytes([tail | tid]))
-    return frames
 
 
 def service_can_id(service_id: int, request: bool, destination: int, source: int, priority: int) -> int:
@@ -131,5 +118,10 @@ class DroneCanNode(Device):
 _OPTIONS = {"node_name": "node name answered to GetNodeInfo (default org.imu_emulator.imu)",
             "software_version": "major.minor (default 1.0)", "hardware_version": "major.minor (default 1.0)",
             "unique_id": "32 hex digits (default: derived from node id and name)"}
-for _format in ("dronecan-rawimu", "dronecan-solution", "dronecan-mag2"):
+for _format in ("dronecan-rawimu", "dronecan-solution", "dronecan-mag2", "dronecan-static-pressure",
+                "dronecan-static-temperature"):
     attach_device(_format, lambda rate_hz, _f=_format, **options: DroneCanNode(rate_hz, _f, **options), _OPTIONS)
+# a GNSS receiver node: the streamer computes the navigation its fix falls back on
+for _format in ("dronecan-fix2", "dronecan-gnss-compass-baro"):
+    attach_device(_format, lambda rate_hz, _f=_format, **options: DroneCanNode(rate_hz, _f, **options), _OPTIONS,
+                  navigation=True)

@@ -31,6 +31,12 @@ MAV_RESULT ACCEPTED 0 / DENIED 2 / UNSUPPORTED 3).
   the encoder's SigningLink, so timestamps stay increasing across all of them; incoming commands must
   then carry a valid signature with that key (unsigned or forged ones are counted as errors and not
   answered, as MAVLink's signing rules ask).
+- `also`: more messages of the sensor head on the same link (comma-separated format names, e.g.
+  "mavlink-hil-gps,mavlink-scaled-pressure,mavlink-attitude"; wire_formats.mavlink_nav), sharing the sequence
+  numbers and the signing link. Each goes out at the samples its encoder sends it (GNSS fixes on new solutions,
+  SCALED_PRESSURE at `baro_rate_hz`, attitude every sample), thinned by its own divider that
+  SET_MESSAGE_INTERVAL sets and GET_MESSAGE_INTERVAL reports like the IMU message's; REQUEST_MESSAGE sends one
+  with the next sample (a GNSS message then repeats the solution held). Also any nav format streamed alone.
 Incoming frames may be MAVLink 1 or 2; replies are MAVLink 2.
 """
 from __future__ import annotations
@@ -39,14 +45,17 @@ import hashlib
 import math
 import re
 import struct
-import time
+
+import numpy as np
 
 
 from firmware_protocols.base import Samples
 from firmware_protocols.crc import crc16_mcrf4xx_bytes
 from firmware_protocols.devices.base import Device, Divider, Periodic, single
-from firmware_protocols.wire_formats.mavlink import (EPOCH_2015_NS, HEADER_LEN, INCOMPAT_SIGNED, MESSAGES, P_COMPID,
-                                                     P_SEQ, P_SYSID, SIGNATURE_LEN, STX_V1, STX_V2, MavlinkEncoder)
+from firmware_protocols.wire_formats.mavlink import (HEADER_LEN, INCOMPAT_SIGNED, MESSAGES, P_COMPID, P_SEQ, P_SYSID,
+                                                     SIGNATURE_LEN, STX_V1, STX_V2, MavlinkEncoder)
+from firmware_protocols.wire_formats.mavlink import pack_frame as wire_frame
+from firmware_protocols.wire_formats.mavlink_nav import NAV_MESSAGES, MavlinkNavEncoder
 from firmware_protocols.registry import attach_device
 
 HEARTBEAT, COMMAND_LONG, COMMAND_ACK, MESSAGE_INTERVAL = 0, 76, 77, 244
@@ -61,22 +70,9 @@ _STX = re.compile(bytes([ord("["), STX_V2, STX_V1, ord("]")]))
 _INT32_MAX = 2 ** 31 - 1     # MESSAGE_INTERVAL.interval_us is an int32: a longer interval could not be read back
 
 
-def _signed_tail(link, frame: bytes) -> bytes:
-    """link_id, timestamp (10 us since 2015, strictly increasing on the link), SHA-256 signature[:6]."""
-    stamp = max((time.time_ns() - EPOCH_2015_NS) // 10_000, int(link.state[0]) + 1)
-    link.state[0] = stamp
-    head = frame + bytes([link.link_id]) + stamp.to_bytes(6, "little")
-    return head[len(frame):] + hashlib.sha256(link.secret_key + head).digest()[:6]
-
-
 def pack_frame(msgid: int, payload: bytes, seq: int, sysid: int, compid: int, link=None) -> bytes:
-    """One MAVLink 2 frame of a message whose CRC_EXTRA is in _CRC_EXTRA (trailing zeros cut, >= 1 byte)."""
-    payload = payload.rstrip(b"\0") or b"\0"
-    header = bytes([STX_V2, len(payload), INCOMPAT_SIGNED if link is not None else 0, 0, seq & 0xFF, sysid,
-                    compid]) + msgid.to_bytes(3, "little")
-    crc = crc16_mcrf4xx_bytes(header[1:] + payload + bytes([_CRC_EXTRA[msgid]]))
-    frame = header + payload + crc.to_bytes(2, "little")
-    return frame + _signed_tail(link, frame) if link is not None else frame
+    """One MAVLink 2 frame of a message whose CRC_EXTRA is in _CRC_EXTRA, signed with the wall clock's time."""
+    return wire_frame(msgid, _CRC_EXTRA[msgid], payload, seq, sysid, compid, link)
 
 
 class _FrameReader:
@@ -148,10 +144,18 @@ class MavlinkDevice(Device):
     """The IMU message of `message` at the scene's rate (or as asked), HEARTBEAT at 1 Hz, COMMAND_ACKs."""
 
     def __init__(self, rate_hz: float, message: str = "mavlink-highres", heartbeat_type: int = MAV_TYPE_IMU,
-                 heartbeat_autopilot: int = MAV_AUTOPILOT_INVALID, **encoder_options):
+                 heartbeat_autopilot: int = MAV_AUTOPILOT_INVALID, also="", **encoder_options):
         super().__init__(rate_hz)
-        self.encoder = MavlinkEncoder(message, **encoder_options)
-        self.spec = MESSAGES[message]
+        names = [n.strip() for n in also.split(",") if n.strip()] if isinstance(also, str) else list(also)
+        unknown = [n for n in names if n not in NAV_MESSAGES or n == message]
+        if unknown:
+            raise ValueError(f"also: {', '.join(map(repr, unknown))} is not one of {', '.join(NAV_MESSAGES)} "
+                             "(or repeats the main message)")
+        if message in NAV_MESSAGES:
+            self.encoder = MavlinkNavEncoder(message, **encoder_options)
+        else:
+            self.encoder = MavlinkEncoder(message, **encoder_options)
+        self.spec = self.encoder.spec
         for name, value in (("heartbeat_type", heartbeat_type), ("heartbeat_autopilot", heartbeat_autopilot)):
             if not 0 <= int(value) <= 255:
                 raise ValueError(f"{name}: must be 0..255, got {value}")
@@ -161,17 +165,45 @@ class MavlinkDevice(Device):
         self.heartbeat = Periodic.every(1.0, rate_hz)
         self._once: set = set()          # message ids asked for once with REQUEST_MESSAGE
         self._reader = _FrameReader()
-        params = self.encoder._params
-        self.sysid, self.compid = int(params[P_SYSID]), int(params[P_COMPID])
+        self.sysid, self.compid = self.encoder_ids(self.encoder)
         self.link = self.encoder.signing_link
+        shared = {k: encoder_options[k] for k in ("sign_time", "truncate") if k in encoder_options}
+        # msgid -> (encoder, divider): the sensor head's other messages on this link
+        self.extra = {}
+        for name in names:
+            options = dict(shared, sysid=self.sysid, compid=self.compid, signing_link=self.link)
+            if NAV_MESSAGES[name].source == "baro" and encoder_options.get("baro_rate_hz") is not None:
+                options["baro_rate_hz"] = encoder_options["baro_rate_hz"]
+            encoder = MavlinkNavEncoder(name, **options)
+            self.extra[encoder.spec.msgid] = (encoder, Divider(1))
         self._stream_ts: dict = {}       # (link id, sysid, compid) -> last signing timestamp accepted
-        self.bytes_per_sample = self.encoder.bytes_per_sample
+        self.bytes_per_sample = self.encoder.bytes_per_sample + sum(e.bytes_per_sample for e, _ in self.extra.values())
+
+    @staticmethod
+    def encoder_ids(encoder) -> tuple:
+        if isinstance(encoder, MavlinkNavEncoder):
+            return encoder.sysid, encoder.compid
+        return int(encoder._params[P_SYSID]), int(encoder._params[P_COMPID])
+
+    # one sequence for everything this component sends: the main encoder holds it
+    def _next_seq(self) -> int:
+        if isinstance(self.encoder, MavlinkNavEncoder):
+            return self.encoder.seq
+        return int(self.encoder._params[P_SEQ])
+
+    def _set_seq(self, seq: int) -> None:
+        if isinstance(self.encoder, MavlinkNavEncoder):
+            self.encoder.seq = seq & 0xFF
+        else:
+            self.encoder._params[P_SEQ] = seq & 0xFF
 
     def _frame(self, msgid: int, payload: bytes) -> bytes:
-        params = self.encoder._params
-        seq = int(params[P_SEQ])
-        params[P_SEQ] = (seq + 1) & 0xFF
+        seq = self._next_seq()
+        self._set_seq(seq + 1)
         return pack_frame(msgid, payload, seq, self.sysid, self.compid, self.link)
+
+    def encoders(self):
+        return [self.encoder] + [encoder for encoder, _ in self.extra.values()]
 
     # - output -
     def output(self, samples: Samples, i: int) -> bytes:
@@ -179,9 +211,21 @@ class MavlinkDevice(Device):
         if self.heartbeat.due() or HEARTBEAT in self._once:
             parts.append(self._frame(HEARTBEAT, self.heartbeat_payload))
         if self.imu.due() or self.spec.msgid in self._once:
-            parts.append(self.encoder.encode(single(samples, i)).data)
+            parts.append(self._encode(self.encoder, samples, i, self.spec.msgid in self._once))
+        for msgid, (encoder, divider) in self.extra.items():
+            if divider.due() or msgid in self._once:
+                encoder.seq = self._next_seq()
+                parts.append(self._encode(encoder, samples, i, msgid in self._once))
+                self._set_seq(encoder.seq)
         self._once.clear()
         return b"".join(parts)
+
+    @staticmethod
+    def _encode(encoder, samples: Samples, i: int, requested: bool) -> bytes:
+        one = single(samples, i)
+        if requested and one.gnss_new is not None:
+            one.gnss_new = np.ones(1)          # asked for: the solution held goes out even between fixes
+        return encoder.encode(one).data
 
     # - input -
     def _receive(self, data: bytes, now_ns: int) -> list:
@@ -226,7 +270,8 @@ class MavlinkDevice(Device):
     def _command(self, command: int, params) -> int:
         if command == MAV_CMD_SET_MESSAGE_INTERVAL:
             msgid, interval_us = _message_id(params[0]), params[1]
-            target = {self.spec.msgid: self.imu, HEARTBEAT: None}.get(msgid, "no")
+            target = {self.spec.msgid: self.imu, HEARTBEAT: None,
+                      **{k: divider for k, (_, divider) in self.extra.items()}}.get(msgid, "no")
             # common.xml, MAV_CMD_SET_MESSAGE_INTERVAL param2: "Set to -1 to disable and 0 to request default
             # rate"; any other negative, a non-finite value or one MESSAGE_INTERVAL cannot report back is
             # MAV_RESULT_DENIED: "one or more parameter values are invalid ... Retrying ... will not work".
@@ -243,7 +288,7 @@ class MavlinkDevice(Device):
             return MAV_RESULT_ACCEPTED
         if command == MAV_CMD_REQUEST_MESSAGE:
             msgid = _message_id(params[0])
-            if msgid not in (self.spec.msgid, HEARTBEAT):
+            if msgid not in (self.spec.msgid, HEARTBEAT, *self.extra):
                 return MAV_RESULT_DENIED
             self._once.add(msgid)
             return MAV_RESULT_ACCEPTED
@@ -261,6 +306,8 @@ class MavlinkDevice(Device):
         msgid = msgid if msgid is not None and msgid <= 0xFFFF else None      # MESSAGE_INTERVAL's field is u16
         if msgid == self.spec.msgid:
             samples = self.imu.divider
+        elif msgid in self.extra:
+            samples = self.extra[msgid][1].divider
         elif msgid == HEARTBEAT:
             samples = self.heartbeat.period_samples
         else:
@@ -292,5 +339,10 @@ _DEVICE_OPTIONS = {
     "heartbeat_autopilot": f"HEARTBEAT autopilot (MAV_AUTOPILOT), default {MAV_AUTOPILOT_INVALID} (not a flight "
                            "controller); 0 (generic) makes MAVSDK's first_autopilot() return this system",
 }
-for _name in MESSAGES:
-    attach_device(_name, lambda rate_hz, _m=_name, **options: MavlinkDevice(rate_hz, _m, **options), _DEVICE_OPTIONS)
+_DEVICE_OPTIONS["also"] = ("more messages on the link, comma-separated: " + ", ".join(NAV_MESSAGES)
+                           + " (GNSS on new fixes, SCALED_PRESSURE at baro_rate_hz)")
+# Every MAVLink device may carry GNSS messages (also=): the streamer computes the navigation their fix falls back on
+# when the scene gives no GNSS receiver.
+for _name in (*MESSAGES, *NAV_MESSAGES):
+    attach_device(_name, lambda rate_hz, _m=_name, **options: MavlinkDevice(rate_hz, _m, **options), _DEVICE_OPTIONS,
+                  navigation=True)

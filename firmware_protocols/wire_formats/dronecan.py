@@ -206,7 +206,7 @@ def _encode_transfers(time_ns, sources, ops, params, counts, frame_rows):
 class _Message:
     """A DSDL message as a serialisation program over named sources (Samples fields)."""
 
-    def __init__(self, name, dtid, signature, ops, sources, counters):
+    def __init__(self, name, dtid, signature, ops, sources, counters, tail_array=True):
         self.name = name
         self.dtid = dtid
         self.signature = signature
@@ -214,9 +214,10 @@ class _Message:
         self.counters = counters            # counter index -> wire field name
         self.signature_crc = crc16_ccitt_bytes(signature.to_bytes(8, "little"), 0xFFFF)
         self.ops = np.array(ops, dtype=np.int64).reshape(-1, 4)
-        # pydronecan packs FD payloads without the tail array optimisation: the final (empty) array gets
-        # its length prefix, one zero byte for every message here.
-        self.fd_ops = np.vstack([self.ops, np.array([[OP_U8, 0, 0, 0]], dtype=np.int64)])
+        # pydronecan packs FD payloads without the tail array optimisation: a final (empty) array gets
+        # its length prefix, one zero byte for every message here that ends in one (`tail_array`).
+        self.fd_ops = (np.vstack([self.ops, np.array([[OP_U8, 0, 0, 0]], dtype=np.int64)]) if tail_array
+                       else self.ops)
         self.payload_len = {fd: int(sum(_OP_WIDTH[int(c)] for c in self.program(fd)[:, 0])) for fd in (False, True)}
 
     def program(self, fd: bool) -> np.ndarray:
@@ -281,6 +282,29 @@ MESSAGES_BY_ID = {m.dtid: m for m in (RAW_IMU, SOLUTION, _mag2_message(0))}
 def can_id_for(dtid: int, node_id: int, priority: int) -> int:
     """29-bit message frame id: priority(5) | data type id(16) | service_not_message(0) | source node(7)."""
     return (priority & 0x1F) << 24 | (dtid & 0xFFFF) << 8 | (node_id & 0x7F)
+
+
+def transfer_frames(payload: bytes, signature: int, transfer_id: int, fd: bool = False) -> list:
+    """A transfer's frame payloads: single frame up to 7 bytes, else CRC-prefixed (CRC-16/CCITT-FALSE
+    seeded with the data type signature) and split in 7-byte chunks, each followed by the tail byte (start 0x80,
+    end 0x40, toggle 0x20 alternating from 0, transfer id). CAN FD: one frame up to 63 bytes, zero-padded before
+    the tail byte to the next FD data length (longer FD transfers are not built here). For transfers built one at
+    a time in Python (node status, service replies, GNSS fixes); the IMU messages go through _encode_transfers."""
+    tid = transfer_id & 0x1F
+    if fd:
+        if len(payload) > 63:
+            raise ValueError(f"a {len(payload)}-byte payload needs a multi-frame FD transfer (unsupported)")
+        return [payload.ljust(int(FD_LENGTH_TABLE[len(payload) + 1]) - 1, b"\0") + bytes([0xC0 | tid])]
+    if len(payload) <= 7:
+        return [payload + bytes([0xC0 | tid])]
+    crc = crc16_ccitt_bytes(signature.to_bytes(8, "little") + payload, 0xFFFF)
+    data = crc.to_bytes(2, "little") + payload
+    chunks = [data[k:k + 7] for k in range(0, len(data), 7)]
+    frames = []
+    for index, chunk in enumerate(chunks):
+        tail = (0x80 if index == 0 else 0) | (0x40 if index == len(chunks) - 1 else 0) | (0x20 if index % 2 else 0)
+        frames.append(chunk + bytes([tail | tid]))
+    return frames
 
 
 # --- encoders -----------------------------------------------------------------------------------
@@ -460,7 +484,11 @@ class DroneCanDecoder(CanStreamDecoder):
     (counted in ignored_frames); a bad transfer CRC counts in bad_checksum. Nothing raises.
     """
 
-    def __init__(self, data_type_ids=(1000, 1002, 1003)):
+    def __init__(self, data_type_ids=(1000, 1002, 1003), messages: dict | None = None):
+        # messages: dtid -> (message with name, signature_crc, payload_len[False], parser(payload) -> dict) for
+        # data types beyond this module's (dronecan_sensors' air data and GNSS)
+        self._messages = {dtid: (m, _PARSERS[dtid]) for dtid, m in MESSAGES_BY_ID.items()}
+        self._messages.update(messages or {})
         self.data_type_ids = frozenset(int(d) for d in data_type_ids)
         self.stats = DecoderStats()
         self._pending: dict[int, _Transfer] = {}
@@ -500,7 +528,7 @@ class DroneCanDecoder(CanStreamDecoder):
         if len(stream) < 2:
             self.stats.ignored_frames += 1
             return []
-        message = MESSAGES_BY_ID[dtid]
+        message = self._messages[dtid][0]
         received = stream[0] | stream[1] << 8
         payload = stream[2:]
         if crc16_ccitt_bytes(payload, message.signature_crc) != received:
@@ -509,11 +537,11 @@ class DroneCanDecoder(CanStreamDecoder):
         return self._complete(can_id, dtid, payload, fd, tid)
 
     def _complete(self, can_id, dtid, payload, fd, tid):
-        message = MESSAGES_BY_ID[dtid]
+        message, parser = self._messages[dtid]
         if len(payload) < message.payload_len[False]:
             self.stats.ignored_frames += 1
             return []
-        fields = _PARSERS[dtid](payload)
+        fields = parser(payload)
         fields.update(source_node_id=can_id & 0x7F, priority=(can_id >> 24) & 0x1F, transfer_id=tid)
         self.stats.packets += 1
         return [Packet(kind=message.name, fields=fields, raw=payload)]

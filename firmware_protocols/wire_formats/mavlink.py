@@ -12,13 +12,17 @@ message         field                      wire unit / range
 HIGHRES_IMU,    time_usec u64              time_ns // 1000; negative time saturates to 0
 HIL_SENSOR      x/y/z acc, gyro, mag f32   m/s^2, rad/s, gauss; |v| > FLT_MAX saturates
                 abs_pressure f32           hPa (pressure_pa / 100)
-                diff_pressure f32          hPa, from the `diff_pressure_pa` option
+                diff_pressure f32          hPa: Samples.differential_pressure_pa, or the
+                                           `diff_pressure_pa` option (which wins when set)
                 pressure_alt f32           m: the `pressure_alt_m` option, else the ISA
                                            (geopotential) altitude of the static pressure,
                                            44330.77 m * (1 - (p / 101325 Pa)^0.190263)
                 temperature f32            degC
-                fields_updated u16 / u32   bit k set iff float field k (wire order) was provided;
-                                           HIL_SENSOR's bit 31 (reset) is never set
+                fields_updated u16 / u32   bit k set iff float field k (wire order) was provided
+                                           and, for mag (bits 6-8) and baro (9-12), that sensor
+                                           has a new reading at this sample (`mag_rate_hz`,
+                                           `baro_rate_hz`; None = every sample); HIL_SENSOR's
+                                           bit 31 (reset) is never set
                 id u8 (extension)          the `id` option (sensor instance)
 SCALED_IMU,     time_boot_ms u32           (time_ns // 1_000_000) mod 2^32: wraps after 49.7
 SCALED_IMU2,                               days exactly as the autopilot's counter does
@@ -32,6 +36,13 @@ RAW_IMU         time_usec u64              as HIGHRES_IMU
                                            then still reads physical units
                 id u8, temperature i16     as above (temperature 0 = not sent)
 ==============  =========================  ==================================================
+
+HIL_SENSOR for PX4 HITL (PX4-Autopilot simulator_mavlink, SimulatorMavlink.hpp/.cpp at commits ad41976 /
+f66bdc0): PX4 takes a sensor only when ALL its bits are set: ACCEL 0b111, GYRO 0b111000, MAG 0b111000000,
+BARO 0b1101000000000 (abs_pressure, pressure_alt AND temperature: a barometer needs Samples.temperature_c),
+DIFF_PRESS 0b10000000000; pressures hPa x 100 -> Pa. Hence mag and baro bits go on and off together, and the
+magnetometer/barometer rates (`mag_rate_hz`, `baro_rate_hz`; differential pressure follows the barometer)
+decide at which samples they are set, so PX4 sees each reading once at its sensor's rate.
 
 Integer fields round to nearest (ties to even) and saturate; each clipped value is counted per wire
 field in ``encoder.saturated``. Missing optional inputs go on the wire as 0, which is MAVLink's own
@@ -62,6 +73,7 @@ import numpy as np
 from firmware_protocols.base import DecoderStats, EncodeError, Packet, SaturationStats, Samples, SerialBatch
 from firmware_protocols.crc import crc16_mcrf4xx, crc16_mcrf4xx_bytes
 from firmware_protocols.registry import FormatInfo, register
+from firmware_protocols.update_rate import UpdateTicks
 
 STX_V2 = 0xFD
 STX_V1 = 0xFE
@@ -146,6 +158,10 @@ class MessageSpec:
     def has_source(self, source: int) -> bool:
         return any(f.source == source for f in self.fields)
 
+    def decode(self, payload: bytes) -> dict:
+        """The full-length payload -> SI fields (see _si_fields)."""
+        return _si_fields(self, payload)
+
 
 def _float_fields() -> list:
     """HIGHRES_IMU's and HIL_SENSOR's 13 float32 fields (hPa for the two pressures)."""
@@ -215,24 +231,27 @@ def _first_nonfinite_row(values, n, lo, hi):
 
 
 @jit(cache=True, nogil=True)
-def _encode_block(time_ns, accel, gyro, mag, pressure, temperature, layout, lsb, consts, params,
-                  link_state, lo, hi, base, sat, out, offsets):
+def _encode_block(time_ns, accel, gyro, mag, pressure, diff_pressure, temperature, updated, layout, lsb, consts,
+                  params, link_state, lo, hi, base, sat, out, offsets):
     """Pack samples [lo, hi) into `out` from its start; offsets[lo..hi] get `base` + position in out.
 
-    Returns (first non-finite row or -1, bytes written, values saturated). Saturations are added to
-    `sat`; params / link_state are only advanced when the whole range is finite.
+    `updated` (n,) int64: the fields_updated bits sample i may carry (the sensors with a new reading then);
+    empty: all. Returns (first non-finite row or -1, bytes written, values saturated). Saturations are added
+    to `sat`; params / link_state are only advanced when the whole range is finite.
     """
     n = time_ns.shape[0]
     bad = hi
     for values in (accel, gyro, mag):
         bad = min(bad, _first_nonfinite_row(values, n, lo, bad))
-    for values in (pressure, temperature):
+    for values in (pressure, diff_pressure, temperature):
         bad = min(bad, _first_nonfinite_row(values, n, lo, bad))
     if bad < hi:
         return bad, 0, 0
 
     has_mag = mag.shape[0] == n
     has_pressure = pressure.shape[0] == n
+    has_diff = diff_pressure.shape[0] == n
+    has_updated = updated.shape[0] == n
     has_temperature = temperature.shape[0] == n
     nfields = layout.shape[0]
 
@@ -243,7 +262,7 @@ def _encode_block(time_ns, accel, gyro, mag, pressure, temperature, layout, lsb,
         if s > S_TEMPERATURE:
             continue
         provided = (s <= S_GYRO_Z or (s <= S_MAG_Z and has_mag) or (s == S_PRESSURE and has_pressure)
-                    or (s == S_DIFF_PRESSURE and not np.isnan(consts[C_DIFF_PRESSURE]))
+                    or (s == S_DIFF_PRESSURE and (has_diff or not np.isnan(consts[C_DIFF_PRESSURE])))
                     or (s == S_PRESSURE_ALT and (has_pressure or not np.isnan(consts[C_PRESSURE_ALT])))
                     or (s == S_TEMPERATURE and has_temperature))
         if provided:
@@ -278,7 +297,7 @@ def _encode_block(time_ns, accel, gyro, mag, pressure, temperature, layout, lsb,
                     elif s == S_PRESSURE:
                         value = pressure[i]
                     elif s == S_DIFF_PRESSURE:
-                        value = consts[C_DIFF_PRESSURE]
+                        value = diff_pressure[i] if np.isnan(consts[C_DIFF_PRESSURE]) else consts[C_DIFF_PRESSURE]
                     elif s == S_PRESSURE_ALT:
                         if np.isnan(consts[C_PRESSURE_ALT]):
                             # ISA is undefined below zero pressure; such input is nonsense anyway.
@@ -319,7 +338,8 @@ def _encode_block(time_ns, accel, gyro, mag, pressure, temperature, layout, lsb,
             elif s == S_TIME_BOOT_MS:
                 _put_le(out, at, (t // 1_000_000) & 0xFFFFFFFF, 4)
             elif s == S_FIELDS_UPDATED:
-                _put_le(out, at, present, 4 if typ == T_U32 else 2)
+                bits = present & updated[i] if has_updated else present
+                _put_le(out, at, bits, 4 if typ == T_U32 else 2)
             else:
                 _put_le(out, at, params[P_ID], 1)
 
@@ -360,6 +380,29 @@ def _encode_block(time_ns, accel, gyro, mag, pressure, temperature, layout, lsb,
     return -1, pos, nsat
 
 
+# --- one frame at a time (messages sent now and then: GNSS fixes, replies) ---------------------------
+
+def pack_frame(msgid: int, crc_extra: int, payload: bytes, seq: int, sysid: int, compid: int, link=None,
+               timestamp: int | None = None, truncate: bool = True) -> bytes:
+    """One MAVLink 2 frame: trailing zero payload bytes cut (one stays) unless `truncate` is False; signed on
+    `link` (a SigningLink) with `timestamp` (10 us since 2015-01-01; None: the wall clock), raised to the
+    link's previous timestamp + 1 so that it strictly increases on the link."""
+    if truncate:
+        payload = payload.rstrip(b"\0") or b"\0"
+    header = bytes([STX_V2, len(payload), INCOMPAT_SIGNED if link is not None else 0, 0, seq & 0xFF, sysid,
+                    compid]) + msgid.to_bytes(3, "little")
+    crc = crc16_mcrf4xx_bytes(header[1:] + payload + bytes([crc_extra]))
+    frame = header + payload + crc.to_bytes(2, "little")
+    if link is None:
+        return frame
+    if timestamp is None:
+        timestamp = (time.time_ns() - EPOCH_2015_NS) // 10_000
+    stamp = max(int(timestamp), int(link.state[0]) + 1)
+    link.state[0] = stamp
+    head = frame + bytes([link.link_id]) + stamp.to_bytes(6, "little")
+    return head + hashlib.sha256(link.secret_key + head).digest()[:6]
+
+
 # --- encoder ------------------------------------------------------------------------------------
 
 class SigningLink:
@@ -394,6 +437,9 @@ class SigningLink:
 _NO_ROWS = np.empty(0, dtype=np.float64)
 _NO_ROWS3 = np.empty((0, 3), dtype=np.float64)
 _NO_LINK = np.zeros(1, dtype=np.int64)
+_NO_BITS = np.empty(0, dtype=np.int64)
+_MAG_BITS = (1 << S_MAG_X) | (1 << S_MAG_Y) | (1 << S_MAG_Z)
+_BARO_BITS = (1 << S_PRESSURE) | (1 << S_DIFF_PRESSURE) | (1 << S_PRESSURE_ALT) | (1 << S_TEMPERATURE)
 _CHUNK = 8192   # samples per packing pass: the scratch buffer (<= 0.75 MB) stays in cache
 
 
@@ -417,7 +463,8 @@ class MavlinkEncoder:
     def __init__(self, message: str = "mavlink-highres", sysid: int = 1, compid: int = 1, seq: int = 0,
                  id: int | None = None, signing_key=None, link_id: int = 0, signing_link: SigningLink | None = None,
                  sign_time: str = "wall", truncate: bool = True, diff_pressure_pa: float | None = None,
-                 pressure_alt_m: float | None = None):
+                 pressure_alt_m: float | None = None, mag_rate_hz: float | None = None,
+                 baro_rate_hz: float | None = None):
         if message not in MESSAGES:
             raise ValueError(f"message: unknown {message!r}; known: {', '.join(MESSAGES)}")
         spec = self.spec = MESSAGES[message]
@@ -429,6 +476,12 @@ class MavlinkEncoder:
                 raise ValueError(f"{name}: {spec.msg_name} carries no such field")
             if value is not None and not np.isfinite(value):
                 raise ValueError(f"{name}: must be finite, got {value}")
+        for name, value in (("mag_rate_hz", mag_rate_hz), ("baro_rate_hz", baro_rate_hz)):
+            if value is not None and not spec.has_source(S_FIELDS_UPDATED):
+                raise ValueError(f"{name}: {spec.msg_name} has no fields_updated bits to mark new readings with")
+        self._mag_ticks = UpdateTicks(mag_rate_hz, "mag_rate_hz")
+        self._baro_ticks = UpdateTicks(baro_rate_hz, "baro_rate_hz")
+        self._gated = mag_rate_hz is not None or baro_rate_hz is not None
         if sign_time not in ("wall", "sample"):
             raise ValueError(f"sign_time: 'wall' or 'sample', got {sign_time!r}")
         if signing_link is None and signing_key is not None:
@@ -454,9 +507,19 @@ class MavlinkEncoder:
         self._layout, self._lsb = spec.layout, spec.lsb
         self._sat = np.zeros(len(spec.fields), dtype=np.int64)   # per wire field, within one encode call
         self._uses_pressure = spec.has_source(S_PRESSURE)
-        self._checked = ("accel", "gyro", "mag", "temperature_c") + (("pressure_pa",) if self._uses_pressure else ())
+        self._checked = ("accel", "gyro", "mag", "temperature_c") + (
+            ("pressure_pa", "differential_pressure_pa") if self._uses_pressure else ())
         self.bytes_per_sample = HEADER_LEN + spec.payload_len + 2 + (SIGNATURE_LEN if signing_link else 0)
         self._scratch = np.empty(_CHUNK * self.bytes_per_sample, dtype=np.uint8)
+
+    def _updated_bits(self, time_ns: np.ndarray) -> np.ndarray:
+        """Per sample, the fields_updated bits allowed: the magnetometer's and the barometer's (static and
+        differential pressure, pressure altitude, temperature: PX4's SensorSource BARO and DIFF_PRESS) only
+        where that sensor has a new reading (called only when a rate is set)."""
+        allowed = np.full(len(time_ns), 0xFFFFFFFF, dtype=np.int64)
+        allowed[~self._mag_ticks.due(time_ns)] &= ~_MAG_BITS
+        allowed[~self._baro_ticks.due(time_ns)] &= ~_BARO_BITS
+        return allowed
 
     @property
     def seq(self) -> int:
@@ -470,9 +533,12 @@ class MavlinkEncoder:
         link_state = _NO_LINK if link is None else link.state
         if link is not None and params[P_SIGN_MODE] == SIGN_WALL:
             params[P_WALL_TS] = (time.time_ns() - EPOCH_2015_NS) // 10_000
+        diff = samples.differential_pressure_pa
         arrays = (samples.time_ns, samples.accel, samples.gyro, _NO_ROWS3 if mag is None else mag,
                   pressure if pressure is not None and self._uses_pressure else _NO_ROWS,
+                  diff if diff is not None and self._uses_pressure else _NO_ROWS,
                   _NO_ROWS if temperature is None else temperature,
+                  self._updated_bits(samples.time_ns) if self._gated else _NO_BITS,
                   self._layout, self._lsb, self._consts, params, link_state)
         offsets = np.empty(n + 1, dtype=np.int64)
         scratch, sat = self._scratch, self._sat
@@ -554,7 +620,9 @@ class MavlinkDecoder:
     `bad_signature`. Without a key, signed frames are accepted on their CRC alone.
     """
 
-    def __init__(self, signing_key=None, allow_unsigned: bool = False):
+    def __init__(self, signing_key=None, allow_unsigned: bool = False, messages: dict | None = None):
+        # messages: msgid -> spec (name, crc_extra, payload_len, decode(payload) -> dict); default the IMU messages
+        self._messages = _BY_MSGID if messages is None else dict(messages)
         self.stats = DecoderStats()
         self.bad_signature = 0
         self._key = None
@@ -593,7 +661,7 @@ class MavlinkDecoder:
         if size - pos < HEADER_LEN:
             return None
         plen, incompat = buf[pos + 1], buf[pos + 2]
-        spec = _BY_MSGID.get(buf[pos + 7] | buf[pos + 8] << 8 | buf[pos + 9] << 16)
+        spec = self._messages.get(buf[pos + 7] | buf[pos + 8] << 8 | buf[pos + 9] << 16)
         if spec is None or incompat & ~INCOMPAT_SIGNED or not 1 <= plen <= spec.payload_len:
             return 0
         signed = bool(incompat & INCOMPAT_SIGNED)
@@ -611,7 +679,7 @@ class MavlinkDecoder:
             self.bad_signature += 1
             self.stats.ignored_frames += 1
             return total
-        fields = _si_fields(spec, frame[HEADER_LEN:HEADER_LEN + plen].ljust(spec.payload_len, b"\0"))
+        fields = spec.decode(frame[HEADER_LEN:HEADER_LEN + plen].ljust(spec.payload_len, b"\0"))
         fields.update(seq=frame[4], sysid=sysid, compid=compid, signed=signed)
         if signed:
             fields["link_id"] = frame[-13]
@@ -638,7 +706,7 @@ class MavlinkDecoder:
         if size - pos < 6:
             return None
         plen = buf[pos + 1]
-        spec = _BY_MSGID.get(buf[pos + 5])
+        spec = self._messages.get(buf[pos + 5])
         if spec is None:
             return 0
         total = 6 + plen + 2
@@ -666,7 +734,10 @@ _COMMON_OPTIONS = {
 }
 _ID_OPTION = {"id": "sensor instance id 0..255 sent in the message's id field (None: 0)"}
 _PRESSURE_OPTIONS = {
-    "diff_pressure_pa": "constant differential pressure to report, Pa (None: not reported)",
+    "diff_pressure_pa": "constant differential pressure to report, Pa, instead of Samples.differential_pressure_pa "
+                        "(None: that field, not reported when absent)",
+    "mag_rate_hz": "magnetometer rate: its fields_updated bits only on its new readings (None: every sample)",
+    "baro_rate_hz": "barometer rate: pressure/altitude/temperature bits only on new readings (None: every sample)",
     "pressure_alt_m": "constant pressure altitude to report, m (None: ISA altitude of the static pressure)",
 }
 
