@@ -152,6 +152,9 @@ def _signed_range(bits: int) -> tuple:
 
 class Fix2Encoder:
     """Samples -> gnss.Fix2 transfers (classic CAN), one at each new solution; frame rows as the other encoders."""
+    # Axes: no body vector; Fix2's ned_velocity is north, east, down (DSDL 1063.Fix2).
+    body_axes, reference = "FRD", "NED"
+    axes_source = "DSDL 1063.Fix2: ned_velocity north, east, down; no body vectors"
 
     frames_vary = True     # a transfer only at samples with a new solution
 
@@ -244,6 +247,10 @@ class Fix2Encoder:
 
 class GnssCompassBaroEncoder:
     """One node's messages: MagneticFieldStrength2, StaticPressure, StaticTemperature, Fix2, each at its rate."""
+    # Axes: the magnetic field in the body axes RawIMU names (X forward, Y right, Z down), as ArduPilot's
+    # AP_Compass_DroneCAN reads it; Fix2's velocity NED.
+    body_axes, reference = "FRD", "NED"
+    axes_source = "DSDL 1002.MagneticFieldStrength2 body axes as 1003.RawIMU (X forward, Y right, Z down); Fix2 NED"
 
     frames_vary = True     # frames_per_sample is the worst case (every message due at one sample)
 

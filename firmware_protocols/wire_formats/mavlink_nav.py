@@ -208,6 +208,10 @@ class MavlinkNavEncoder:
 
     `encode` returns a SerialBatch with an (empty or one-frame) packet per sample: GNSS messages only where a
     new solution arrived, SCALED_PRESSURE only on the barometer's readings."""
+    # Axes: ATTITUDE* are "in the aeronautical frame (right-handed, Z-down, Y-right, X-front)" w.r.t. NED; the GNSS
+    # messages' velocities are north, east, down (common.xml). No body vector is carried besides the attitude.
+    body_axes, reference = "FRD", "NED"
+    axes_source = "MAVLink common.xml: ATTITUDE aeronautical frame (X-front, Y-right, Z-down); HIL_GPS vn/ve/vd"
 
     def __init__(self, message: str, sysid: int = 1, compid: int = 1, seq: int = 0, id: int | None = None,
                  signing_key=None, link_id: int = 0, signing_link: SigningLink | None = None, sign_time: str = "wall",
