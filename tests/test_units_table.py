@@ -6,6 +6,8 @@ Where the datasheet symbol means something else to pint, the test spells pint's 
 difference (pint: an offset unit, delta_degC), gauss through pint's "Gaussian" context (pint's gauss is the CGS unit
 of another dimension; the context converts with CODATA's mu0, 7e-11 relative from the defined 1e-4 T)."""
 import math
+import re
+from pathlib import Path
 
 import pint
 import pytest
@@ -88,3 +90,75 @@ def test_unknown_unit_is_named_in_one_line(text, named):
 def test_arithmetic_errors_are_one_line(text, reason):
     with pytest.raises(SceneError, match=reason):
         to_unit(text, "rad", "k")
+
+
+def test_every_parameters_unit_reads():
+    """The keys' own units (the effects' records) go through the same table: a unit missing from it would fail
+    every scene that gives that key as text."""
+    from imu_emulator.effects import all_params
+    from imu_emulator.scene.units import quantity
+    for _, param in all_params():
+        for alternative in param.unit.split("|"):
+            quantity(alternative)
+
+
+# The unit context the scene's parser used while it ran on pint (commit 35a2177, imu_emulator/scene/units.py)
+PINT_CONTEXT = """
+pi = 3.1415926535897932384626433832795028841971693993751 = π
+milli- = 1e-3 = m-
+micro- = 1e-6 = u- = µ- = μ-
+nano- = 1e-9 = n-
+kilo- = 1e3 = k-
+meter = [length] = m
+second = [time] = s = sec
+radian = [angle] = rad
+minute = 60 * second = min
+hour = 60 * minute = h = hr
+hertz = 1 / second = Hz
+degree = pi / 180 * radian = deg = °
+degree_per_second = degree / second = dps
+standard_gravity = 9.80665 * meter / second ** 2 = g = g0
+percent = 0.01 = %
+kelvin = [temperature] = K = degC
+ppm = 1e-6
+"""
+ROOT = Path(__file__).resolve().parents[1]
+PROSE = {"6 s per 60 000"}      # a comment's words in quotes, not a value
+
+
+def _documented_values() -> list[str]:
+    """Every quoted "NUMBER unit..." of the README, the example scenes and the presets."""
+    files = [ROOT / "README.md", *sorted((ROOT / "examples").glob("*.toml")),
+             *sorted((ROOT / "imu_emulator" / "scene" / "presets").glob("*.toml"))]
+    found = set()
+    for path in files:
+        found |= set(re.findall(r'"(-?[0-9][0-9.eE+-]* *[^"0-9 ,=][^"]*)"', path.read_text()))
+    return sorted(found - PROSE)
+
+
+def _pint_text(text: str) -> str:
+    text = text.replace("²", "**2").replace("√", "sqrt")
+    text = re.sub(r"sqrt\(([^()]*)\)", r"(\1)**0.5", text)
+    return re.sub(r"sqrt(\w+)", r"(\1)**0.5", text)
+
+
+def test_documented_values_read_bit_for_bit_as_with_pint():
+    """Each documented value in each key unit it has the dimension of: the same double as pint's evaluation in the
+    old unit context (so the switch changed no output byte), and read wherever pint read it."""
+    from imu_emulator.effects import all_params
+    reg = pint.UnitRegistry(None)
+    reg.load_definitions(PINT_CONTEXT.strip().splitlines())
+    key_units = sorted({a for _, p in all_params() for a in p.unit.split("|")})
+    compared = 0
+    for text in _documented_values():
+        for key_unit in key_units:
+            try:
+                expected = float((reg.Quantity(_pint_text(text)) / reg.Quantity(_pint_text(key_unit)))
+                                 .to(reg.dimensionless).magnitude)
+            except (pint.DimensionalityError, pint.UndefinedUnitError, ValueError, TypeError):
+                expected = None
+            if expected is None:
+                continue
+            assert to_unit(text, key_unit, "k") == expected, (text, key_unit)
+            compared += 1
+    assert compared > 50

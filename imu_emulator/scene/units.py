@@ -50,6 +50,7 @@ _TABLE = {
     ("G", "gauss"): (1e-4, _dims(tesla=1)),                                # not "Gs": pint's gigasecond
     ("%", "percent"): (1e-2, _dims()),
     ("ppm",): (1e-6, _dims()),
+    ("dimensionless",): (1.0, _dims()),                                   # the unit of ratios' keys
     ("pi", "π"): (math.pi, _dims()),
 }
 UNITS = {name: entry for names, entry in _TABLE.items() for name in names}
@@ -59,39 +60,78 @@ PREFIXES = {"m": 1e-3, "u": 1e-6, "µ": 1e-6, "μ": 1e-6, "n": 1e-9, "k": 1e3, "
             "milli": 1e-3, "micro": 1e-6, "nano": 1e-9, "kilo": 1e3, "centi": 1e-2}
 # Plurals of the long names ("hours", "degrees", "knots"), as pint reads them
 _PLURAL = {name + "s": name for name in UNITS if len(name) > 3 and name.isalpha() and name != "feet"}
+# Each unit's canonical word (the first of its aliases): "30 deg" in a key of unit "degree" cancels exactly
+_CANONICAL = {name: names[0] for names in _TABLE for name in names}
+_SHORT_PREFIX = {"µ": "u", "μ": "u", "milli": "m", "micro": "u", "nano": "n", "kilo": "k", "centi": "c"}
 
 
 class _Quantity:
-    """A factor to SI and the exponents of DIMENSIONS: what the grammar multiplies, divides and raises."""
-    __slots__ = ("factor", "dims")
+    """A number and its units, as canonical unit words with exponents: units are cancelled by name before any
+    factor is applied, as pint does, so that "30 deg" read in degrees is exactly 30 and "0.2 %" in percent 0.2."""
+    __slots__ = ("magnitude", "units")
 
-    def __init__(self, factor: float, dims: tuple):
-        self.factor, self.dims = factor, dims
+    def __init__(self, magnitude: float, units: dict):
+        self.magnitude, self.units = magnitude, units
 
     def __mul__(self, other):
         if isinstance(other, _Quantity):
-            return _Quantity(self.factor * other.factor, tuple(a + b for a, b in zip(self.dims, other.dims)))
-        return _Quantity(self.factor * other, self.dims)
+            return _Quantity(self.magnitude * other.magnitude, _merged(self.units, other.units, 1))
+        return _Quantity(self.magnitude * other, self.units)
 
     __rmul__ = __mul__
 
     def __truediv__(self, other):
         if isinstance(other, _Quantity):
-            return _Quantity(self.factor / other.factor, tuple(a - b for a, b in zip(self.dims, other.dims)))
-        return _Quantity(self.factor / other, self.dims)
+            return _Quantity(self.magnitude / other.magnitude, _merged(self.units, other.units, -1))
+        return _Quantity(self.magnitude / other, self.units)
 
     def __rtruediv__(self, other):
-        return _Quantity(other / self.factor, tuple(-a for a in self.dims))
+        return _Quantity(other / self.magnitude, {name: -e for name, e in self.units.items()})
 
     def __pow__(self, exponent):
-        return _Quantity(_power(self.factor, exponent), tuple(a * exponent for a in self.dims))
+        return _Quantity(_power(self.magnitude, exponent), {name: e * exponent for name, e in self.units.items()})
+
+    @property
+    def dims(self) -> tuple:
+        """Exponents of DIMENSIONS (sums of small integers and halves: exact in binary floating point)."""
+        total = [0.0] * len(DIMENSIONS)
+        for name, e in self.units.items():
+            for i, d in enumerate(_entry(name)[1]):
+                total[i] += d * e
+        return tuple(total)
+
+    @property
+    def factor(self) -> float:
+        """The value in SI: the magnitude times the units' factors (numerator and denominator apart, one
+        rounding each)."""
+        numerator = denominator = 1.0
+        for name, e in sorted(self.units.items()):
+            f = _entry(name)[0]
+            if e > 0:
+                numerator *= _power(f, e)
+            else:
+                denominator *= _power(f, -e)
+        return self.magnitude * (numerator / denominator)
 
     def dimensionless(self) -> bool:
-        # exponents are sums of small integers and halves (sqrt), exact in binary floating point
         return not any(self.dims)
 
-    def describe(self) -> str:
-        return "*".join(f"{name}^{e:g}" for name, e in zip(DIMENSIONS, self.dims) if e) or "1"
+
+def _merged(a: dict, b: dict, sign: int) -> dict:
+    units = dict(a)
+    for name, e in b.items():
+        units[name] = units.get(name, 0.0) + sign * e
+        if not units[name]:
+            del units[name]
+    return units
+
+
+def _entry(name: str) -> tuple[float, tuple]:
+    """(factor to SI, dimension exponents) of a canonical word: a unit of the table, or a prefix and one."""
+    if name in UNITS:
+        return UNITS[name]
+    factor, dims = UNITS[name[1:]]
+    return PREFIXES[name[0]] * factor, dims
 
 
 def _power(base: float, exponent: float) -> float:
@@ -108,24 +148,26 @@ def _power(base: float, exponent: float) -> float:
 @lru_cache(maxsize=256)
 def unit(name: str) -> _Quantity:
     """A unit word -> its _Quantity (a ValueError names an unknown one as written)."""
-    found = _lookup(name)
+    found = _canonical(name)
     if found is None:
         raise ValueError(f"unknown unit {name!r}")
-    return found
+    canonical, exponent = found
+    return _Quantity(1.0, {canonical: exponent})
 
 
-def _lookup(name: str) -> _Quantity | None:
+def _canonical(name: str) -> tuple[str, float] | None:
+    """A unit word -> (canonical word, exponent): "degrees" -> ("deg", 1), "rtHz" -> ("Hz", 0.5), "µg" -> ("ug", 1)."""
     if name in UNITS:
-        return _Quantity(*UNITS[name])
+        return _CANONICAL[name], 1.0
     if name in _PLURAL:
-        return _Quantity(*UNITS[_PLURAL[name]])
+        return _CANONICAL[_PLURAL[name]], 1.0
     if name.startswith("rt") and len(name) > 2:
-        root = _lookup(name[2:])
-        return None if root is None else root ** 0.5
+        root = _canonical(name[2:])
+        return None if root is None else (root[0], root[1] * 0.5)
     for prefix in sorted(PREFIXES, key=len, reverse=True):
         rest = name[len(prefix):]
         if name.startswith(prefix) and (rest in UNITS or rest in _PLURAL):
-            return _lookup(rest) * PREFIXES[prefix]
+            return _SHORT_PREFIX.get(prefix, prefix) + _canonical(rest)[0], 1.0
     return None
 
 
@@ -255,7 +297,7 @@ def quantity(text: str) -> _Quantity:
         value = _Reader(text).read()
     except ZeroDivisionError:
         raise ValueError("division by zero") from None
-    return value if isinstance(value, _Quantity) else _Quantity(value, _dims())
+    return value if isinstance(value, _Quantity) else _Quantity(value, {})
 
 
 def to_unit(value, unit: str, where: str) -> float:

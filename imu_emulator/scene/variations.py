@@ -119,10 +119,10 @@ def parse(text: str, scene, raw: dict | None = None) -> Variation:
             units.quantity(unit)
         except ValueError as exc:
             raise VaryError(f"{where}: {unit!r} is not a unit: {exc} (e.g. deg/h, ug/sqrt(Hz), deg)") from None
-        if param is not None:
+        if param is not None and op == "+=":
             from imu_emulator.errors import SceneError
             try:
-                scale = units.to_unit(f"1 {unit}", param.unit.split("|")[0], where)
+                scale = units.to_unit(f"1 {unit}", param.unit, where)
             except SceneError as exc:
                 raise VaryError(str(exc)) from None
     count = 3 if param is not None and param.shape == "triple" else 1
