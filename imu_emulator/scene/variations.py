@@ -30,7 +30,6 @@ import numpy as np
 
 from imu_emulator.errors import ImuEmulatorError
 
-_OPERATORS = ("+=", "*=", "=")
 _DIST = re.compile(r"^\s*(uniform|normal)\s*\(\s*([^,()]+?)\s*,\s*([^,()]+?)\s*\)\s*(.*?)\s*$")
 _KEY = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*(\.[A-Za-z_][A-Za-z0-9_]*)+$")
 _TOP_TABLES = ("params", "scene", "trajectory", "attitude")
