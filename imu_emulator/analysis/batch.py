@@ -190,9 +190,9 @@ def load_source(scene):
 
 
 def tasks_for(scene, n: int, seed: int, out, vary=(), truth: bool = False, indices=None) -> list[Task]:
-    """The tasks of a batch; `vary` holds "KEY=DIST" (or +=, *=) texts or Variations. Realization 0's scene is built here, so
-    that a --vary naming no usable key fails at once with its one-line error (checked with each distribution's
-    middle value: a draw outside what the key accepts fails its own realization only)."""
+    """The tasks of a batch; `vary` holds "KEY=DIST" (or +=, *=) texts or Variations. Realization 0's scene is
+    built here, so that a --vary naming no usable key fails at once with its one-line error (checked with each
+    distribution's middle value: a draw outside what the key accepts fails its own realization only)."""
     from imu_emulator.scene import variations
     raw, base_dir, path, validated = load_source(scene)
     parsed = tuple(v if isinstance(v, variations.Variation) else variations.parse(v, validated, raw)

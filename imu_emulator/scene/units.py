@@ -1,8 +1,8 @@
 """Parameter values as datasheets print them ("0.2 deg/sqrt(h)", "120 ug/sqrt(Hz)", "500 ppm") -> SI floats.
 
 A small grammar over a fixed table of units (UNITS), rather than pint: importing pint (and through it dask, babel,
-scipy) doubled the start-up of a warm `generate` of a scene written with units (tools/bench_startup.py), and the
-table is all a scene needs. tests/test_units_table.py checks every entry's factor and dimension against pint's own
+scipy) doubled the start-up of a warm `generate` of a scene written with units (tools/bench_startup_against.py),
+and the table is all a scene needs. tests/test_units_table.py checks every entry's factor and dimension against pint's own
 registry, so pint stays the oracle without being imported here.
 
 Datasheets and pint disagree on one symbol: "g" is standard gravity here (so "ug", "mg" are micro-g and milli-g),
@@ -31,7 +31,7 @@ def _dims(**exponents) -> tuple:
     return tuple(float(exponents.get(name, 0)) for name in DIMENSIONS)
 
 
-# name -> (factor to SI, dimension exponents). Aliases share an entry. Each is checked against pint (the test above).
+# name -> (factor to SI, dimension exponents). Aliases share an entry; each is checked against pint by the test.
 _TABLE = {
     ("m", "meter", "metre"): (1.0, _dims(length=1)),
     ("ft", "foot", "feet"): (0.3048, _dims(length=1)),                    # international foot (1959)
