@@ -2,8 +2,8 @@
 
 A small grammar over a fixed table of units (UNITS), rather than pint: importing pint (and through it dask, babel,
 scipy) doubled the start-up of a warm `generate` of a scene written with units (tools/bench_startup_against.py),
-and the table is all a scene needs. tests/test_units_table.py checks every entry's factor and dimension against pint's own
-registry, so pint stays the oracle without being imported here.
+and the table is all a scene needs. tests/test_units_table.py checks every entry's factor and dimension against
+pint's own registry, so pint stays the oracle without being imported here.
 
 Datasheets and pint disagree on one symbol: "g" is standard gravity here (so "ug", "mg" are micro-g and milli-g),
 never gram. Angle is a dimension of its own, so "5 m/s" given for a gyro key is an error rather than silently
