@@ -60,7 +60,7 @@ class Task:
         return realization_seed(self.root_seed, self.index)
 
     def drawn(self) -> dict:
-        return {v.key: v.draw(self.root_seed, self.index) for v in self.variations}
+        return {v.name: v.draw(self.root_seed, self.index) for v in self.variations}
 
     def build(self, drawn: dict | None = None):
         """The validated scene of this realization (its seed set, its draws or `drawn` applied)."""
@@ -191,13 +191,17 @@ def load_source(scene):
 
 
 def tasks_for(scene, n: int, seed: int, out, vary=(), truth: bool = False, indices=None) -> list[Task]:
-    """The tasks of a batch; `vary` holds "KEY=DIST" texts or Variations. Realization 0's scene is built here, so
-    that a --vary naming no usable key fails at once with its one-line error (checked with each distribution's
-    middle value: a draw outside what the key accepts fails its own realization only)."""
+    """The tasks of a batch; `vary` holds "KEY=DIST" (or +=, *=) texts or Variations. Realization 0's scene is
+    built here, so that a --vary naming no usable key fails at once with its one-line error (checked with each
+    distribution's middle value: a draw outside what the key accepts fails its own realization only)."""
     from imu_emulator.scene import variations
     raw, base_dir, path, validated = load_source(scene)
-    parsed = tuple(v if isinstance(v, variations.Variation) else variations.parse(v, validated.imu_names)
+    parsed = tuple(v if isinstance(v, variations.Variation) else variations.parse(v, validated, raw)
                    for v in vary)
+    keys = [v.key for v in parsed]
+    twice = sorted({k for k in keys if keys.count(k) > 1})
+    if twice:
+        raise variations.VaryError(f"--vary: {twice[0]} is varied twice (one --vary per key)")
     if parsed and raw is None:
         raise variations.VaryError("--vary needs the scene as a file or a dict (it is validated again with the "
                                    "drawn values)")
@@ -212,7 +216,7 @@ def tasks_for(scene, n: int, seed: int, out, vary=(), truth: bool = False, indic
     tasks = [Task(index=i, **common) for i in chosen]
     if parsed and tasks:
         try:
-            tasks[0].build({v.key: v.center() for v in parsed})
+            tasks[0].build({v.name: v.center() for v in parsed})
         except ImuEmulatorError as exc:
             raise variations.VaryError(f"--vary: with each distribution's middle value: {exc}") from None
     return tasks
@@ -321,7 +325,7 @@ def summary_columns(tasks, result: BatchResult) -> dict:
         columns["cpu_s"].append(None if failure else row["cpu_s"])
         drawn = (failure or row)["drawn"]
         for v in variations:
-            values = drawn[v.key] if v.count > 1 else [drawn[v.key]]
+            values = drawn[v.name] if v.count > 1 else [drawn[v.name]]
             for j, value in enumerate(values):
                 columns[v.label(j if v.count > 1 else None)].append(value)
         for name in stat_names:

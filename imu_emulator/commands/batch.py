@@ -22,7 +22,8 @@ def register(subparsers) -> None:
                    help="root seed S (default: the scene's seed); realization i uses SeedSequence(S).spawn()[i]")
     p.add_argument("--vary", action="append", default=[], metavar="KEY=DIST",
                    help="draw a scene value per realization: uniform(LOW,HIGH) or normal(MEAN,SIGMA), optionally "
-                   "with a unit, e.g. 'imu0.gyro.bias_instability=uniform(1,5) deg/h' (repeatable)")
+                   "with a unit; KEY=DIST sets the value, KEY+=DIST adds the draw to the scene's value, KEY*=DIST "
+                   "multiplies it, e.g. 'imu1.mounting_rpy_deg+=normal(0,0.5) deg' (repeatable)")
     p.add_argument("--truth", action="store_true", help="add the truth columns to every file")
     p.add_argument("--only", type=number(0, 10_000_000, integer=True), action="append", default=None,
                    metavar="I", help="run realization I only (repeatable): the same file as in the whole batch")

@@ -29,7 +29,7 @@ import numpy as np
 
 from imu_emulator.files import trust
 
-_pending: list["Deferred"] = []
+_pending: list["Deferred | DeferredIntrinsic"] = []
 # IMU_EMULATOR_NATIVE=0: numba's dispatcher only (read once: a per-call lookup cost a microsecond per call;
 # tools/bench_encode.py sets it to compare both in one process)
 NATIVE = os.environ.get("IMU_EMULATOR_NATIVE") != "0"
@@ -125,6 +125,24 @@ def _refused():
     return _REFUSED[0]
 
 
+class DeferredIntrinsic:
+    """Stands for `numba.extending.intrinsic(func)` until realize(): an intrinsic (LLVM code a numba function
+    inlines, such as a memcpy) needs numba to be defined, and the functions calling it are Deferred themselves."""
+
+    def __init__(self, func):
+        self.func = func
+        _pending.append(self)
+
+    def __repr__(self) -> str:
+        return f"<deferred numba intrinsic {self.func.__module__}.{self.func.__qualname__}>"
+
+
+def intrinsic(func):
+    """`@intrinsic`: numba.extending.intrinsic, applied by realize() (before any Deferred that calls it compiles;
+    the intrinsic's own body imports what it needs of numba)."""
+    return DeferredIntrinsic(func)
+
+
 def jit(py_func=None, **options):
     """`@jit` or `@jit(cache=True, ...)`: numba.njit's options, applied when numba is first needed."""
     if py_func is None:
@@ -174,9 +192,13 @@ def realize() -> None:
     if not _pending:
         return
     import numba
+    from numba.extending import intrinsic as numba_intrinsic
     built = {}
     while _pending:
         deferred = _pending.pop(0)
+        if type(deferred) is DeferredIntrinsic:
+            built[id(deferred)] = numba_intrinsic(deferred.func)
+            continue
         dispatcher = numba.njit(**deferred.options)(deferred.py_func)
         # Calls from Python keep going to the machine code (numba's typing sees a plain dispatcher)
         dispatcher.__class__ = _python_calls_to_machine_code(type(dispatcher))
@@ -188,5 +210,5 @@ def realize() -> None:
         if names is None:
             continue
         for name, value in list(names.items()):
-            if type(value) is Deferred and id(value) in built:
+            if type(value) in (Deferred, DeferredIntrinsic) and id(value) in built:
                 names[name] = built[id(value)]

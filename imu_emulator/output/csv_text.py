@@ -8,13 +8,15 @@ stamp without [[imu]] time_offset_s, the truth and the Earth truth) are formatte
 per IMU.
 
 orjson writes a non-finite number as "null"; a block holding one is left to the caller's fallback (`None`).
+
+The compiled loops are declared with imu_emulator.native.lazy (`jit`, `intrinsic`): a warm run calls their machine
+code without importing numba (its import and CPU-target start cost about a second, more than a short run's work).
 """
 from __future__ import annotations
 
-import numba
 import numpy as np
-from numba.core import cgutils, types
-from numba.extending import intrinsic
+
+from imu_emulator.native.lazy import intrinsic, jit
 
 _OPEN, _CLOSE = ord("["), ord("]")
 
@@ -77,7 +79,7 @@ class RowWriter:
             offset += len(text)
         self._text = _room(self._text, offset)
         np.concatenate(texts, out=self._text[:offset])
-        per_imu = np.array([p for p, _ in segments], dtype=np.bool_)
+        per_imu = np.array([p for p, _ in segments], dtype=np.uint8)     # uint8: machine code takes no bool arrays
         size = _size(starts, ends, per_imu, self._name_starts, self._name_ends, n, n_imu)
         self._out = _room(self._out, size)
         _fill(self._out, self._text, starts, ends, per_imu, self._names, self._name_starts, self._name_ends, n,
@@ -93,6 +95,8 @@ def _room(buffer: np.ndarray, size: int) -> np.ndarray:
 def _copy(typingctx, dst, dst_start, src, src_start, count):
     """dst[dst_start:dst_start + count] = src[src_start:...] as one memcpy of bytes (uint8 arrays): a byte loop
     or a slice assignment costs ~1.5 ns a byte, and a row has ~250."""
+    from numba.core import cgutils, types
+
     def codegen(context, builder, signature, args):
         dst_array = context.make_array(signature.args[0])(context, builder, args[0])
         src_array = context.make_array(signature.args[2])(context, builder, args[2])
@@ -102,7 +106,7 @@ def _copy(typingctx, dst, dst_start, src, src_start, count):
     return types.void(dst, types.int64, src, types.int64, types.int64), codegen
 
 
-@numba.njit(cache=True, nogil=True)
+@jit(cache=True, nogil=True)
 def _size(starts, ends, per_imu, name_starts, name_ends, n, n_imu):
     size = 0
     for s in range(len(per_imu)):
@@ -114,7 +118,7 @@ def _size(starts, ends, per_imu, name_starts, name_ends, n, n_imu):
     return size + n * n_imu * (len(per_imu) + 1)     # commas between the groups and the name, and the '\n'
 
 
-@numba.njit(cache=True, nogil=True)
+@jit(cache=True, nogil=True)
 def _fill(out, text, starts, ends, per_imu, name_bytes, name_starts, name_ends, n, n_imu):
     n_seg = len(per_imu)
     p = 0
