@@ -22,14 +22,15 @@ PINT_SPELLING = {"g": "standard_gravity", "g0": "standard_gravity", "dps": "degr
 GAUSSIAN = {"G", "gauss", "mG"}
 # Our dimensions in pint's base dimensions (pint counts angle as dimensionless)
 IN_PINT = {"length": {"[length]": 1}, "time": {"[time]": 1}, "angle": {}, "temperature": {"[temperature]": 1},
-           "tesla": {"[mass]": 1, "[current]": -1, "[time]": -2}}
+           "tesla": {"[mass]": 1, "[current]": -1, "[time]": -2},
+           "pascal": {"[mass]": 1, "[length]": -1, "[time]": -2}}
 
 # Forms built from the table by its rules, with pint's spelling of the same thing
 DERIVED = {
     "cm": "cm", "mm": "mm", "km": "km", "kft": "kft", "ms": "ms", "us": "us", "µs": "µs", "μs": "μs", "ns": "ns",
     "kHz": "kHz", "mrad": "mrad", "urad": "urad", "mdeg": "millidegree", "nT": "nT", "uT": "uT", "mT": "mT",
     "ug": "1e-6 standard_gravity", "µg": "1e-6 standard_gravity", "mg": "1e-3 standard_gravity",
-    "mdps": "1e-3 degree / second", "mG": "milligauss", "millisecond": "millisecond", "kilometer": "kilometer",
+    "mdps": "1e-3 degree / second", "mG": "milligauss", "mbar": "mbar", "kPa": "kPa", "millisecond": "millisecond", "kilometer": "kilometer",
     "hours": "hour", "minutes": "minute", "seconds": "second", "degrees": "degree", "radians": "radian",
     "knots": "knot", "meters": "meter",
     "rtHz": "hertz ** 0.5", "rt-Hz": "hertz ** 0.5", "rth": "hour ** 0.5", "rt-hr": "hour ** 0.5",
