@@ -78,9 +78,17 @@ def needs_truth(configs: list[StreamConfig]) -> bool:
             info = firmware_protocols.get(config.format)
         except KeyError:
             continue
-        if config.device and info.device is not None and info.device_navigation:
+        if reports_navigation(info, config):
             return True
     return False
+
+
+def reports_navigation(info, config: StreamConfig) -> bool:
+    """Whether the stream's wire carries position/velocity: a device that reports navigation, or an encoder that
+    says so with `uses_navigation` (ardupilot-json)."""
+    if config.device and info.device is not None:
+        return info.device_navigation
+    return getattr(info.encoder, "uses_navigation", False)
 
 
 def needs_increments(configs: list[StreamConfig]) -> bool:

@@ -54,6 +54,7 @@ class Stream:
 
     def open(self) -> None:
         self.transport = open_target(self.spec, self.info.kind, self.config.target_options)
+        self.transport.sample_period_s = self.period_s
 
     def samples(self, block, time_ns: np.ndarray):
         from firmware_protocols import Samples
@@ -69,17 +70,17 @@ class Stream:
             increments = {"delta_theta": block.dtheta[i], "delta_velocity": block.dvel[i],
                           "delta_time_s": np.full(len(time_ns), self.period_s),
                           "attitude_change": self._attitude_change(block, quat)}
-        if self.device is None:
-            return Samples(time_ns, block.accel[i], block.gyro[i], quat=quat, temperature_c=temperature,
-                           **increments)
         # imported here: rotations pulls in numba, which every command would pay for at start-up otherwise
         from imu_emulator.geo.rotations import quat_to_euler, quat_to_matrix
-        # A device may be asked for any field its format knows at any moment: give it all we have.
         nav = {}
         if self.navigation is not None and block.truth is not None:
             specific_force = np.einsum("nij,nj->ni", quat_to_matrix(block.quat[i]), block.accel[i])
             nav = device_navigation(block.truth["position"], block.truth["velocity"], specific_force,
                                     *self.navigation)
+        if self.device is None:     # an encoder reading navigation (ardupilot-json) has it in nav
+            return Samples(time_ns, block.accel[i], block.gyro[i], quat=quat, temperature_c=temperature,
+                           **nav, **increments)
+        # A device may be asked for any field its format knows at any moment: give it all we have.
         return Samples(time_ns, block.accel[i], block.gyro[i], quat=quat, euler=quat_to_euler(quat),
                        temperature_c=temperature, **nav, **increments)
 

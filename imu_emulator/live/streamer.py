@@ -190,6 +190,8 @@ class Streamer:
         period = 1e9 / (self.rate_hz * self.options.speed) if pacer else 0.0
         streams = self.streams
         transports = [s.transport for s in streams]
+        # links whose other end sets the pace (a flight stack stepping in lockstep) are waited for before each sample
+        pacing = [t for t in transports if t.sets_pace]
         devices = [s.device for s in streams]
         inputs = Inputs(streams, self._note)
         stats = self.stats
@@ -219,6 +221,8 @@ class Streamer:
                 if pacer:
                     now = pacer.wait_until(deadline)
                     stats.add(now - deadline)
+                for transport in pacing:
+                    transport.await_turn()
                 for stream, transport, payload in zip(streams, transports, payloads):
                     if stream.device is not None:
                         stream.send_sample(payload)      # replies waiting for room go first
@@ -313,7 +317,8 @@ def run_streams(scene, sim, configs: list[StreamConfig], options: RunOptions) ->
     for stream in streams:
         stream.frame = scene.frame
         stream.exact_gyro = scene.effects <= _TRUE_RATE_EFFECTS
-        if stream.device is not None and stream.info.device_navigation:
+        if (stream.info.device_navigation if stream.device is not None
+                else getattr(stream.encoder, "uses_navigation", False)):
             from imu_emulator.scene.earth import position_frame
             stream.navigation = (scene.frame, float(scene.gravity_mps2), scene.origin, scene.gravity_model,
                                  position_frame(scene))
