@@ -83,7 +83,7 @@ class Px4SimTransport(Transport):
             return
         conn, peer = self.server.accept()
         conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)   # as PX4 sets on its side
-        conn.settimeout(self.timeout)
+        conn.setblocking(False)    # reads never wait; sends wait for room up to the timeout (_send_all)
         self.conn, self.stepping, self.pending = conn, False, 0
         self._decoder = MavlinkDecoder(messages={HIL_ACTUATOR_CONTROLS: _ACTUATOR_SPEC})
         self.connections += 1
@@ -139,19 +139,21 @@ class Px4SimTransport(Transport):
             while self.conn is not None and not self.stepping and now < due:
                 self._wait_readable((due - now) / 1e9)
                 now = time.monotonic_ns()
-        else:
-            deadline = now + int(self.timeout * 1e9)
-            while self.conn is not None and self.pending == 0:
-                if now >= deadline:
-                    raise LockstepTimeout(f"px4: lockstep timeout: no HIL_ACTUATOR_CONTROLS from PX4 SITL for "
-                                          f"{self.timeout:g} s after sample {self.samples_sent} (timeout= in the "
-                                          "target sets the limit)")
-                self._wait_readable((deadline - now) / 1e9)
-                now = time.monotonic_ns()
-            if self.conn is None:       # it left while we waited: wait for it to come back
-                self._accept(None)
-                return self.await_turn()
-            self.pending -= 1
+            if not self.stepping:
+                self._last_turn_ns = now
+                return
+        deadline = now + int(self.timeout * 1e9)
+        while self.conn is not None and self.pending == 0:
+            if now >= deadline:
+                raise LockstepTimeout(f"px4: lockstep timeout: no HIL_ACTUATOR_CONTROLS from PX4 SITL for "
+                                      f"{self.timeout:g} s after sample {self.samples_sent} (timeout= in the "
+                                      "target sets the limit)")
+            self._wait_readable((deadline - now) / 1e9)
+            now = time.monotonic_ns()
+        if self.conn is None:       # it left while we waited: wait for it to come back
+            self.await_turn()
+            return
+        self.pending -= 1
         self._last_turn_ns = now
 
     def send(self, payload: bytes) -> bool:
@@ -159,16 +161,29 @@ class Px4SimTransport(Transport):
             self.count_refusal("no stack connected")
             return False
         try:
-            self.conn.sendall(payload)
-        except socket.timeout:
-            raise LockstepTimeout(f"px4: PX4 SITL took no data for {self.timeout:g} s (timeout= in the target sets "
-                                  "the limit)") from None
+            self._send_all(payload)
         except OSError as exc:
             self._disconnect(error_name(exc))
             self.count_refusal("stack disconnected")
             return False
         self.samples_sent += 1
         return True
+
+    def _send_all(self, payload: bytes) -> None:
+        """All of it (a stream link: half a message would garble the rest), waiting for room up to the timeout."""
+        view = memoryview(payload)
+        deadline = time.monotonic() + self.timeout
+        while view:
+            try:
+                view = view[self.conn.send(view):]
+            except (BlockingIOError, InterruptedError):
+                pass
+            if view:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    raise LockstepTimeout(f"px4: PX4 SITL took no data for {self.timeout:g} s (timeout= in the "
+                                          "target sets the limit)")
+                select.select((), [self.conn], (), remaining)
 
     def recv(self) -> bytes:
         self._read()
