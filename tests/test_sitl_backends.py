@@ -322,6 +322,7 @@ class Px4Model:
         self.mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
         self.clock_usec = None
         self.queue = []
+        self.gps = []
         hb = self.mav.heartbeat_encode(type=0, autopilot=12, base_mode=0, custom_mode=0, system_status=0)
         self.sock.sendall(hb.pack(self.mav))
         cmd = self.mav.command_long_encode(0, 0, mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
@@ -343,6 +344,8 @@ class Px4Model:
                 if msg.get_type() == "HIL_SENSOR" and msg.id == 0:
                     self.clock_usec = msg.time_usec          # px4_clock_settime
                     found.append(msg)
+                elif msg.get_type() == "HIL_GPS":
+                    self.gps.append(msg)                     # handle_message_hil_gps
         return found
 
     def next_sensor(self, timeout: float = 5.0):

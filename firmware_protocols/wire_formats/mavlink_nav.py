@@ -223,6 +223,8 @@ class MavlinkNavEncoder:
     `encode` returns a SerialBatch with an (empty or one-frame) packet per sample: GNSS messages only where a
     new solution arrived, SCALED_PRESSURE only on the barometer's readings."""
 
+    uses_navigation = True      # position/velocity/attitude: a device sending it (also=) needs the navigation
+
     def __init__(self, message: str, sysid: int = 1, compid: int = 1, seq: int = 0, id: int | None = None,
                  signing_key=None, link_id: int = 0, signing_link: SigningLink | None = None, sign_time: str = "wall",
                  truncate: bool = True, baro_rate_hz: float | None = None):

@@ -28,7 +28,7 @@ import time
 import firmware_protocols
 from imu_emulator.errors import ImuEmulatorError, TargetError
 from imu_emulator.live.budget import link_budget_problem, link_text
-from imu_emulator.live.config import RunOptions, StreamConfig, StreamError
+from imu_emulator.live.config import RunOptions, StreamConfig, StreamError, encoders_navigate
 from imu_emulator.live.inputs import Inputs
 from imu_emulator.live.producer import Producer, ProducerFailure, reap
 from imu_emulator.live.realtime import LatenessStats, Pacer, drop_realtime, enable_realtime
@@ -317,8 +317,8 @@ def run_streams(scene, sim, configs: list[StreamConfig], options: RunOptions) ->
     for stream in streams:
         stream.frame = scene.frame
         stream.exact_gyro = scene.effects <= _TRUE_RATE_EFFECTS
-        if (stream.info.device_navigation if stream.device is not None
-                else getattr(stream.encoder, "uses_navigation", False)):
+        if (stream.info.device_navigation or encoders_navigate(stream.device.encoders()) if stream.device is not None
+                else encoders_navigate([stream.encoder])):
             from imu_emulator.scene.earth import position_frame
             stream.navigation = (scene.frame, float(scene.gravity_mps2), scene.origin, scene.gravity_model,
                                  position_frame(scene))
