@@ -321,7 +321,6 @@ class Px4Model:
         self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self.mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
         self.clock_usec = None
-        self.queue = []
         self.gps = []
         hb = self.mav.heartbeat_encode(type=0, autopilot=12, base_mode=0, custom_mode=0, system_status=0)
         self.sock.sendall(hb.pack(self.mav))
@@ -330,7 +329,7 @@ class Px4Model:
         self.sock.sendall(cmd.pack(self.mav))
 
     def sensors(self, timeout: float):
-        """HIL_SENSOR messages that arrive within timeout (the first one ends the wait early if `one`)."""
+        """HIL_SENSOR messages (id 0) that arrive within timeout; HIL_GPS ones are kept in self.gps."""
         end = time.monotonic() + timeout
         found = []
         while time.monotonic() < end:
@@ -347,13 +346,6 @@ class Px4Model:
                 elif msg.get_type() == "HIL_GPS":
                     self.gps.append(msg)                     # handle_message_hil_gps
         return found
-
-    def next_sensor(self, timeout: float = 5.0):
-        while not self.queue:
-            got = self.sensors_until_one(timeout)
-            assert got, "no HIL_SENSOR came"
-            self.queue.extend(got)
-        return self.queue.pop(0)
 
     def sensors_until_one(self, timeout):
         end = time.monotonic() + timeout
@@ -479,4 +471,50 @@ def test_px4_wall_clock_drops_while_no_stack_and_records_what_comes():
         assert transport.actuator_messages == 1
         px4.close()
     finally:
+        transport.close()
+
+
+def test_ardupilot_32_channel_packets_and_resends_are_taken(tmp_path):
+    """SERVO_32_ENABLE: magic 29569 with pwm[32]; a resend (same frame_count: SITL missed our line) is answered
+    with the next sample and counted."""
+    port = _free_port()
+    record = tmp_path / "servos.csv"
+    transport = _ardupilot(port, f"record={record}")
+    batch = fp.create_encoder("ardupilot-json").encode(_json_samples(3))
+    failures = []
+    thread = _stepper(transport, [batch.packet(i) for i in range(3)], failures)
+    sitl = SimJsonModel(port)
+    try:
+        packet = struct.pack("<HHI32H", 29569, 250, 0, *range(1000, 1032))
+        sitl.sock.sendto(packet, ("127.0.0.1", port))
+        first = sitl.recv_fdm()
+        sitl.sock.sendto(packet, ("127.0.0.1", port))           # the same frame again
+        second = sitl.recv_fdm()
+        thread.join(0.5)
+    finally:
+        sitl.close()
+        transport.close()
+    assert not failures
+    assert second["timestamp"] - first["timestamp"] == pytest.approx(PERIOD_S, abs=1e-12)
+    assert (transport.servo_packets, transport.resends, transport.malformed) == (2, 1, 0)
+    rows = list(csv.reader(record.open()))
+    assert [int(v) for v in rows[1][3:]] == list(range(1000, 1032))
+
+
+def test_ardupilot_wall_clock_sends_to_the_last_sitl_heard_and_refuses_before():
+    port = _free_port()
+    transport = _ardupilot(port, lockstep=False)
+    batch = fp.create_encoder("ardupilot-json").encode(_json_samples(2))
+    sitl = SimJsonModel(port)
+    try:
+        transport.await_turn()
+        assert transport.send(batch.packet(0)) is False       # nobody to send to yet: counted
+        assert transport.send_errors == {"no SITL heard from yet": 1}
+        sitl.output_servos([1200] * 16)
+        time.sleep(0.05)
+        transport.await_turn()                                  # never blocks: reads what came
+        assert transport.send(batch.packet(1))
+        assert sitl.recv_fdm()["timestamp"] == pytest.approx(1.004)
+    finally:
+        sitl.close()
         transport.close()

@@ -91,7 +91,6 @@ def test_px4_sitl_gets_hil_sensor_and_hil_gps_in_lockstep(tmp_path):
     proc = _start(tmp_path, "--format", "mavlink-hil-sensor", "--option", "also=mavlink-hil-gps",
                   "--to", f"px4:127.0.0.1:{port}", "--speed", "0", "--count", "25")
     px4 = Px4Model(port)
-    gps = []
     try:
         times = [m.time_usec for m in px4.sensors_until_one(30)]
         for step in range(5):
@@ -113,5 +112,6 @@ def test_px4_sitl_gets_hil_sensor_and_hil_gps_in_lockstep(tmp_path):
     # HIL_GPS as handle_message_hil_gps reads it: degE7, mm, cm/s; the circle passes through the origin
     assert px4.gps and all(m.fix_type == 3 for m in px4.gps)
     for m in px4.gps:
-        assert abs(m.lat / 1e7 - ORIGIN[0]) < 2 * RADIUS_M / 111e3 and abs(m.lon / 1e7 - ORIGIN[1]) < 2 * RADIUS_M / 75e3
+        assert abs(m.lat / 1e7 - ORIGIN[0]) < 2 * RADIUS_M / 111e3      # degrees of latitude: ~111 km
+        assert abs(m.lon / 1e7 - ORIGIN[1]) < 2 * RADIUS_M / 75e3       # of longitude at 47.4 N: ~75 km
         assert math.hypot(m.vn, m.ve) / 100 == pytest.approx(2 * math.pi * FREQ_HZ * RADIUS_M, abs=0.02)
