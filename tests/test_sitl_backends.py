@@ -518,3 +518,15 @@ def test_ardupilot_wall_clock_sends_to_the_last_sitl_heard_and_refuses_before():
     finally:
         sitl.close()
         transport.close()
+
+
+@pytest.mark.parametrize("fmt, options, device, expected", [
+    ("ardupilot-json", {}, True, True),                             # its encoder reads position and velocity
+    ("mavlink-hil-sensor", {}, True, False),
+    ("mavlink-hil-sensor", {"also": "mavlink-hil-gps"}, True, True),   # HIL_GPS beside it needs the navigation
+    ("mavlink-hil-sensor", {"also": "mavlink-hil-gps"}, False, False),  # --device off: HIL_SENSOR alone goes out
+    ("mavlink-highres", {}, True, False),
+])
+def test_the_simulation_computes_navigation_exactly_for_streams_that_send_it(fmt, options, device, expected):
+    from imu_emulator.live.config import StreamConfig, needs_truth
+    assert needs_truth([StreamConfig("imu0", fmt, "px4", options, device=device)]) is expected
