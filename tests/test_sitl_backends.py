@@ -530,3 +530,48 @@ def test_ardupilot_wall_clock_sends_to_the_last_sitl_heard_and_refuses_before():
 def test_the_simulation_computes_navigation_exactly_for_streams_that_send_it(fmt, options, device, expected):
     from imu_emulator.live.config import StreamConfig, needs_truth
     assert needs_truth([StreamConfig("imu0", fmt, "px4", options, device=device)]) is expected
+
+
+def test_ardupilot_resends_queued_while_the_stream_started_get_one_line():
+    """SITL resends its packet each second without an answer (SIM_JSON recv_fdm): the copies queued before the
+    stream's first step are answered once, or SITL would read one stale line at every step from then on."""
+    port = _free_port()
+    transport = _ardupilot(port)
+    batch = fp.create_encoder("ardupilot-json").encode(_json_samples(3))
+    sitl = SimJsonModel(port)
+    for _ in range(3):
+        sitl.output_servos([1000] * 16)           # frame 0, sent three times before anyone answered
+    time.sleep(0.05)
+    failures = []
+    thread = _stepper(transport, [batch.packet(i) for i in range(3)], failures)
+    try:
+        first = sitl.recv_fdm()
+        assert not select.select([sitl.sock], (), (), 0.2)[0]        # one line, not three
+        second = sitl.update([1000] * 16)
+        thread.join(0.5)
+    finally:
+        sitl.close()
+        transport.close()
+    assert (first["timestamp"], second["timestamp"]) == pytest.approx((1.0, 1.004))
+    assert (transport.servo_packets, transport.resends) == (4, 2)
+
+
+def test_px4_input_no_device_reads_is_bounded_and_counted():
+    port = _free_port(socket.SOCK_STREAM)
+    transport = _px4(port, lockstep=False)
+    px4 = Px4Model(port)
+    try:
+        time.sleep(0.05)
+        transport.await_turn()
+        for _ in range(800):                      # ~74 kB of HIL_ACTUATOR_CONTROLS nobody reads as a device would
+            px4.send_controls(0.0)
+        end = time.monotonic() + 5
+        while transport.actuator_messages < 800 and time.monotonic() < end:
+            time.sleep(0.02)
+            transport.await_turn()
+        assert transport.actuator_messages == 800
+        assert len(transport.recv()) == 1 << 16
+        assert transport.link_report()["counts"]["input bytes not read"] > 0
+    finally:
+        px4.close()
+        transport.close()

@@ -15,7 +15,8 @@ back to the address it came from; none for `timeout` s once SITL has spoken is a
 (before that, the stream waits for SITL as long as it takes). Wall clock (--speed > 0): a sample at each of the
 scene's deadlines to the last address heard from, servo packets read and recorded as they come. A malformed packet
 (size or magic) is counted and announced, never answered; the stream keeps its state. A resend is counted and
-answered with the next sample (SITL did not get the last one), a frame_count going back is announced as SITL
+answered with the next sample (SITL did not get the last one; resends already queued behind a packet share its
+answer), a frame_count going back is announced as SITL
 restarting; the emulator's clock carries on (SITL calls a step back in time "physics reset", forward is fine).
 The servo outputs are recorded (record=PATH, CSV), never obeyed: the scene's motion is scripted.
 """
@@ -111,6 +112,11 @@ class ArduPilotJsonTransport(Transport):
             return False       # an ICMP error for an earlier reply (SITL gone): it will speak again or time out
         return self._take(data, peer)
 
+    def _pending(self) -> bool:
+        """Whether a datagram is waiting (a malformed one makes _receive False without ending the queue)."""
+        ready, _, _ = select.select([self.sock], (), (), 0)
+        return bool(ready)
+
     def await_turn(self) -> None:
         if not self.lockstep:
             while True:
@@ -131,6 +137,11 @@ class ArduPilotJsonTransport(Transport):
                                       "sets the limit)")
             ready, _, _ = select.select([self.sock], (), (), wait)
             if ready and self._receive():
+                # Packets queued behind it are resends of the same step (SITL sends one per step, then waits, and
+                # repeats it each second without an answer: while the emulator started, say). One line answers
+                # them all: a line per packet would leave SITL reading a stale line at every step from then on.
+                while self._receive() or self._pending():
+                    pass
                 return
             now = time.monotonic_ns()
 

@@ -45,6 +45,8 @@ def _decode_actuators(payload: bytes) -> dict:
 _ACTUATOR_SPEC = SimpleNamespace(name="HIL_ACTUATOR_CONTROLS", crc_extra=47, payload_len=_ACTUATOR.size,
                                  decode=_decode_actuators)
 _COLUMNS = ["sample", "time_usec", "mode", "flags"] + [f"control{i}" for i in range(16)]
+# What the stack sent, kept for the stream's device: a stream without one never takes it
+_INPUT_KEPT = 1 << 16
 
 
 class Px4SimTransport(Transport):
@@ -71,6 +73,7 @@ class Px4SimTransport(Transport):
         self.stepping = False              # the connection's first HIL_ACTUATOR_CONTROLS has come
         self.samples_sent = 0
         self.connections = self.disconnects = self.actuator_messages = 0
+        self.input_dropped = 0             # bytes the stack sent that no device took (beyond _INPUT_KEPT)
         self._last_turn_ns = 0
 
     # - the connection -
@@ -111,6 +114,9 @@ class Px4SimTransport(Transport):
                 self._disconnect("connection closed")
                 return
             self._input += chunk
+            if len(self._input) > _INPUT_KEPT:     # nobody reads it (--device off): keep the newest only
+                self.input_dropped += len(self._input) - _INPUT_KEPT
+                del self._input[:-_INPUT_KEPT]
             for packet in self._decoder.feed(chunk):
                 f = packet.fields
                 self.actuator_messages += 1
@@ -198,7 +204,8 @@ class Px4SimTransport(Transport):
     def link_report(self) -> dict:
         return {**super().link_report(),
                 "counts": {"connections": self.connections, "disconnects": self.disconnects,
-                           "HIL_ACTUATOR_CONTROLS": self.actuator_messages}}
+                           "HIL_ACTUATOR_CONTROLS": self.actuator_messages,
+                           **({"input bytes not read": self.input_dropped} if self.input_dropped else {})}}
 
     def close(self) -> None:
         if self.conn is not None:
