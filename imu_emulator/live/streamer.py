@@ -14,6 +14,8 @@ While waiting for a deadline the loop watches every transport's descriptor (sele
 are fed to the device at once and its replies go out between two deadlines, without moving the sample
 clock. Input on a link without a device is read and counted as ignored, so the writer never blocks.
 Several streams (one IMU, one format, one target each) share one clock and one simulation.
+A link whose other end sets the pace (a flight stack's simulator interface, `Transport.sets_pace`) is asked
+`await_turn()` before each sample: in lockstep (--speed 0) it returns when the stack asks for the next step.
 """
 from __future__ import annotations
 
