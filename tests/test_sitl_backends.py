@@ -328,8 +328,9 @@ class Px4Model:
                                            mavlink2.MAVLINK_MSG_ID_HIL_STATE_QUATERNION, 5e3, 0, 0, 0, 0, 0)
         self.sock.sendall(cmd.pack(self.mav))
 
-    def sensors(self, timeout: float):
-        """HIL_SENSOR messages (id 0) that arrive within timeout; HIL_GPS ones are kept in self.gps."""
+    def sensors(self, timeout: float, until_one: bool = False):
+        """HIL_SENSOR messages (id 0) that arrive within timeout (or until the first, `until_one`); HIL_GPS ones
+        are kept in self.gps."""
         end = time.monotonic() + timeout
         found = []
         while time.monotonic() < end:
@@ -345,15 +346,13 @@ class Px4Model:
                     found.append(msg)
                 elif msg.get_type() == "HIL_GPS":
                     self.gps.append(msg)                     # handle_message_hil_gps
+            if found and until_one:
+                break
         return found
 
     def sensors_until_one(self, timeout):
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            got = self.sensors(min(0.05, end - time.monotonic()))
-            if got:
-                return got
-        return []
+        """What arrives until the first HIL_SENSOR (with any others in the same read)."""
+        return self.sensors(timeout, until_one=True)
 
     def send_controls(self, value: float):
         msg = self.mav.hil_actuator_controls_encode(self.clock_usec or 0, [value] * 16, 1 | 128, 1)
