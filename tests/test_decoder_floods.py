@@ -13,7 +13,8 @@ from firmware_protocols.wire_formats.bosch import crc8_sae_j1850
 SERIAL = [name for name, info in fp.formats().items() if info.kind == "serial"]
 CAN = [name for name, info in fp.formats().items() if info.kind == "can"]
 # One decoder per decoder class is enough: the MAVLink messages share one decoder, and so do the ASCII sentences.
-DECODERS = ["mavlink-highres", "vectornav-binary", "vectornav-vnymr", "xsens-mtdata2", "microstrain-mip"]
+DECODERS = ["mavlink-highres", "vectornav-binary", "vectornav-vnymr", "xsens-mtdata2", "microstrain-mip",
+            "ardupilot-json"]
 
 
 def test_every_serial_decoder_is_covered():

@@ -25,6 +25,10 @@ from imu_emulator.live.transport.slcan_pty import slcan_lines
     ("can:udp_multicast:ff15::1", dict(interface="udp_multicast", path="ff15::1", port=0)),
     ("udp:[::1]:14550", dict(kind="udp", path="::1", port=14550)),
     ("file:out/imu.blf", dict(kind="file", path="out/imu.blf")),
+    ("px4", dict(kind="px4", path="127.0.0.1", port=4560)),
+    ("px4:0.0.0.0:4561,timeout=2.5", dict(kind="px4", path="0.0.0.0", port=4561, params=(("timeout", "2.5"),))),
+    ("ardupilot:9003,record=servos.csv", dict(kind="ardupilot", path="127.0.0.1", port=9003,
+                                              params=(("record", "servos.csv"),))),
 ])
 def test_parse_target(text, fields):
     spec = parse_target(text)
@@ -34,7 +38,9 @@ def test_parse_target(text, fields):
 
 @pytest.mark.parametrize("text", ["", "pty:x", "serial:", "serial:/dev/x@0", "can:virtual", "can::x", "udp:h:0",
                                   "tcp:h:1", "can:udp_multicast:239.1.2.3:0",
-                                  "can:udp_multicast:239.1.2.3:x", "can:udp_multicast:[ff15::1]"])
+                                  "can:udp_multicast:239.1.2.3:x", "can:udp_multicast:[ff15::1]",
+                                  "px4:h:x", "px4:4560,timeout=0", "px4:4560,record=", "ardupilot:70000",
+                                  "ardupilot:9002,lockstep=1"])
 def test_malformed_target_raises_target_error(text):
     with pytest.raises(TargetError):
         parse_target(text)

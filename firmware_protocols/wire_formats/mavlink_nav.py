@@ -213,6 +213,8 @@ class MavlinkNavEncoder:
     body_axes, reference = "FRD", "NED"
     axes_source = "MAVLink common.xml: ATTITUDE aeronautical frame (X-front, Y-right, Z-down); HIL_GPS vn/ve/vd"
 
+    uses_navigation = True      # position/velocity/attitude: a device sending it (also=) needs the navigation
+
     def __init__(self, message: str, sysid: int = 1, compid: int = 1, seq: int = 0, id: int | None = None,
                  signing_key=None, link_id: int = 0, signing_link: SigningLink | None = None, sign_time: str = "wall",
                  truncate: bool = True, baro_rate_hz: float | None = None):

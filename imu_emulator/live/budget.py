@@ -68,6 +68,8 @@ def link_text(link: dict) -> str:
     moved = {name: n for name, n in link.get("interface", {}).items() if n}
     if "interface" in link:
         parts.append("interface " + (", ".join(f"{name} +{n}" for name, n in moved.items()) or "counters unchanged"))
+    if link.get("counts"):     # what a link counts of its own (steps, reconnects, malformed input)
+        parts.append(", ".join(f"{name} {n}" for name, n in link["counts"].items()))
     if "queue_max_bytes" in link:
         parts.append(f"queue up to {link['queue_max_bytes']} B")
     if link.get("unread_lost"):

@@ -78,9 +78,24 @@ def needs_truth(configs: list[StreamConfig]) -> bool:
             info = firmware_protocols.get(config.format)
         except KeyError:
             continue
-        if config.device and info.device is not None and info.device_navigation:
+        if reports_navigation(info, config):
             return True
     return False
+
+
+def reports_navigation(info, config: StreamConfig) -> bool:
+    """Whether the stream's wire carries position/velocity: a device that reports navigation, or an encoder (its
+    own, or one a device sends beside its main message: MAVLink's also=) that says so with `uses_navigation`."""
+    try:
+        if config.device and info.device is not None:
+            return info.device_navigation or encoders_navigate(info.device(100.0, **config.options).encoders())
+        return encoders_navigate([info.encoder(**config.options)])
+    except (TypeError, ValueError):
+        return False        # build_streams reports it
+
+
+def encoders_navigate(encoders) -> bool:
+    return any(getattr(encoder, "uses_navigation", False) for encoder in encoders)
 
 
 def needs_increments(configs: list[StreamConfig]) -> bool:

@@ -54,6 +54,7 @@ class Stream:
 
     def open(self) -> None:
         self.transport = open_target(self.spec, self.info.kind, self.config.target_options)
+        self.transport.sample_period_s = self.period_s
 
     def samples(self, block, time_ns: np.ndarray):
         """The block's samples of this stream's IMU as every format takes them (firmware_protocols.Samples): the
@@ -77,22 +78,24 @@ class Stream:
             increments = {"delta_theta": block.dtheta[i], "delta_velocity": block.dvel[i],
                           "delta_time_s": np.full(len(time_ns), self.period_s),
                           "attitude_change": self._attitude_change(block, quat)}
-        quat, temperature, companion = _companion_fields(block, i, quat, temperature)
-        if self.device is None:
-            return reexpress(Samples(time_ns, block.accel[i], block.gyro[i], quat=quat, temperature_c=temperature,
-                                     **increments, **companion), body, "FRD")
-        # imported here: rotations pulls in numba, which every command would pay for at start-up otherwise
-        from imu_emulator.geo.rotations import quat_to_euler, quat_to_matrix
-        # A device may be asked for any field its format knows at any moment: give it all we have.
+        if getattr(self.encoder, "true_physics", False):
+            companion = {}      # a simulator's physics backend gets the truth, never the unit's own estimate
+        else:
+            quat, temperature, companion = _companion_fields(block, i, quat, temperature)
         nav = {}
+        # imported only when needed: rotations pulls in numba, which every command would pay for at start-up otherwise
+        if self.device is not None:
+            from imu_emulator.geo.rotations import quat_to_euler
         if self.navigation is not None and block.truth is not None:
+            from imu_emulator.geo.rotations import quat_to_matrix
             specific_force = np.einsum("nij,nj->ni", quat_to_matrix(block.quat[i]), block.accel[i])
             nav = device_navigation(block.truth["position"], block.truth["velocity"], specific_force,
                                     *self.navigation)
         # the unit's own estimate (companion INS) replaces the truth's position and velocity
         samples = reexpress(Samples(time_ns, block.accel[i], block.gyro[i], quat=quat, temperature_c=temperature,
                                     **{**nav, **companion}, **increments), body, "FRD")
-        samples.euler = quat_to_euler(samples.quat)
+        if self.device is not None:     # a device may be asked for any field its format knows at any moment
+            samples.euler = quat_to_euler(samples.quat)
         return samples
 
     def _attitude_change(self, block, quat: np.ndarray) -> np.ndarray:

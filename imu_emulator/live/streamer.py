@@ -14,6 +14,8 @@ While waiting for a deadline the loop watches every transport's descriptor (sele
 are fed to the device at once and its replies go out between two deadlines, without moving the sample
 clock. Input on a link without a device is read and counted as ignored, so the writer never blocks.
 Several streams (one IMU, one format, one target each) share one clock and one simulation.
+A link whose other end sets the pace (a flight stack's simulator interface, `Transport.sets_pace`) is asked
+`await_turn()` before each sample: in lockstep (--speed 0) it returns when the stack asks for the next step.
 """
 from __future__ import annotations
 
@@ -28,7 +30,7 @@ import time
 import firmware_protocols
 from imu_emulator.errors import ImuEmulatorError, TargetError
 from imu_emulator.live.budget import link_budget_problem, link_text
-from imu_emulator.live.config import RunOptions, StreamConfig, StreamError
+from imu_emulator.live.config import RunOptions, StreamConfig, StreamError, encoders_navigate
 from imu_emulator.live.inputs import Inputs
 from imu_emulator.live.producer import Producer, ProducerFailure, reap
 from imu_emulator.live.realtime import LatenessStats, Pacer, drop_realtime, enable_realtime
@@ -192,6 +194,8 @@ class Streamer:
         period = 1e9 / (self.rate_hz * self.options.speed) if pacer else 0.0
         streams = self.streams
         transports = [s.transport for s in streams]
+        # links whose other end sets the pace (a flight stack stepping in lockstep) are waited for before each sample
+        pacing = [t for t in transports if t.sets_pace]
         devices = [s.device for s in streams]
         inputs = Inputs(streams, self._note)
         stats = self.stats
@@ -221,6 +225,8 @@ class Streamer:
                 if pacer:
                     now = pacer.wait_until(deadline)
                     stats.add(now - deadline)
+                for transport in pacing:
+                    transport.await_turn()
                 for stream, transport, payload in zip(streams, transports, payloads):
                     if stream.device is not None:
                         stream.send_sample(payload)      # replies waiting for room go first
@@ -315,7 +321,8 @@ def run_streams(scene, sim, configs: list[StreamConfig], options: RunOptions) ->
     for stream in streams:
         stream.frame = scene.frame
         stream.exact_gyro = scene.effects <= _TRUE_RATE_EFFECTS
-        if stream.device is not None and stream.info.device_navigation:
+        if (stream.info.device_navigation or encoders_navigate(stream.device.encoders()) if stream.device is not None
+                else encoders_navigate([stream.encoder])):
             from imu_emulator.scene.earth import position_frame
             stream.navigation = (scene.frame, float(scene.gravity_mps2), scene.origin, scene.gravity_model,
                                  position_frame(scene))

@@ -64,6 +64,16 @@ class Transport:
     def fileno(self) -> int | None:
         return None
 
+    # The stream's sample period, s, set when the stream opens the link (a link that sets the pace uses it).
+    sample_period_s: float | None = None
+    # Whether the other end sets the pace (a flight stack's simulator interface): then the streaming loop calls
+    # `await_turn` before each sample of this link.
+    sets_pace = False
+
+    def await_turn(self) -> None:
+        """Before each sample: a link whose other end steps the simulation (lockstep) waits here until it asks
+        for the next sample, and raises a TargetError naming its timeout when that never comes."""
+
     def set_baud(self, baud: int) -> bool:
         """Follow a baud-rate change the device agreed to; False when the link has no baud rate to follow."""
         return False

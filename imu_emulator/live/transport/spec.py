@@ -16,6 +16,7 @@ class TargetSpec:
     interface: str = ""   # python-can interface (can)
     port: int = 0         # udp; udp_multicast (0: python-can's default)
     rate: int | None = None   # baud (serial) or bit rate (can), when the spec names one
+    params: tuple = ()        # (key, value) pairs after ',' (the flight-stack targets' record=, timeout=)
 
 
 def no_capacity(spec: TargetSpec, format_kind: str, options: TargetOptions) -> LinkCapacity:
