@@ -341,8 +341,7 @@ _DEVICE_OPTIONS = {
 }
 _DEVICE_OPTIONS["also"] = ("more messages on the link, comma-separated: " + ", ".join(NAV_MESSAGES)
                            + " (GNSS on new fixes, SCALED_PRESSURE at baro_rate_hz)")
-# Every MAVLink device may carry GNSS messages (also=): the streamer computes the navigation their fix falls back on
-# when the scene gives no GNSS receiver.
+# A MAVLink device carries GNSS messages only when also= names them: their encoders say `uses_navigation`, and the
+# streamer computes the navigation their fix falls back on (live.config.reports_navigation) for those streams alone.
 for _name in (*MESSAGES, *NAV_MESSAGES):
-    attach_device(_name, lambda rate_hz, _m=_name, **options: MavlinkDevice(rate_hz, _m, **options), _DEVICE_OPTIONS,
-                  navigation=True)
+    attach_device(_name, lambda rate_hz, _m=_name, **options: MavlinkDevice(rate_hz, _m, **options), _DEVICE_OPTIONS)

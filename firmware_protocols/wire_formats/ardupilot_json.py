@@ -79,6 +79,8 @@ class ArduPilotJsonEncoder:
 
     uses_navigation = True     # the streamer computes position and velocity for it
     true_physics = True        # SITL's physics backend: the truth, never a unit's own estimate (companion INS)
+    body_axes, reference = "FRD", "NED"
+    axes_source = "ArduPilot SIM_JSON.cpp/h (2ebd1127): imu.gyro, accel_body body frame; quaternion, velocity NED"
 
     def __init__(self, origin=None):
         self.origin = _parse_origin(origin)
