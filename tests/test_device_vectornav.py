@@ -393,3 +393,28 @@ def test_formats_lists_devices_and_presets():
                          check=True).stdout
     assert re.search(r"^vectornav-binary .*\[device\]$", out, re.M)
     assert "preset=ardupilot:" in out and "preset=px4:" in out
+
+
+def test_warm_up_runs_every_compiled_function_a_configuration_could_need(monkeypatch):
+    """The streamer warms a throwaway device before the first deadline: a VectorNav device must run there every
+    compiled function that a driver's register 75-77 write could bring in (vectornav_quantities), so no reply waits
+    for a compile (seconds on a cold cache; past the 500 ms after which ArduPilot and the ROS nodes resend, and the
+    resend is answered twice: the ROS 2 start-up answered 20 of 19 commands on a fresh clone)."""
+    import firmware_protocols
+    from firmware_protocols import Samples, vectornav_quantities
+    from imu_emulator.native.lazy import Deferred
+
+    called = set()
+    original = Deferred.__call__
+
+    def recording(self, *args):
+        called.add(self)
+        return original(self, *args)
+
+    monkeypatch.setattr(Deferred, "__call__", recording)
+    compiled = {value for value in vars(vectornav_quantities).values() if isinstance(value, Deferred)}
+    assert len(compiled) >= 4
+    n = 3
+    samples = Samples(np.arange(n) * 2_500_000, np.zeros((n, 3)), np.zeros((n, 3)), quat=np.tile([1.0, 0, 0, 0], (n, 1)))
+    firmware_protocols.create_device("vectornav-binary", 400.0).warm_up(samples)
+    assert compiled <= called, sorted(map(repr, compiled - called))

@@ -77,6 +77,12 @@ class Device:
         """Everything sent for sample i of `samples` (b"" / an empty frame array when nothing is due)."""
         raise NotImplementedError
 
+    def warm_up(self, samples: Samples) -> None:
+        """Compile now what a driver's configuration command could make the device compile later: the streamer
+        calls it on a throwaway device before the first deadline. A reply delayed by a compile (seconds on a cold
+        cache) reaches a driver after its timeout, and its resend is then answered twice (issue 23, item 7).
+        This default has nothing beyond `output`, which the streamer runs anyway."""
+
     def encoders(self):
         """The encoders whose saturation counts this device reports (one `encoder` unless overridden)."""
         encoder = getattr(self, "encoder", None)

@@ -395,6 +395,14 @@ def _layout_from_selection(selection: dict) -> Layout:
     return Layout(groups, tuple(masks), tuple(fields))
 
 
+def every_field_layout(increments: bool = True) -> Layout:
+    """A layout with every field the emulator sends (those with quantities behind them), of every group; without
+    the integrated outputs (DeltaTheta, DeltaVel) when the samples carry none."""
+    return parse_fields({gname: [fname for fname, _, quantities in fields
+                                 if quantities and (increments or not fname.startswith("Delta"))]
+                         for gname, _, fields in _GROUP_TABLE})
+
+
 def parse_fields(fields) -> Layout:
     """A field selection -> Layout. Accepts a spec string "common:timestartup,accel;imu:uncompgyro",
     a dict {group: [field names] or int mask}, or a Layout. Names are case-insensitive; order given

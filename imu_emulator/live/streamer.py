@@ -186,7 +186,9 @@ class Streamer:
         for stream in self.streams:
             samples = stream.samples(block, block.time_ns())
             if stream.device is not None:
-                stream.info.device(self.rate_hz, **stream.config.options).output(samples, 0)
+                device = stream.info.device(self.rate_hz, **stream.config.options)
+                device.output(samples, 0)
+                device.warm_up(samples)     # what a driver's configuration could make it compile mid-run
             else:
                 firmware_protocols.create_encoder(stream.config.format, **stream.config.options).encode(samples)
 
