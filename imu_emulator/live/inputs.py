@@ -30,6 +30,7 @@ class Inputs:
             else:
                 self.by_fd.setdefault(fd, []).append(stream)
         self.fds = list(self.by_fd)
+        self.served_ns = 0          # when input was last served (monotonic): a deadline missed meanwhile is its
         # Unwatched links that can talk are polled at each deadline; one-way ones not at all.
         self.unwatched = [s for s in self.unwatched if s.device is not None]
 
@@ -78,6 +79,7 @@ class Inputs:
         device = stream.device
         if device is None:
             stream.ignored_input += sum(len(data) for data in units)
+            self.served_ns = time.monotonic_ns()
             return True
         for data in units:
             for reply in device.receive(data, time.monotonic_ns(), whole=whole):
@@ -89,4 +91,5 @@ class Inputs:
                           + ("followed" if followed else "acknowledged (this link has no baud rate to follow)"))
         for text in device.take_notes():
             self.note(f"{stream.config.format}: {text}")
+        self.served_ns = time.monotonic_ns()
         return True
