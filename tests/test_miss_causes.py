@@ -5,6 +5,8 @@ makes the next deadline late by more than a period (a sleep never returns early)
 and the kernel preempting the test is kept out of the causes by a constant context-switch count."""
 from __future__ import annotations
 
+import os
+import select
 import time
 from types import SimpleNamespace
 
@@ -43,28 +45,40 @@ class _Transport:
 
 class _Pipe:
     """The producer's pipe: blocks of BLOCK samples; the blocks listed in `late` are not there until three periods
-    after their first deadline (poll says so first, as a pipe would)."""
+    after their first deadline. Its descriptor (a real pipe's) is readable exactly when the next block is there."""
 
     def __init__(self, start_ns: int, late=()):
         self.start_ns = start_ns
         self.late = set(late)
         self.next = 0
+        self.r, self.w = os.pipe()
+        self._mark()
 
-    def poll(self, timeout=0) -> bool:
-        return self.next not in self.late
+    def _mark(self):
+        readable = bool(select.select((self.r,), (), (), 0)[0])
+        if self.next in self.late and readable:
+            os.read(self.r, 1)
+        elif self.next not in self.late and not readable:
+            os.write(self.w, b"x")
 
     def fileno(self):
-        return -1
+        return self.r
+
+    def poll(self, timeout=0) -> bool:
+        return bool(select.select((self.r,), (), (), timeout)[0])
 
     def recv(self):
         n = self.next
         self.next += 1
-        if n == BLOCKS:
-            return None
         if n in self.late:
             wake = self.start_ns + (n * BLOCK + 3) * PERIOD_NS
             time.sleep(max(0, wake - time.monotonic_ns()) / 1e9 + 1e-4)
-        return _Block(n * BLOCK)
+        self._mark()
+        return None if n == BLOCKS else _Block(n * BLOCK)
+
+    def close(self):
+        os.close(self.r)
+        os.close(self.w)
 
 
 class _Block:
@@ -86,7 +100,11 @@ def _run(monkeypatch, transport, late_blocks=()) -> LatenessStats:
     streamer = Streamer(sim, RATE, 0.0, [_stream(transport)], RunOptions(quiet=True))
     streamer.pacer = pacer = Pacer(False, PERIOD_NS, spin=False)
     start = time.monotonic_ns() + 5 * PERIOD_NS
-    streamer._send_loop(_Pipe(start, late_blocks), pacer, start)
+    pipe = _Pipe(start, late_blocks)
+    try:
+        streamer._send_loop(pipe, pacer, start)
+    finally:
+        pipe.close()
     assert streamer.samples_done == BLOCK * BLOCKS
     return streamer.stats
 

@@ -219,9 +219,9 @@ class Streamer:
         fds, ready, unwatched = inputs.fds, inputs.ready, inputs.unwatched
         try:
             while True:
-                waited = not blocks.poll(0)         # the producer's block is not there yet
                 block = inputs.next_block(blocks)
                 block_at = time.monotonic_ns()
+                waited = inputs.block_waited         # the producer's block was not there yet
                 if block is None:
                     break
                 if isinstance(block, ProducerFailure):
