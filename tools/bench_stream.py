@@ -8,7 +8,14 @@
   shared virtual machines the host takes the vCPU away now and then (seen here: every 100 ms, for
   0.2-5 ms, even from a loop that never sleeps); no pacing inside the guest can beat that floor.
 
+With --baseline PATH (another checkout, e.g. /work/main) the lateness runs become a comparison: for each rate,
+--pairs rounds of (floor, PATH's emulator, this tree's emulator), the order rotated each round, so the machine's
+load hits all three alike; per run it prints misses %, lateness p50/p99, the sender thread's CPU per second of
+streaming, and this tree's misses by cause; then the medians and the misses above the floor, this tree against
+PATH, in percentage points and as a ratio. The CPU model and the load average (start, end) are printed.
+
     python tools/bench_stream.py [--seconds 30] [--rates 1000 10000] [--drift-seconds 600]
+    python tools/bench_stream.py --baseline /work/main --rates 10000 --seconds 20 --pairs 3 --drift-seconds 0
 """
 from __future__ import annotations
 
@@ -46,14 +53,15 @@ gravity = true
 
 
 def launch(directory: Path, rate: float, seconds: float, stats: Path, fmt: str = "mavlink-highres",
-           target: str = "pty", extra: tuple = ()):
+           target: str = "pty", extra: tuple = (), repo: Path = REPO):
     """Start a stream to a pty (or a virtual SLCAN adapter's pty: target can:slcan:pty) and open the pty."""
     scene = directory / f"bench_{int(rate)}.toml"
     scene.write_text(SCENE.format(rate=rate))
     started = time.monotonic()
     proc = subprocess.Popen([sys.executable, "-m", "imu_emulator", "stream", str(scene), "--format",
                              fmt, "--to", target, "--loop", "--duration", str(seconds), "--quiet",
-                             "--stats-json", str(stats), *extra], stdout=subprocess.PIPE, cwd=REPO, text=True)
+                             "--stats-json", str(stats), *extra], stdout=subprocess.PIPE, cwd=repo, text=True)
+    # cwd: `-m` imports the package of the working directory (a --baseline checkout runs its own code)
     line = proc.stdout.readline()
     path = next(word for word in line.split("-> ")[1].split() if word.startswith("/"))
     fd = os.open(path, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
@@ -83,9 +91,9 @@ def read_until_exit(proc, fd, on_data=None):
     return first
 
 
-def lateness(directory: Path, rate: float, seconds: float) -> dict:
+def lateness(directory: Path, rate: float, seconds: float, repo: Path = REPO) -> dict:
     stats = directory / "stats.json"
-    proc, fd, _ = launch(directory, rate, seconds, stats)
+    proc, fd, _ = launch(directory, rate, seconds, stats, repo=repo)
     read_until_exit(proc, fd)
     return json.loads(stats.read_text())
 
@@ -138,17 +146,63 @@ def first_packet(directory: Path) -> float:
     return first - started
 
 
+def _load() -> str:
+    return " ".join(Path("/proc/loadavg").read_text().split()[:3])
+
+
+def _cpu_model() -> str:
+    for line in Path("/proc/cpuinfo").read_text().splitlines():
+        if line.startswith("model name"):
+            return line.split(":", 1)[1].strip()
+    return "unknown CPU"
+
+
+def compare(directory: Path, rate: float, seconds: float, pairs: int, base: Path) -> None:
+    """Floor, `base`'s emulator and this tree's, interleaved (order rotated each round); medians and ratio."""
+    kinds = ["floor", "base", "tree"]
+    runs = {k: [] for k in kinds}
+    shown = LatenessStats.shown
+    for round_ in range(pairs):
+        for kind in kinds[round_ % 3:] + kinds[:round_ % 3]:
+            if kind == "floor":
+                late, cpu = baseline(rate, seconds), None
+            else:
+                s = lateness(directory, rate, seconds, REPO if kind == "tree" else base)
+                late, cpu = s["lateness"], s.get("sender_cpu_ratio")
+            runs[kind].append(late)
+            causes = LatenessStats.causes_text(late.get("missed_by_cause", {}))
+            print(f"  round {round_ + 1} {kind:>5s}: missed {late['missed_ratio']:.4%}, p50 {shown(late['p50_us'])} us, "
+                  f"p99 {shown(late['p99_us'])} us" + ("" if cpu is None else f", sender CPU {cpu:.2f} s/s")
+                  + (f"; misses: {causes}" if causes else "") + f" (load {_load()})", flush=True)
+    median = {k: float(np.median([r["missed_ratio"] for r in runs[k]])) * 100 for k in kinds}
+    above = {k: median[k] - median["floor"] for k in ("base", "tree")}
+    print(f"{rate:>7.0f} Hz, {pairs} rounds of {seconds:g} s, median misses: floor {median['floor']:.3f} %, "
+          f"{base} {median['base']:.3f} %, this tree {median['tree']:.3f} %; above the floor: "
+          f"{base} {above['base']:+.3f} pp, this tree {above['tree']:+.3f} pp"
+          + (f" (ratio tree/base {above['tree'] / above['base']:.2f})" if above["base"] > 0 else ""), flush=True)
+    for k in kinds:
+        print(f"{'':>7s}  {k:>5s}: misses % each round "
+              + ", ".join(f"{r['missed_ratio'] * 100:.3f}" for r in runs[k]), flush=True)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=float, default=30.0, help="duration of each lateness run")
     parser.add_argument("--rates", type=float, nargs="*", default=[1000.0, 10000.0], help="rates of the lateness runs (none: skip)")
     parser.add_argument("--drift-seconds", type=float, default=600.0, help="duration of the drift run (0 = skip)")
+    parser.add_argument("--baseline", type=Path, help="another checkout to compare with, interleaved (e.g. /work/main)")
+    parser.add_argument("--pairs", type=int, default=3, help="rounds of (floor, baseline, this tree) with --baseline")
     args = parser.parse_args()
+    print(f"{_cpu_model()}, {os.cpu_count()} CPUs; load average at start {_load()}", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         directory = Path(tmp)
         first_packet(directory)   # warm the numba caches
         print(f"first packet after launch (warm cache): {first_packet(directory) * 1e3:.0f} ms")
-        for rate in args.rates:
+        if args.baseline:
+            lateness(directory, 1000, 1.0, args.baseline)     # its numba caches too
+        for rate in args.rates if args.baseline else ():
+            compare(directory, rate, args.seconds, args.pairs, args.baseline)
+        for rate in args.rates if not args.baseline else ():
             s = lateness(directory, rate, args.seconds)
             late = s["lateness"]
             shown = LatenessStats.shown      # a quantile beyond the histogram is None: "> 65536000"
@@ -162,6 +216,7 @@ def main() -> int:
             total, spread = drift(directory, args.drift_seconds)
             print(f"drift over {args.drift_seconds:g} s at 1 kHz (reader clock - sample time, last s vs first s): "
                   f"{total:+.3f} ms (p99 - p50 of arrival offset in the last s: {spread:.3f} ms)")
+    print(f"load average at end {_load()}")
     return 0
 
 

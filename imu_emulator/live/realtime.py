@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import resource
 import select
 import time
 from dataclasses import dataclass
@@ -69,6 +70,13 @@ def cpu_clock_step_ns(limit_ns: int = 50_000_000) -> int:
         if time.monotonic_ns() > give_up:
             return limit_ns
     return third - second
+
+
+def involuntary_switches() -> int:
+    """Times the kernel took the CPU from this thread for another runnable one (getrusage RUSAGE_THREAD
+    ru_nivcsw; about 0.7 us a call here). The host taking the vCPU from the whole guest does not count: the guest
+    never sees it, and such a miss is left "woke late" (see MISS_CAUSES)."""
+    return resource.getrusage(resource.RUSAGE_THREAD).ru_nivcsw
 
 
 def usable_cpus() -> int:
@@ -173,6 +181,9 @@ class Pacer:
         # When the descriptors were last looked at: at high rates the whole period may be spin and margin,
         # and the caller then polls them itself after a send (see streamer).
         self.watched_ns = 0
+        # When the sender last came to sleep_until: past the wake time, the previous sample's work (or a
+        # block's arrival) made it late before any waiting began (the miss classification reads it).
+        self.arrived_ns = 0
 
     def _normal_priority(self) -> None:
         if self.fifo and not self._normal:
@@ -190,7 +201,8 @@ class Pacer:
         Input arriving within serve_margin_ns of the wake time waits in the kernel until after the
         deadline's send, so answering never makes a sample late. select() rather than poll/epoll because its
         timeout has microsecond resolution (theirs is ms)."""
-        early = wake_ns - time.monotonic_ns()
+        now = self.arrived_ns = time.monotonic_ns()
+        early = wake_ns - now
         if early <= 0:
             return
         self._wake_priority()
@@ -256,6 +268,21 @@ class Pacer:
         return now
 
 
+# Why a deadline was missed (later than one period), as the send loop tells it apart; the first that applies is
+# counted, in this order, so the counts add up to the misses:
+MISS_CAUSES = {
+    "producer": "the producer's block was not there by the deadline",
+    "input": "input from a link was being served when the deadline passed",
+    "preempted": "preempted: the kernel ran another thread on this CPU since the previous deadline "
+                 "(involuntary context switch)",
+    "catching_up": "still behind after the previous deadline's miss",
+    "block_handover": "taking the producer's next block from the pipe (it was there: reading and unpickling it) "
+                      "ended after the deadline of its first sample",
+    "previous_work": "the previous sample's work (send, status, a block's unpickling) ended after this deadline",
+    "woke_late": "woke late with nothing above seen: the host took the vCPU, or the timer (the floor's kind)",
+}
+
+
 class LatenessStats:
     """Lateness against deadlines with bounded memory: a histogram of 1 us bins up to 65.5 ms, then of 1 ms bins up
     to 65.5 s, plus the exact maximum and a count of misses. A quantile beyond the histogram is None ("more than
@@ -274,6 +301,11 @@ class LatenessStats:
         self.count = 0
         self.max_ns = 0
         self.missed = 0       # later than one period
+        self.missed_by_cause = dict.fromkeys(MISS_CAUSES, 0)   # for senders that classify (classify)
+
+    def classify(self, cause: str) -> None:
+        """Count one miss (already counted by add) under its cause, one of MISS_CAUSES."""
+        self.missed_by_cause[cause] += 1
 
     def add(self, lateness_ns: int) -> None:
         self.count += 1
@@ -307,4 +339,10 @@ class LatenessStats:
         return {"p50_us": self.quantile_us(0.5), "p99_us": self.quantile_us(0.99),
                 "p999_us": self.quantile_us(0.999), "max_us": self.max_ns / 1000,
                 "over_us": self.OVER_US,        # a quantile of None: later than this
-                "missed": self.missed, "missed_ratio": self.missed / self.count if self.count else 0.0}
+                "missed": self.missed, "missed_ratio": self.missed / self.count if self.count else 0.0,
+                "missed_by_cause": dict(self.missed_by_cause)}
+
+    @staticmethod
+    def causes_text(by_cause: dict) -> str:
+        """The non-zero miss counts by cause, as the summary prints them ("" when none)."""
+        return ", ".join(f"{n} {cause.replace('_', ' ')}" for cause, n in by_cause.items() if n)

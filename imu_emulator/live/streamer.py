@@ -33,7 +33,8 @@ from imu_emulator.live.budget import link_budget_problem, link_text
 from imu_emulator.live.config import RunOptions, StreamConfig, StreamError, encoders_navigate
 from imu_emulator.live.inputs import Inputs
 from imu_emulator.live.producer import Producer, ProducerFailure, reap
-from imu_emulator.live.realtime import LatenessStats, Pacer, drop_realtime, enable_realtime
+from imu_emulator.live.realtime import (LatenessStats, Pacer, drop_realtime, enable_realtime,
+                                         involuntary_switches)
 from imu_emulator.live.stream import Stream, build_streams
 from imu_emulator.output.atomic import AtomicOutput
 from imu_emulator.runtime.samples import counts_text
@@ -167,6 +168,10 @@ class Streamer:
             if s.get("ignored_input"):
                 print(f"    input ignored (no device): {s['ignored_input']}", file=sys.stderr, flush=True)
             print(f"    link: {link_text(s['link'])}", file=sys.stderr, flush=True)
+        late = summary["lateness"]
+        if late["missed"]:
+            print(f"  {late['missed']} deadlines missed by more than a period: "
+                  f"{LatenessStats.causes_text(late['missed_by_cause'])}", file=sys.stderr, flush=True)
 
     def _check_budgets(self) -> None:
         if self.options.speed == 0:
@@ -193,72 +198,109 @@ class Streamer:
                 firmware_protocols.create_encoder(stream.config.format, **stream.config.options).encode(samples)
 
     def _send_loop(self, blocks, pacer: Pacer | None, start: int) -> None:
+        """Per sample at 10 kHz this loop has 100 us, of which the sleep's wake-up takes tens: what it does per
+        sample is kept to attribute reads of locals and no lists built (tools/bench_stream.py --profile shows
+        where the rest goes). Each missed deadline is counted under its cause (realtime.MISS_CAUSES)."""
         period = 1e9 / (self.rate_hz * self.options.speed) if pacer else 0.0
         streams = self.streams
-        transports = [s.transport for s in streams]
+        # (stream, transport, device) per stream: a device answers its driver and is asked for each sample's output
+        links = [(s, s.transport, s.device) for s in streams]
+        single = links[0] if len(links) == 1 else None
         # links whose other end sets the pace (a flight stack stepping in lockstep) are waited for before each sample
-        pacing = [t for t in transports if t.sets_pace]
-        devices = [s.device for s in streams]
+        pacing = [s.transport for s in streams if s.transport.sets_pace]
         inputs = Inputs(streams, self._note)
         stats = self.stats
+        classify = stats.classify
         next_status = start + _STATUS_INTERVAL_NS
         show_status = not self.options.quiet
         done = 0
-        items = None
-        while True:
-            block = inputs.next_block(blocks)
-            if block is None:
-                break
-            if isinstance(block, ProducerFailure):
-                block.raise_()
-            items = block.items
-            for i in range(len(block)):
-                j = block.j0 + i
-                if pacer:
-                    deadline = start + int(j * period)
-                    # Commands are answered while waiting; the devices encode with the configuration in
-                    # force just before the deadline, then the last stretch is spun.
-                    pacer.sleep_until(deadline - pacer.spin_ns, inputs.fds, inputs.ready)
-                    inputs.poll_unwatched()
-                elif j % _UNPACED_POLL_EVERY == 0:
-                    inputs.poll_all()
-                payloads = [p[i] if d is None else s.device_item(p, i)
-                            for s, d, p in zip(streams, devices, items)]
-                if pacer:
-                    now = pacer.wait_until(deadline)
-                    stats.add(now - deadline)
-                for transport in pacing:
-                    transport.await_turn()
-                for stream, transport, payload in zip(streams, transports, payloads):
-                    if stream.device is not None:
-                        stream.send_sample(payload)      # replies waiting for room go first
-                    elif payload is None:
-                        stream.idle += 1
-                    elif transport.send(payload):
-                        stream.sent += 1
+        missed_before = False       # the previous deadline was missed (a miss now is catching up)
+        switches = involuntary_switches()
+        if pacer:
+            spin_ns, sleep_until, wait_until = pacer.spin_ns, pacer.sleep_until, pacer.wait_until
+        fds, ready, unwatched = inputs.fds, inputs.ready, inputs.unwatched
+        try:
+            while True:
+                block = inputs.next_block(blocks)
+                block_at = time.monotonic_ns()
+                waited = inputs.block_waited         # the producer's block was not there yet
+                if block is None:
+                    break
+                if isinstance(block, ProducerFailure):
+                    block.raise_()
+                items = block.items
+                j0 = block.j0
+                for i in range(len(block)):
+                    j = j0 + i
+                    if pacer:
+                        deadline = start + int(j * period)
+                        # Commands are answered while waiting; the devices encode with the configuration in
+                        # force just before the deadline, then the last stretch is spun.
+                        sleep_until(deadline - spin_ns, fds, ready)
+                        if unwatched:
+                            inputs.poll_unwatched()
+                    elif j % _UNPACED_POLL_EVERY == 0:
+                        inputs.poll_all()
+                    if single is not None:
+                        stream, transport, device = single
+                        payload = items[0][i] if device is None else stream.device_item(items[0], i)
                     else:
-                        stream.dropped += 1
-                if pacer and inputs.fds and deadline - pacer.watched_ns > _INPUT_STARVED_NS:
-                    # No slack left to watch the links while waiting (high rates): look right after the send.
-                    inputs.poll_all()
-                    pacer.watched_ns = deadline
-                done += 1
+                        payloads = [p[i] if d is None else s.device_item(p, i) for (s, _, d), p in zip(links, items)]
+                    if pacer:
+                        now = wait_until(deadline)
+                        late = now - deadline
+                        stats.add(late)
+                        seen = involuntary_switches()
+                        if late > period:
+                            classify(miss_cause(i == 0 and waited and block_at > deadline, inputs.served_ns > deadline,
+                                                seen != switches, missed_before, pacer.arrived_ns > deadline,
+                                                i == 0 and block_at > deadline))
+                            missed_before = True
+                        else:
+                            missed_before = False
+                        switches = seen
+                    for transport in pacing:
+                        transport.await_turn()
+                    if single is not None:
+                        self._send(stream, transport, device, payload)
+                    else:
+                        for (stream, transport, device), payload in zip(links, payloads):
+                            self._send(stream, transport, device, payload)
+                    if pacer and fds and deadline - pacer.watched_ns > _INPUT_STARVED_NS:
+                        # No slack left to watch the links while waiting (high rates): look right after the send.
+                        inputs.poll_all()
+                        pacer.watched_ns = deadline
+                    done += 1
+                    if done == 1:
+                        self._first_ns = time.monotonic_ns()
+                    if not pacer or j % 64 == 0:
+                        now = time.monotonic_ns()
+                        if now >= next_status:
+                            self.samples_done = done
+                            next_status = now + _STATUS_INTERVAL_NS
+                            for stream in streams:
+                                stream.sample_queue()
+                            if show_status:
+                                text, end = status_line(self._status_text("streaming"), sys.stderr.isatty())
+                                print(text, end=end, file=sys.stderr, flush=True)
+                for stream, saturated in zip(streams, block.saturated):
+                    stream.saturated = saturated if stream.device is None else stream.device.saturated
+                self.effect_counts = block.counts
                 self.samples_done = done
-                if done == 1:
-                    self._first_ns = time.monotonic_ns()
-                if not pacer or j % 64 == 0:
-                    now = time.monotonic_ns()
-                    if now >= next_status:
-                        next_status = now + _STATUS_INTERVAL_NS
-                        for stream in streams:
-                            stream.sample_queue()
-                        if show_status:
-                            text, end = status_line(self._status_text("streaming"), sys.stderr.isatty())
-                            print(text, end=end, file=sys.stderr, flush=True)
-            for stream, saturated in zip(streams, block.saturated):
-                stream.saturated = saturated if stream.device is None else stream.device.saturated
-            self.effect_counts = block.counts
-            self._last_ns = time.monotonic_ns()
+                self._last_ns = time.monotonic_ns()
+        finally:
+            self.samples_done = done
+
+    @staticmethod
+    def _send(stream, transport, device, payload) -> None:
+        if device is not None:
+            stream.send_sample(payload)      # replies waiting for room go first
+        elif payload is None:
+            stream.idle += 1
+        elif transport.send(payload):
+            stream.sent += 1
+        else:
+            stream.dropped += 1
 
     # - reporting -
     def _note(self, text: str) -> None:
@@ -286,6 +328,28 @@ class Streamer:
         return (f"{state}: {s['samples']} samples, {s['achieved_hz']:.1f} Hz, late p50 {shown(late['p50_us'])} us "
                 f"p99 {shown(late['p99_us'])} us max {late['max_us']:.0f} us, dropped {s['dropped']}, "
                 f"saturated {s['saturated']}" + (f"; {counts_text(self.effect_counts)}" if self.effect_counts else ""))
+
+
+def miss_cause(block_late: bool, serving: bool, preempted: bool, missed_before: bool, arrived_late: bool,
+               handover_late: bool = False) -> str:
+    """Why a deadline was missed: the first of realtime.MISS_CAUSES that applies. block_late: the producer's block
+    came after the deadline; serving: input was served past it; preempted: involuntary context switches since the
+    previous deadline; missed_before: the previous deadline was missed too; arrived_late: the loop came to wait
+    for this deadline after it had passed; handover_late: this deadline, a block's first, passed while the block
+    was taken from the pipe."""
+    if block_late:
+        return "producer"
+    if serving:
+        return "input"
+    if preempted:
+        return "preempted"
+    if missed_before:
+        return "catching_up"
+    if handover_late:
+        return "block_handover"
+    if arrived_late:
+        return "previous_work"
+    return "woke_late"
 
 
 def status_line(text: str, tty: bool) -> tuple[str, str]:
