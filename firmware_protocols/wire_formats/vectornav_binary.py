@@ -28,8 +28,9 @@ What the encoder can fill, wire units, and the Samples field each comes from:
                                     previous sample), delta_theta (required: no rate x dt stand-in)
     IMU.DeltaVel    3 x f32 m/s     delta_velocity (required)
     Common.DeltaTheta  IMU.DeltaTheta + IMU.DeltaVel
-    TimeGps         u64 ns          time_ns + gps_week_offset weeks (GPS time); Time.GpsTow u64 ns and
-                                    Time/GPS Week u16 split it
+    TimeGps         u64 ns          GPS time of time_ns (UTC Unix ns + 18 leap seconds - the GPS epoch,
+                                    firmware_protocols.gnss_time); Time.GpsTow u64 ns and Time/GPS Week u16
+                                    split it; before 1980-01-06 they clip to 0 (counted)
     TimeUtc, GPS Utc  i8 year-2000, u8 month, day, hour, minute, second, u16 ms: GPS time - 18 leap seconds
     TimeGpsPps,     u64 ns          ns since the last PPS edge, on whole GPS seconds; the SyncIn pin is taken as
     TimeSyncIn                      wired to the PPS, so TimeSyncIn is the same and
@@ -78,7 +79,7 @@ import numpy as np
 from firmware_protocols.base import (DecoderStats, EncodeError, Packet, SaturationStats, Samples,
                                      SerialBatch, integration_intervals)
 from firmware_protocols.crc import crc16_ccitt, crc16_ccitt_bytes
-from firmware_protocols.gnss_time import GNSS_DEFAULTS, dops
+from firmware_protocols.gnss_time import GNSS_DEFAULTS, GPS_WEEK_OFFSET_RETIRED, dops, gps_offset_ns
 from firmware_protocols import vectornav_quantities
 from firmware_protocols.registry import FormatInfo, register
 from firmware_protocols.vectornav_common import DEG, SAMPLE_DEFAULTS
@@ -226,7 +227,7 @@ def _q(source, n=3, order=None, scale=1.0, label="", wire="f", time=""):
 
 
 _TIME = (_q("time_ns", 1, wire="Q", time="startup"),)
-# GPS time: time_ns + gps_week_offset weeks, as u64 ns since the GPS epoch (ArduPilot divides it into week
+# GPS time of time_ns (firmware_protocols.gnss_time), as u64 ns since the GPS epoch (ArduPilot divides it into week
 # and time of week), the same split as u64 ns into the week and u16 week.
 _GPS_TIME = (_q("time_ns", 1, wire="Q", time="gps"),)
 _GPS_TOW = (_q("time_ns", 1, wire="Q", time="tow"),)
@@ -469,11 +470,10 @@ def _pack(out, size, header, items, scales, time_ns, accel, gyro, mag, quat, eul
                     t = 0
                     sat[j] += 1
                 if kind != 1:
-                    if t > 9223372036854775807 - gps_offset_ns:
-                        t = 9223372036854775807
+                    t += gps_offset_ns      # <= 0: GPS time from Unix time; before the GPS epoch clips to 0
+                    if t < 0:
+                        t = 0
                         sat[j] += 1
-                    else:
-                        t += gps_offset_ns
                 if kind == 6:
                     week = t // 604800000000000
                     if week > 65535:
@@ -583,20 +583,19 @@ class BinaryEncoder:
     axes_source = "VN-100 User Manual UM001 4.4.3-4.4.5: body frame w.r.t. NED (so x fwd, y right, z down)"
 
 
-    def __init__(self, fields=None, sample_period_s: float | None = None, gps_week_offset: int = 0,
+    def __init__(self, fields=None, sample_period_s: float | None = None, gps_week_offset=None,
                  constants: dict | None = None):
-        """`gps_week_offset`: GPS weeks added to time_ns for the GPS time fields (time_ns counts from the start
-        of week 0 otherwise). `constants`: values for the quantities no Samples field carries (GNSS_CONSTANTS,
-        the INS uncertainties and status), replacing the documented defaults."""
+        """`constants`: values for the quantities no Samples field carries (GNSS_CONSTANTS, the INS uncertainties
+        and status), replacing the documented defaults. `gps_week_offset` is retired (a one-line error naming
+        --start-time): GPS time follows time_ns, UTC since the Unix epoch (firmware_protocols.gnss_time)."""
         self.layout = parse_fields(fields)
         if sample_period_s is not None and not (np.isfinite(sample_period_s) and sample_period_s > 0):
             raise ValueError(f"sample_period_s must be a positive number, got {sample_period_s}")
         self.sample_period_s = sample_period_s
         self._last_time_ns = None
-        if isinstance(gps_week_offset, bool) or not isinstance(gps_week_offset, (int, np.integer)) \
-                or not 0 <= gps_week_offset <= MAX_GPS_WEEK:
-            raise ValueError(f"gps_week_offset: a GPS week 0..{MAX_GPS_WEEK}, got {gps_week_offset!r}")
-        self.gps_offset_ns = int(gps_week_offset) * WEEK_NS
+        if gps_week_offset is not None:
+            raise ValueError(GPS_WEEK_OFFSET_RETIRED)
+        self.gps_offset_ns = gps_offset_ns(vectornav_quantities.LEAP_SECONDS)    # GPS time - time_ns (negative)
         undecodable = [f.key for f in self.layout.fields if not f.quantities]
         if undecodable:
             raise ValueError(f"VectorNav fields: the emulator has no data for {', '.join(undecodable)}")
@@ -785,7 +784,7 @@ register(FormatInfo(
                        f"(default {DEFAULT_FIELDS!r}, PX4's binary output 1)",
              "sample_period_s": "DeltaTheta's dtime in s, > 0, when the samples carry none (None: time since the "
                                 "previous sample)",
-             "gps_week_offset": f"GPS week added to time_ns for the GPS time fields, 0..{MAX_GPS_WEEK}",
+             "gps_week_offset": "retired: GPS time follows --start-time (UTC) + scene time",
              "constants": "values for quantities no sample carries: " + ", ".join(_SETTABLE)
                           + " (e.g. {gnss_num_sats = 9})"},
 ))
