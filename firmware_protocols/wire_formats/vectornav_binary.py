@@ -13,7 +13,8 @@ bit 13 DOP 28), the layout ArduPilot's VN-300 GNSS packet assumes; older librari
 
 What the encoder can fill, wire units, and the Samples field each comes from:
 
-    TimeStartup     u64 ns          time_ns (negative times saturate to 0, counted)
+    TimeStartup     u64 ns          time_ns - start_ns: since the run's start (the unit's power-up; negative
+                                    times saturate to 0, counted)
     YawPitchRoll    3 x f32 deg     euler, reordered yaw, pitch, roll         default 0, 0, 0
     Quaternion      4 x f32         quat, reordered x, y, z, w (scalar LAST)  default identity
     AngularRate,
@@ -34,7 +35,7 @@ What the encoder can fill, wire units, and the Samples field each comes from:
     TimeUtc, GPS Utc  i8 year-2000, u8 month, day, hour, minute, second, u16 ms: GPS time - 18 leap seconds
     TimeGpsPps,     u64 ns          ns since the last PPS edge, on whole GPS seconds; the SyncIn pin is taken as
     TimeSyncIn                      wired to the PPS, so TimeSyncIn is the same and
-    SyncInCnt       u32             counts the edges since start-up (whole seconds of time_ns); SyncOutCnt 0
+    SyncInCnt       u32             counts the edges since start-up (whole seconds of TimeStartup); SyncOutCnt 0
     TimeStatus, GPS TimeInfo  u8 7 (time of week, week, UTC valid; 0 without any fix) [+ i8 leap seconds 18]
     Common.Position = INS.PosLla  3 x f64 deg, deg, m    position_llh (the INS estimate)   default PX4's home
     Common.Velocity = INS.VelNed  3 x f32 m/s            velocity_ned                     default 0
@@ -190,7 +191,7 @@ def _derived():
         "gnss_time_info": lambda s, e: np.column_stack(
             (vq.time_valid(s, fix_default(e)), np.full(len(s), float(vectornav_quantities.LEAP_SECONDS)))),
         "since_pps": lambda s, e: vq.since_pps(s.time_ns, e.gps_offset_ns),
-        "sync_in_count": lambda s, e: vq.sync_in_count(s.time_ns),
+        "sync_in_count": lambda s, e: vq.sync_in_count(s.time_ns - s.start_ns),
     }
 
 
@@ -445,7 +446,7 @@ def parse_fields(fields) -> Layout:
 
 @jit(cache=True, nogil=True)
 def _pack(out, size, header, items, scales, time_ns, accel, gyro, mag, quat, euler, temp, pres, extra, steps, sat,
-          gps_offset_ns):
+          gps_offset_ns, startup_ns):
     """Write len(time_ns) packets of `size` bytes into `out`. items[j] = (source id, column, wire type
     0 f32 / 1 u64 time / 2 f64 / 3 u16 / 4 u8 / 5 u64 GPS time of week / 6 u16 GPS week / 7 u64 GPS time /
     8 u32 / 9 u64 / 10 i8, the last three from a value) in wire order. Returns the first sample with a
@@ -465,15 +466,11 @@ def _pack(out, size, header, items, scales, time_ns, accel, gyro, mag, quat, eul
             src = items[j, 0]
             kind = items[j, 2]
             if kind == 1 or 5 <= kind <= 7:
-                t = time_ns[i]
+                # TimeStartup counts since the run's start; the GPS times are UTC Unix time + gps_offset_ns (< 0)
+                t = time_ns[i] - startup_ns if kind == 1 else time_ns[i] + gps_offset_ns
                 if t < 0:
                     t = 0
                     sat[j] += 1
-                if kind != 1:
-                    t += gps_offset_ns      # <= 0: GPS time from Unix time; before the GPS epoch clips to 0
-                    if t < 0:
-                        t = 0
-                        sat[j] += 1
                 if kind == 6:
                     week = t // 604800000000000
                     if week > 65535:
@@ -666,7 +663,7 @@ class BinaryEncoder:
         arrays, steps = self._columns(samples)
         sat = np.zeros(len(self._items), dtype=np.int64)
         bad = _pack(out, size, self._header, self._items, self._scales, samples.time_ns, *arrays, steps, sat,
-                    self.gps_offset_ns)
+                    self.gps_offset_ns, samples.start_ns)
         if bad >= 0:
             samples.require_finite(self._sources)     # names field and sample
             raise EncodeError(f"non-finite value at sample {bad}")
