@@ -244,7 +244,7 @@ def test_hangup_closes_like_sigterm_link_removed_summary_shown(tmp_path, sig):
 
 
 def _first_time_s(fd, seconds=1.0) -> float:
-    messages, bad = mavlink_parse(read_for(fd, seconds))
+    messages, bad = mavlink_parse(read_for(fd, seconds), types=("HIL_GPS",))
     assert messages and not bad
     return messages[0].time_usec * 1e-6
 
