@@ -142,6 +142,20 @@ def test_dronecan_fix2_is_utc_with_its_leap_seconds(block):
         assert divmod(gps_ms, 7 * 86_400_000) == (week, tow // 1_000_000)
 
 
+def test_dronecan_imu_and_sitl_json_count_since_the_start(block):
+    """uavcan.Timestamp of RawIMU (the node's own clock: no time sync) and SIM_JSON's physics time count from the
+    run's start, read by pydronecan and json."""
+    import json
+
+    from firmware_protocols.wire_formats.ardupilot_json import ArduPilotJsonEncoder
+    from firmware_protocols.wire_formats.dronecan import RawImuEncoder
+    from test_dronecan_sensors import transfers
+    raw = [t.payload.timestamp.usec for _, t in transfers(RawImuEncoder(sample_period_s=0.01).encode(block))]
+    assert raw == SCENE_US
+    lines = bytes(ArduPilotJsonEncoder().encode(block).data).split(b"\n")
+    assert [json.loads(line)["timestamp"] for line in lines if line] == [us / 1e6 for us in SCENE_US]
+
+
 def test_gps_week_offset_is_retired_in_one_line():
     from firmware_protocols.devices.vectornav import VectorNavDevice
     from firmware_protocols.wire_formats.vectornav_binary import BinaryEncoder
