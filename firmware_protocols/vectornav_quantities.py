@@ -8,9 +8,10 @@ samples lack what it needs, so the encoder falls back to its documented default 
 
 Frames (VectorNav ICD, as the wire format states): vectors in the part's body axes forward-right-down; quat
 rotates body -> NED (Samples' own convention, so nothing converts); ECEF from WGS-84 geodetic position in closed
-form. Times: time_ns is UTC Unix ns (firmware_protocols.gnss_time's rule), GPS time = time_ns + 18 leap seconds
-- the GPS epoch (gnss_time.gps_offset_ns), UTC fields = GPS time - leap seconds, the receiver's PPS edges and the SyncIn input on whole GPS
-seconds (the SyncIn pin modelled as wired to the receiver's PPS, the usual installation).
+form. Times: time_ns is UTC Unix ns (firmware_protocols.gnss_time's rule), GPS time = time_ns + 18 leap
+seconds - the GPS epoch (gnss_time.gps_offset_ns), UTC fields = GPS time - leap seconds, the receiver's PPS
+edges and the SyncIn input on whole GPS seconds (the SyncIn pin modelled as wired to the receiver's PPS, the usual
+installation).
 """
 from __future__ import annotations
 
@@ -126,9 +127,6 @@ def rotate(quat: np.ndarray, vectors: np.ndarray, inverse: bool = False) -> np.n
     out = np.empty_like(vectors)
     _rotate(_rows(quat, 4), vectors, bool(inverse), out)
     return out
-
-
-INT64_MAX = np.iinfo(np.int64).max
 
 
 def gps_time_ns(time_ns: np.ndarray, gps_offset_ns: int) -> np.ndarray:

@@ -38,9 +38,10 @@ from one counter, so outputs with related divisors fall on the same samples as o
 ROS 1 / ROS 2 nodes and ArduPilot / PX4 ask for is produced (wire_formats.vectornav_binary lists what each
 carries); the ones the emulator has no data for (Attitude Dcm, IMU Raw) are error 7, never a packet with
 invented layout. The GPS groups (VN-200/300) carry the GNSS receiver's solution (Samples.gnss_*, else the INS
-estimate and the configured satellite count, fix and uncertainties), GPS time = the sample time (UTC Unix ns: the run's
-`--start-time` + scene time) + leap seconds, firmware_protocols.gnss_time: ArduPilot's VN-300 sequence (`$VNWRG,77,3,80,49,0003,26B8,0018`) gets its GNSS packet. A VN-200/300 also
-has the GNSS registers the ROS 2 node reads after configuring: 55 GNSS configuration (5 integers), 57 antenna
+estimate and the configured satellite count, fix and uncertainties), GPS time = the sample time (UTC Unix ns:
+the run's `--start-time` + scene time) + leap seconds, firmware_protocols.gnss_time: ArduPilot's VN-300
+sequence (`$VNWRG,77,3,80,49,0003,26B8,0018`) gets its GNSS packet. A VN-200/300 also has the GNSS registers the ROS 2
+node reads after configuring: 55 GNSS configuration (5 integers), 57 antenna
 offset (3 reals) and, on a VN-300, 93 compass baseline (6 reals), stored and read back (a VN-1xx answers 8).
 
 Errors (`$VNERR,<2 digits>`): 03 bad checksum (or none), 04 unknown command, 05 / 06 too few / too many

@@ -16,9 +16,10 @@ HIL_GPS (113)       time_usec u64: the solution's time of validity in UTC Unix u
 GPS_RAW_INT (24)    time_usec, lat, lon, alt, vel, cog, fix_type, satellites_visible as HIL_GPS; eph, epv u16:
                     HDOP, VDOP x 100 (common.xml); alt_ellipsoid i32 mm; h_acc, v_acc u32 mm; vel_acc u32
                     mm/s; hdg_acc u32 0 and yaw u16 0 (no heading from a single antenna)
-SCALED_PRESSURE     time_boot_ms u32: since the run's start, ((time_ns - start_ns) // 1e6) mod 2^32; press_abs f32 hPa; press_diff f32 hPa (0 when absent); temperature
-(29)                i16 cdegC; temperature_press_diff i16 cdegC, the sensor head's temperature when a
-                    differential pressure is given, else 0 ("not available"; a reading of 0 goes out as 1)
+SCALED_PRESSURE     time_boot_ms u32: since the run's start, ((time_ns - start_ns) // 1e6) mod 2^32;
+(29)                press_abs f32 hPa; press_diff f32 hPa (0 when absent); temperature i16 cdegC;
+                    temperature_press_diff i16 cdegC, the sensor head's temperature when a differential
+                    pressure is given, else 0 ("not available"; a reading of 0 goes out as 1)
 ATTITUDE (30)       time_boot_ms; roll, pitch, yaw f32 rad (Samples.euler, else z-y-x angles of quat);
                     rollspeed, pitchspeed, yawspeed f32 rad/s: the body rates (Samples.gyro)
 ATTITUDE_QUATERNION time_boot_ms; q1..q4 f32 = w, x, y, z of quat; the three body rates;

@@ -26,8 +26,9 @@ src/mip/definitions/data_sensor.h):
   so the caller gives sensor->NED attitude in `quat`; nothing is converted here.
 - GPS timestamp: GPS time of time_ns (UTC Unix ns, the run's --start-time + scene time) + 18 leap seconds -
   the GPS epoch (firmware_protocols.gnss_time); week = GPS time // 1 week (no 1024-week rollover), time of
-  week = the remainder in seconds; the decoder gives time_ns back as UTC Unix ns. Flags (data_sensor.h): 0x01 PPS valid, 0x02 time refreshed (toggles),
-  0x04 time initialized, 0x08 time of week valid, 0x10 week number valid; default 0x1C (no PPS line
+  week = the remainder in seconds; the decoder gives time_ns back as UTC Unix ns. Flags (data_sensor.h): 0x01
+  PPS valid, 0x02 time refreshed (toggles), 0x04 time initialized, 0x08 time of week valid, 0x10 week number valid;
+  default 0x1C (no PPS line
   exists in an emulator). Weeks outside u16 saturate (counted).
 Values beyond float32 range saturate to +-3.4e38 and are counted in `encoder.saturated`.
 

@@ -113,9 +113,6 @@ _WIRE_CODE = {"f": 0, "Q": 1, "d": 2, "H": 3, "B": 4}
 # Integers made from a value (extras): u32, u64 (exact below 2^53), i8.
 _VALUE_CODE = {"f": 0, "d": 2, "H": 3, "B": 4, "I": 8, "Q": 9, "b": 10}
 _TIME_CODE = {"startup": 1, "gps": 7, "tow": 5, "week": 6}
-WEEK_NS = 7 * 86400 * 1_000_000_000
-#: the last GPS week whose start fits the int64 nanoseconds the GPS time is computed in (year 2272)
-MAX_GPS_WEEK = (2**63 - 1) // WEEK_NS
 
 
 # Documented defaults for the navigation and status quantities (one row, broadcast), after those of Samples.
