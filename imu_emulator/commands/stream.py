@@ -40,8 +40,8 @@ def register(subparsers) -> None:
                    help="time factor; 0 = as fast as the link takes")
     p.add_argument("--loop", action="store_true", help="repeat the scene; time keeps increasing")
     p.add_argument("--start-time", type=start_time, metavar="ISO8601|now", default=None,
-                   help="the UTC instant of scene time 0 on the wire: GNSS/UTC fields and every time stamp are it + "
-                        "scene time (\"2026-03-01T12:00:00Z\"; no zone is UTC; \"now\" = the first sample is the "
+                   help="the UTC instant of scene time 0: GNSS/UTC fields are it + scene time, fields counting "
+                        "since power-up count from it (\"2026-03-01T12:00:00Z\"; no zone is UTC; \"now\" = the first sample is the "
                         "wall clock; default 2024-01-01T00:00:00Z, as generate)")
     p.add_argument("--epoch-time", action="store_true", help=argparse.SUPPRESS)    # deprecated: --start-time now
     p.add_argument("--duration", type=number(1e-9, _MAX_DURATION_S), metavar="SECONDS",
