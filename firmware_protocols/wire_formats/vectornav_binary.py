@@ -463,11 +463,15 @@ def _pack(out, size, header, items, scales, time_ns, accel, gyro, mag, quat, eul
             src = items[j, 0]
             kind = items[j, 2]
             if kind == 1 or 5 <= kind <= 7:
-                # TimeStartup counts since the run's start; the GPS times are UTC Unix time + gps_offset_ns (< 0)
-                t = time_ns[i] - startup_ns if kind == 1 else time_ns[i] + gps_offset_ns
-                if t < 0:
+                # TimeStartup counts since the run's start; the GPS times are UTC Unix time + gps_offset_ns (< 0).
+                # `zero` is the time_ns that goes out as 0; earlier ones clip to it (compared first: no overflow)
+                t = time_ns[i]
+                zero = startup_ns if kind == 1 else -gps_offset_ns
+                if t < zero:
                     t = 0
                     sat[j] += 1
+                else:
+                    t -= zero
                 if kind == 6:
                     week = t // 604800000000000
                     if week > 65535:
