@@ -21,7 +21,10 @@ class EncodeError(ValueError):
 class Samples:
     """A block of n IMU samples in SI units, sensor frame.
 
-    time_ns:        (n,) int64, nanoseconds on the caller's time base (since start, or Unix epoch)
+    time_ns:        (n,) int64, UTC nanoseconds since the Unix epoch: the run's start (`--start-time`) + scene time.
+                    GNSS/UTC fields derive from it through firmware_protocols.gnss_time (GPS = UTC + leap s).
+    start_ns:       int, the run's start on time_ns's base (default 0). Formats whose wire time counts since the
+                    unit's start (MAVLink IMU time_usec / time_boot_ms) send time_ns - start_ns; each says which.
     accel:          (n, 3) specific force, m/s^2
     gyro:           (n, 3) angular rate, rad/s
     mag:            (n, 3) magnetic field, gauss                    (optional)
@@ -93,6 +96,7 @@ class Samples:
     gnss_speed_accuracy_mps: np.ndarray | None = None
     gnss_new: np.ndarray | None = None
     gnss_age_s: np.ndarray | None = None
+    start_ns: int = 0
 
     def __post_init__(self):
         self.time_ns = np.ascontiguousarray(self.time_ns, dtype=np.int64).reshape(-1)
@@ -118,7 +122,7 @@ class Samples:
     def slice(self, start: int, stop: int) -> "Samples":
         kw = {name: (None if getattr(self, name) is None else getattr(self, name)[start:stop])
               for name in _FIELD_WIDTHS}
-        return Samples(self.time_ns[start:stop], **kw)
+        return Samples(self.time_ns[start:stop], **kw, start_ns=self.start_ns)
 
     def field_or(self, name: str, default) -> np.ndarray:
         """The named field, or `default` broadcast to the block's shape."""

@@ -1,9 +1,12 @@
 """What GNSS-carrying formats report besides position and velocity: UTC and GPS time from the sample time,
 receiver quality figures, and the records built from them (Xsens UtcTime and GnssPvtData).
 
-Time: time_ns is read as Unix-epoch nanoseconds (UTC; `stream --epoch-time` makes it the wall clock, otherwise
-it counts from 1970-01-01 00:00:00). GPS time = UTC + leap seconds (18 since 2017-01-01, the `leap_seconds`
-setting) - 315 964 800 s (the GPS epoch, 1980-01-06, in Unix time).
+Time, the one rule of every wire format and file: Samples.time_ns is UTC nanoseconds since the Unix epoch, the
+run's start (`generate`/`stream --start-time ISO8601|now`, default 2024-01-01T00:00:00Z,
+imu_emulator.output.ros2.conventions.DEFAULT_START) plus the scene time. Every format derives GPS time, GPS
+week / time of week, UTC calendar fields and leap seconds from it here: GPS time = UTC + leap seconds (18 since
+2017-01-01, the `leap_seconds` setting) - 315 964 800 s (the GPS epoch, 1980-01-06, in Unix time). Leap seconds
+are one constant for the run (no table: a run crossing a leap second is off by it from then on).
 
 Quality: a healthy receiver under open sky by default (GNSS_DEFAULTS); DOPs follow from their north, east,
 vertical and time parts (h^2 = n^2 + e^2, p^2 = h^2 + v^2, g^2 = p^2 + t^2), so a reader that checks their
@@ -17,6 +20,10 @@ import numpy as np
 
 GPS_EPOCH_UNIX_S = 315_964_800
 WEEK_MS = 7 * 86_400_000
+WEEK_NS = WEEK_MS * 1_000_000
+#: The one-line answer to an encoder or device option that used to shift GPS time by whole weeks.
+GPS_WEEK_OFFSET_RETIRED = ("gps_week_offset: retired; GPS time now follows the run's start: "
+                           "--start-time ISO8601|now (UTC) plus the scene time")
 GNSS_DEFAULTS = {
     "leap_seconds": 18,
     "num_sats": 12,
@@ -50,6 +57,22 @@ def gnss_settings(overrides: dict | None) -> dict:
     return settings
 
 
+def gps_offset_ns(leap_seconds: int = GNSS_DEFAULTS["leap_seconds"]) -> int:
+    """GPS time - time_ns, ns: leap seconds - the GPS epoch's Unix time (negative: GPS time counts from 1980)."""
+    return (int(leap_seconds) - GPS_EPOCH_UNIX_S) * 1_000_000_000
+
+
+def gps_ns(time_ns, leap_seconds: int = GNSS_DEFAULTS["leap_seconds"]) -> np.ndarray:
+    """GPS time in ns since the GPS epoch (1980-01-06 00:00:00 GPS) of Unix-epoch UTC nanoseconds."""
+    return np.asarray(time_ns, dtype=np.int64) + np.int64(gps_offset_ns(leap_seconds))
+
+
+def gps_week_tow_ns(time_ns, leap_seconds: int = GNSS_DEFAULTS["leap_seconds"]) -> tuple:
+    """(GPS week, ns into the week) of Unix-epoch UTC nanoseconds; weeks count from 1980-01-06 without the
+    1024-week rollover."""
+    return np.divmod(gps_ns(time_ns, leap_seconds), np.int64(WEEK_NS))
+
+
 def _calendar(time_ns: np.ndarray) -> tuple:
     """UTC calendar fields of Unix-epoch nanoseconds: year, month, day, hour, minute, second, nanosecond."""
     t = np.asarray(time_ns, dtype=np.int64)
@@ -78,9 +101,7 @@ def gnss_pvt_rows(time_ns: np.ndarray, position_llh: np.ndarray, velocity_ned: n
     """(n, 35) Xsens GnssPvtData in wire units (see firmware_protocols.wire_formats.xsens for the layout)."""
     n = len(time_ns)
     year, month, day, hour, minute, second, nano = _calendar(time_ns)
-    gps_ms = (np.asarray(time_ns, dtype=np.int64) // 1_000_000
-              + (settings["leap_seconds"] - GPS_EPOCH_UNIX_S) * 1000)
-    itow = gps_ms % WEEK_MS
+    itow = gps_week_tow_ns(time_ns, settings["leap_seconds"])[1] // 1_000_000
     lat, lon, height = position_llh[:, 0], position_llh[:, 1], position_llh[:, 2]
     vn, ve, vd = velocity_ned[:, 0], velocity_ned[:, 1], velocity_ned[:, 2]
     heading = np.degrees(np.arctan2(ve, vn)) % 360.0

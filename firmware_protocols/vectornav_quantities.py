@@ -8,9 +8,10 @@ samples lack what it needs, so the encoder falls back to its documented default 
 
 Frames (VectorNav ICD, as the wire format states): vectors in the part's body axes forward-right-down; quat
 rotates body -> NED (Samples' own convention, so nothing converts); ECEF from WGS-84 geodetic position in closed
-form. Times: GPS time = time_ns + the GPS week offset (vectornav_binary's convention), UTC = GPS time - leap
-seconds (firmware_protocols.gnss_time's 18 s), the receiver's PPS edges and the SyncIn input on whole GPS
-seconds (the SyncIn pin modelled as wired to the receiver's PPS, the usual installation).
+form. Times: time_ns is UTC Unix ns (firmware_protocols.gnss_time's rule), GPS time = time_ns + 18 leap
+seconds - the GPS epoch (gnss_time.gps_offset_ns), UTC fields = GPS time - leap seconds, the receiver's PPS
+edges and the SyncIn input on whole GPS seconds (the SyncIn pin modelled as wired to the receiver's PPS, the usual
+installation).
 """
 from __future__ import annotations
 
@@ -128,22 +129,17 @@ def rotate(quat: np.ndarray, vectors: np.ndarray, inverse: bool = False) -> np.n
     return out
 
 
-INT64_MAX = np.iinfo(np.int64).max
-
-
 def gps_time_ns(time_ns: np.ndarray, gps_offset_ns: int) -> np.ndarray:
-    """time_ns (negative: 0) + the GPS week offset, held at the int64 limit as the packing kernel's GPS time is
-    (the wire fields built from it then saturate, counted, instead of wrapping)."""
+    """GPS time of time_ns (UTC Unix ns; negative: 0) + `gps_offset_ns` (gnss_time.gps_offset_ns, <= 0), before the
+    GPS epoch 0, as the packing kernel's GPS time is (the wire fields built from it then saturate, counted)."""
     t = np.maximum(np.asarray(time_ns, dtype=np.int64), 0)
-    if gps_offset_ns >= INT64_MAX:
-        return np.full_like(t, INT64_MAX)
-    return np.minimum(t, INT64_MAX - gps_offset_ns) + np.int64(gps_offset_ns)
+    return np.maximum(t + np.int64(gps_offset_ns), 0)
 
 
 def utc_fields(time_ns: np.ndarray, gps_offset_ns: int) -> np.ndarray:
     """(n, 7) VectorNav TimeUtc: year - 2000 (int8), month, day, hour, minute, second, millisecond."""
     shift = (GPS_EPOCH_UNIX_S - LEAP_SECONDS) * SECOND_NS
-    unix_ns = np.minimum(gps_time_ns(time_ns, gps_offset_ns), INT64_MAX - shift) + shift
+    unix_ns = gps_time_ns(time_ns, gps_offset_ns) + np.int64(shift)
     out = np.empty((len(unix_ns), 7))
     _utc(np.ascontiguousarray(unix_ns), out)
     return out
@@ -156,7 +152,7 @@ def since_pps(time_ns: np.ndarray, gps_offset_ns: int) -> np.ndarray:
 
 def sync_in_count(time_ns: np.ndarray) -> np.ndarray:
     """(n, 1) SyncIn edges since start-up: the whole seconds elapsed on the sample clock (u32 on the wire;
-    the PPS edges fall on whole seconds of time_ns too, since the GPS offset is whole weeks)."""
+    the PPS edges fall on whole seconds of time_ns too, since GPS - UTC is whole seconds)."""
     return (np.maximum(np.asarray(time_ns, dtype=np.int64), 0) // SECOND_NS).astype(np.float64).reshape(-1, 1)
 
 

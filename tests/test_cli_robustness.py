@@ -244,18 +244,18 @@ def test_hangup_closes_like_sigterm_link_removed_summary_shown(tmp_path, sig):
 
 
 def _first_time_s(fd, seconds=1.0) -> float:
-    messages, bad = mavlink_parse(read_for(fd, seconds))
+    messages, bad = mavlink_parse(read_for(fd, seconds), types=("HIL_GPS",))
     assert messages and not bad
     return messages[0].time_usec * 1e-6
 
 
 def test_reader_that_opens_late_or_reopens_gets_fresh_packets(tmp_path):
-    # With --epoch-time a packet's time stamp is the wall clock at its deadline. Held back in the pty, the
-    # first packet a late reader gets would be up to a buffer (16 KB: about 1 s at 200 Hz) old.
+    # With --start-time now a GNSS fix's UTC time stamp (HIL_GPS time_usec) is the wall clock at its deadline.
+    # Held back in the pty, the first packet a late reader gets would be up to a buffer (about 1 s) old.
     period = 1 / 200
     stats = tmp_path / "stats.json"
-    with Emulator(write_scene(tmp_path, rate=200, duration=5.0), "--format", "mavlink-highres", "--to", "pty",
-                  "--loop", "--epoch-time", "--stats-json", stats) as emu:
+    with Emulator(write_scene(tmp_path, rate=200, duration=5.0), "--format", "mavlink-hil-gps", "--to", "pty",
+                  "--loop", "--start-time", "now", "--stats-json", stats) as emu:
         time.sleep(2.0)
         opened = time.time()
         fd = open_pty_reader(emu.targets[0])

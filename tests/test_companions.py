@@ -290,7 +290,7 @@ def test_gnss_outage_gives_no_fix_and_holds_the_last_position():
 
 def test_gnss_time_of_week_of_the_sample_less_its_age_is_the_solutions_epoch():
     from firmware_protocols.gnss_time import GNSS_DEFAULTS, gnss_pvt_rows
-    epoch_ns = 1_767_225_600 * 10 ** 9         # 2026-01-01 00:00:00 UTC, the stream's --epoch-time base
+    epoch_ns = 1_767_225_600 * 10 ** 9         # 2026-01-01 00:00:00 UTC, a stream's --start-time
     values = _values("gnss", rate_hz=4, latency_s=0.03)
     out = _run(COMPANIONS["gnss"].start(_scene(100.0), 0, values), lambda s: _truth(s, 100.0), 1000, 250)
     time_ns = epoch_ns + np.arange(1000) * 10_000_000

@@ -203,10 +203,11 @@ def test_ardupilot_vn300_start_up_sequence_and_its_gnss_packet(tmp_path):
     from imu_emulator.geo.geodesy import DEFAULT_ORIGIN
     from imu_emulator.scene.load import load_scene
     from imu_emulator.runtime.simulation import Simulation
+    from test_vectornav_drivers import WEEK_START
     rate, week = 200, 2345          # a scene slower than the unit: divisors still count its 400 Hz IMU
     scene_path = write_scene(tmp_path, rate=rate, duration=60.0)
     with Emulator(scene_path, "--format", "vectornav-binary", "--to", "pty", "--duration", "40",
-                  "--option", "model=VN-300-CR", "--option", f"gps_week_offset={week}") as emu:
+                  "--option", "model=VN-300-CR", "--start-time", WEEK_START) as emu:
         driver = Driver(emu.targets[0])
         ardupilot_rate = 200            # EAHRS_RATE; a VN-300's IMU runs at 400 Hz: divisor 400 / rate
         exchange = ardupilot_start("VN-300-CR") + echoed(f"VNWRG,75,3,{400 // ardupilot_rate},01,0721",
@@ -231,6 +232,7 @@ def test_ardupilot_vn300_start_up_sequence_and_its_gnss_packet(tmp_path):
     # ArduPilot: gps_week = timeGps / (ms per week * 1e6), ms_tow = timeGps / 1e6 % ms per week
     week_ns = 7 * 86400 * 10**9
     for g in gnss:
+        # --start-time is the start of GPS week 2345 and TimeStartup counts from it: TOW = TimeStartup
         assert g[1] // week_ns == week and g[1] % week_ns == g[0]
         assert g[3] >= 3 and g[-1] >= 3 and g[2] > 0 and g[-2] > 0         # ArduPilot's pre-arm: fix >= 3
         assert np.all(np.array(g[10:13]) > 0) and g[13] > 0                 # posU N, E, D and velU

@@ -12,9 +12,8 @@ from scipy.spatial.transform import Rotation
 from test_device_vectornav import Driver
 from test_stream_support import Emulator, reference, write_scene
 from test_vectornav_drivers import (ROS1_HEADER, ROS1_STRUCT, ROS2_CONFIG, ROS2_HEADER, ROS2_STRUCT,
-                                    ROS2_VN300_READS, ecef_vector, identity, split)
+                                    ROS2_VN300_READS, WEEK, WEEK_START, ecef_vector, identity, split)
 
-WEEK = 2345
 WEEK_NS = 7 * 86400 * 10**9
 
 
@@ -31,7 +30,7 @@ def run(tmp_path, model: str, exchange, seconds: float = 2.0):
     rate = 400
     scene_path = write_scene(tmp_path, rate=rate, duration=60.0)
     with Emulator(scene_path, "--format", "vectornav-binary", "--to", "pty", "--duration", "40",
-                  "--option", f"model={model}", "--option", f"gps_week_offset={WEEK}") as emu:
+                  "--option", f"model={model}", "--start-time", WEEK_START) as emu:
         driver = Driver(emu.targets[0])
         after = driver.replay(exchange, then_read=seconds)
         driver.close()
@@ -84,6 +83,7 @@ def test_ros2_node_over_a_pty(tmp_path):
     v = np.array(rows, dtype=np.float64)
     t = v[:, 0].astype(np.int64)
     assert set(np.diff(t)) == {100_000_000}
+    # TimeStartup counts from the run's start, which --start-time puts at GPS week WEEK's start
     np.testing.assert_array_equal(v[:, 1], t + WEEK * WEEK_NS)
     np.testing.assert_array_equal(v[:, 2], t % 10**9)                   # TimeSyncIn
     np.testing.assert_array_equal(v[:, 41], t // 10**9)                 # SyncInCnt

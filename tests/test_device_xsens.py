@@ -92,7 +92,9 @@ def test_ardupilot_configuration_then_exactly_the_configured_items(tmp_path):
     rate = 400
     scene_path = write_scene(tmp_path, rate=rate, duration=60.0)
     scene, _, accel, gyro = reference(scene_path)
-    with Emulator(scene_path, "--format", "xsens-mtdata2", "--to", "pty", "--duration", "40") as emu:
+    start_ns = int((datetime.datetime(2026, 11, 27, 12) - datetime.datetime(1970, 1, 1)).total_seconds()) * 10**9
+    with Emulator(scene_path, "--format", "xsens-mtdata2", "--to", "pty", "--duration", "40",
+                  "--start-time", "2026-11-27T12:00:00Z") as emu:
         client = Client(emu.targets[0])
         assert client.transact(message(0x30), 0x31) == (0x31, b"")
         in_config = read_for(client.fd, 0.3)
@@ -123,8 +125,9 @@ def test_ardupilot_configuration_then_exactly_the_configured_items(tmp_path):
     fine = np.array([struct.unpack(">I", p[0x1060])[0] for p in packets])
     counter = np.array([struct.unpack(">H", p[0x1020])[0] for p in packets])
     assert set(np.diff(fine)) == {100} and set(np.diff(counter) % 65536) == {1}
+    # SampleTimeFine counts since the unit's start (the run's), UtcTime from --start-time: start + scene time
     k = np.rint(fine * 1e-4 * rate).astype(int)
-    t_ns = k * (10**9 // rate)
+    t_ns = start_ns + k * (10**9 // rate)
     # Sensor alignment pi about x: the object frame is x, -y, -z of the sensor's, whose own axes are forward-left-up
     # (reference() gives forward-right-down: FRD_FROM_SCENE["ENU"] turns it back), so ArduPilot gets FRD
     got_acc = np.array([struct.unpack(">3f", p[0x4020]) for p in packets])
@@ -138,7 +141,7 @@ def test_ardupilot_configuration_then_exactly_the_configured_items(tmp_path):
             * Rotation.from_quat([*sensor_q[1:], sensor_q[0]]).inv())
     got_q = np.array([struct.unpack(">4f", p[0x2010]) for p in packets])
     assert np.all((want.inv() * Rotation.from_quat(got_q[:, [1, 2, 3, 0]])).magnitude() < 1e-5)
-    # UtcTime: no --epoch-time, so the sample time counts from the Unix epoch
+    # UtcTime: the run's --start-time + scene time
     for p, t in zip(packets, t_ns):
         nano, year, month, day, hour, minute, second, flags = UTC.unpack(p[0x1010])
         when = datetime.datetime(1970, 1, 1) + datetime.timedelta(microseconds=int(t) // 1000)

@@ -5,6 +5,7 @@ import os
 import struct
 import time
 import tty
+from datetime import datetime, timezone
 
 import numpy as np
 import pytest
@@ -21,13 +22,22 @@ SETTINGS = settings(derandomize=True, deadline=None, max_examples=60,
 F32_MAX = float(np.finfo(np.float32).max)
 G = 9.80665
 WEEK_NS = 604_800 * 10 ** 9
+# GPS time - UTC Unix time, from the definitions rather than the module: the GPS epoch 1980-01-06T00:00:00Z and the
+# 18 leap seconds GPS has gained on UTC since (IERS Bulletin C, from 2017-01-01).
+GPS_MINUS_UNIX_NS = 18 * 10 ** 9 - round((datetime(1980, 1, 6, tzinfo=timezone.utc)
+                                          - datetime(1970, 1, 1, tzinfo=timezone.utc)).total_seconds()) * 10 ** 9
+
+
+def unix_of_gps(week: int, tow_ns: int) -> int:
+    """Samples.time_ns (UTC Unix ns) of a GPS week and time of week."""
+    return week * WEEK_NS + tow_ns - GPS_MINUS_UNIX_NS
 
 # wire-formats.md, "MicroStrain MIP": accel in g from the common sample, gyro, mag, pressure 1013.25 mbar,
 # quaternion (1, 0, 0, 0), GPS timestamp tow 123456.789 week 2300 flags 7.
 SPEC_VECTOR = bytes.fromhex(
     "756580500e043c2711ffbca711ffbf8000000e053c23d70abca3d70a3cf5c28f0e063e570a3d3c23d70abed70a3d0617447d50"
     "00120a3f8000000000000000000000000000000e1240fe240c9fbe76c908fc000740f1")
-SPEC_SAMPLE = Samples.single(123_456_789_000_000, [0.1, -0.2, -9.80665], [0.01, -0.02, 0.03],
+SPEC_SAMPLE = Samples.single(unix_of_gps(2300, 123_456_789_000_000), [0.1, -0.2, -9.80665], [0.01, -0.02, 0.03],
                              mag=[0.21, 0.01, -0.42], pressure_pa=101_325.0, quat=[1.0, 0.0, 0.0, 0.0])
 
 
@@ -62,7 +72,7 @@ def f32(values):
 # --- published vector --------------------------------------------------------------------------
 
 def test_spec_vector_byte_for_byte():
-    encoder = registry._REGISTRY["microstrain-mip"].encoder(gps_week_offset=2300, gps_flags=7)
+    encoder = registry._REGISTRY["microstrain-mip"].encoder(gps_flags=7)
     assert encoder.encode(SPEC_SAMPLE).data == SPEC_VECTOR
     assert encoder.bytes_per_sample == len(SPEC_VECTOR) == registry._REGISTRY["microstrain-mip"].bytes_per_sample
 
@@ -73,7 +83,7 @@ def test_spec_vector_read_by_spec_decoder_and_ours():
     assert list(struct.unpack(">3f", fields[0x04])) == f32(np.array([0.1, -0.2, -9.80665]) / G)
     assert struct.unpack(">f", fields[0x17]) == (1013.25,)
     assert struct.unpack(">dHH", fields[0x12]) == (123456.789, 2300, 7)
-    decoder = MipDecoder(gps_week_offset=2300)
+    decoder = MipDecoder()
     (packet,) = decoder.feed(SPEC_VECTOR)
     f = packet.fields
     assert packet.kind == "mip-sensor" and f["descriptors"] == list(fields)
@@ -81,12 +91,12 @@ def test_spec_vector_read_by_spec_decoder_and_ours():
     assert f["gyro"] == tuple(f32([0.01, -0.02, 0.03]))
     assert f["mag"] == tuple(f32([0.21, 0.01, -0.42]))
     assert f["pressure_pa"] == 101_325.0 and f["quat"] == (1.0, 0.0, 0.0, 0.0)
-    assert f["time_ns"] == 123_456_789_000_000 and f["gps_flags"] == 7
+    assert f["time_ns"] == unix_of_gps(2300, 123_456_789_000_000) and f["gps_flags"] == 7
 
 
 def test_every_field_read_by_spec_decoder():
-    encoder = MipEncoder(fields=tuple(FIELDS), gps_week_offset=2000)
-    sample = Samples.single(5 * WEEK_NS + 1_500_000_001, [1.0, 2.0, 3.0], [0.1, 0.2, 0.3], mag=[0.2, 0.3, 0.4],
+    encoder = MipEncoder(fields=tuple(FIELDS))
+    sample = Samples.single(unix_of_gps(2005, 1_500_000_001), [1.0, 2.0, 3.0], [0.1, 0.2, 0.3], mag=[0.2, 0.3, 0.4],
                             quat=[0.5, 0.5, 0.5, 0.5], euler=[0.1, 0.2, 0.3], pressure_pa=95_000.0,
                             delta_theta=[1e-4, 2e-4, 3e-4], delta_velocity=[0.01, 0.02, 0.03])
     fields = spec_fields(encoder.encode(sample).packet(0))
@@ -129,18 +139,19 @@ def test_float_round_trip_and_saturation(vectors, pressure):
 
 
 @SETTINGS
-@given(st.integers(-3 * WEEK_NS, 12_000 * WEEK_NS), st.integers(0, 3000), st.integers(0, 0xFFFF))
-def test_gps_timestamp_round_trip_and_week_saturation(time_ns, week_offset, flags):
-    # int64 nanoseconds reach only ~15 000 weeks, so only weeks before the GPS epoch can saturate
-    encoder = MipEncoder(fields=("gps_timestamp",), gps_week_offset=week_offset, gps_flags=flags)
+@given(st.integers(-3 * WEEK_NS, 12_000 * WEEK_NS), st.integers(0, 0xFFFF))
+def test_gps_timestamp_round_trip_and_week_saturation(time_ns, flags):
+    # time_ns is UTC Unix ns; int64 nanoseconds reach only ~15 000 weeks, so only weeks before the GPS epoch
+    # (1980-01-06) can saturate
+    encoder = MipEncoder(fields=("gps_timestamp",), gps_flags=flags)
     packet = encoder.encode(Samples.single(time_ns, [0, 0, 0], [0, 0, 0])).packet(0)
     tow, week, got_flags = struct.unpack(">dHH", spec_fields(packet)[0x12])
-    gps_ns = time_ns + week_offset * WEEK_NS
+    gps_ns = time_ns + GPS_MINUS_UNIX_NS
     true_week, tow_ns = divmod(gps_ns, WEEK_NS)
     assert tow == tow_ns / 1e9 and got_flags == flags
     assert week == min(max(true_week, 0), 0xFFFF)
     assert encoder.saturated.counts.get("gps_timestamp.week", 0) == int(week != true_week)
-    (decoded,) = MipDecoder(gps_week_offset=week_offset).feed(packet)
+    (decoded,) = MipDecoder().feed(packet)
     if week == true_week:
         assert decoded.fields["time_ns"] == time_ns                  # exact to the nanosecond
 
@@ -254,9 +265,9 @@ def test_pymscl_reads_our_packets_from_a_pty():
     accel, gyro, mag = rng.normal(size=(n, 3)), rng.normal(size=(n, 3)) * 0.1, rng.normal(size=(n, 3)) * 0.3
     quat = rng.normal(size=(n, 4))
     quat /= np.linalg.norm(quat, axis=1, keepdims=True)
-    time_ns = 100_000 * 10 ** 9 + np.arange(n, dtype=np.int64) * 5_000_000
+    time_ns = unix_of_gps(2345, 100_000 * 10 ** 9) + np.arange(n, dtype=np.int64) * 5_000_000
     samples = Samples(time_ns, accel, gyro, mag=mag, quat=quat, pressure_pa=np.linspace(90_000, 101_000, n))
-    data = MipEncoder(gps_week_offset=2345).encode(samples).data
+    data = MipEncoder().encode(samples).data
     received = mscl_packets(data, n)
     for i, packet in enumerate(received):
         assert packet.descriptorSet() == 0x80
@@ -269,7 +280,7 @@ def test_pymscl_reads_our_packets_from_a_pty():
         q = points["orientQuaternion"].as_Vector()
         assert [q.as_floatAt(k) for k in range(4)] == f32(quat[i])
         assert points["gpsCorrelTimestampWeekNum"].as_uint16() == 2345
-        assert points["gpsCorrelTimestampTow"].as_double() == (time_ns[i] % WEEK_NS) / 1e9
+        assert points["gpsCorrelTimestampTow"].as_double() == ((time_ns[i] + GPS_MINUS_UNIX_NS) % WEEK_NS) / 1e9
         assert points["gpsCorrelTimestampFlags"].as_uint16() == 0x1C
 
 
@@ -278,7 +289,7 @@ def _gnss_and_filter_samples():
     rng = np.random.default_rng(5)
     n = 3
     return Samples(
-        100_000 * 10 ** 9 + np.arange(n, dtype=np.int64) * 250_000_000, rng.normal(size=(n, 3)),
+        unix_of_gps(2300, 100_000 * 10 ** 9) + np.arange(n, dtype=np.int64) * 250_000_000, rng.normal(size=(n, 3)),
         rng.normal(size=(n, 3)),
         gnss_llh=np.column_stack((47 + rng.random(n), 8 + rng.random(n), 400 + 100 * rng.random(n))),
         gnss_velocity_ned=rng.normal(size=(n, 3)) * 5, gnss_fix=[3, 2, 0], gnss_satellites=[11, 6, 2],
@@ -299,7 +310,7 @@ def test_pymscl_reads_the_gnss_set_as_the_receivers_solution():
     (MIP: 0 3D, 1 2D, 3 none), satellites, GPS time; valid flags cleared without a fix."""
     from firmware_protocols.wire_formats.microstrain import GNSS_FIELDS
     s = _gnss_and_filter_samples()
-    data = MipEncoder(tuple(GNSS_FIELDS), descriptor_set=0x81, gps_week_offset=2300).encode(s).data
+    data = MipEncoder(tuple(GNSS_FIELDS), descriptor_set=0x81).encode(s).data
     for i, packet in enumerate(mscl_packets(data, len(s))):
         assert packet.descriptorSet() == 0x81
         p = {d.channelName(): d for d in packet.data()}
@@ -321,7 +332,8 @@ def test_pymscl_reads_the_gnss_set_as_the_receivers_solution():
         assert p["latitude"].valid() == p["northVelocity"].valid() == p["headingAccuracy"].valid() == fixed
         assert p["gpsTimeWeekNum"].as_uint16() == 2300
         # the solution's time of validity: the sample time less its age
-        assert p["gpsTimeTow"].as_double() == ((s.time_ns[i] - round(s.gnss_age_s[i] * 1e9)) % WEEK_NS) / 1e9
+        assert p["gpsTimeTow"].as_double() == \
+            ((s.time_ns[i] - round(s.gnss_age_s[i] * 1e9) + GPS_MINUS_UNIX_NS) % WEEK_NS) / 1e9
 
 
 @pytest.mark.parametrize("family, states", [("gq7", (4, 1, 1)), ("gx5", (2, 1, 0))])
@@ -366,3 +378,10 @@ def test_our_decoder_reads_the_gnss_and_filter_sets_back():
         assert v["position_llh"] == (*s.position_llh[i], int(s.ins_mode[i] == 2))
         assert list(v["position_uncertainty"][:3]) == f32(s.position_sigma_m[i])
         assert v["status"] == ((4, 1, 1)[i], 1, 0)
+
+
+def test_gps_week_offset_is_retired_with_one_line_naming_start_time():
+    for make in (lambda: MipEncoder(gps_week_offset=2300), lambda: MipDecoder(gps_week_offset=2300)):
+        with pytest.raises(ValueError, match="--start-time") as err:
+            make()
+        assert "\n" not in str(err.value)

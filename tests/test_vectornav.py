@@ -154,12 +154,13 @@ def test_binary_round_trip_any_layout(selection, time_ns, accel, gyro, mag, eule
         for q in field.quantities:
             key = f"{field.key}.{q.label}" if q.label else field.key
             if q.source == "time_ns":
-                # GPS week and time of week split the same clamped count of nanoseconds (offset 0 here)
+                # TimeStartup counts from the run's start (start_ns 0 here); GPS week and time of week split the
+                # same clamped GPS time: time_ns is UTC Unix ns, GPS = UTC + 18 s - 315 964 800 s (1980-01-06)
                 week_ns = 7 * 86400 * 10**9
-                t = max(time_ns, 0)
-                expected = {"week": min(t // week_ns, 65535), "tow": t % week_ns}.get(q.time, t)
+                t = time_ns if q.time == "startup" else time_ns + (18 - 315_964_800) * 10**9
+                expected = {"week": min(max(t, 0) // week_ns, 65535), "tow": max(t, 0) % week_ns}.get(q.time, max(t, 0))
                 assert fields[key] == expected
-                saturated += (time_ns < 0) + (q.time == "week" and t // week_ns > 65535)
+                saturated += (t < 0) + (q.time == "week" and max(t, 0) // week_ns > 65535)
                 continue
             source = np.atleast_1d(getattr(samples, q.source)[0])
             got = np.atleast_1d(fields[key])

@@ -31,6 +31,12 @@ from firmware_protocols.devices.vectornav import VectorNavDevice
 RATE = 400.0
 WEEK = 2345
 WEEK_NS = 7 * 86400 * 10**9
+# GPS time - UTC Unix time from the definitions (GPS epoch 1980-01-06T00:00:00Z; 18 leap seconds since 2017-01-01):
+# Samples.time_ns is UTC Unix ns (firmware_protocols.gnss_time), the GPS fields are derived from it.
+GPS_MINUS_UNIX_NS = 18 * 10**9 - int((datetime.datetime(1980, 1, 6) - datetime.datetime(1970, 1, 1))
+                                     .total_seconds()) * 10**9
+# --start-time of a run whose scene time 0 is the start of GPS week WEEK (UTC = GPS - 18 s)
+WEEK_START = (datetime.datetime(1980, 1, 6) + datetime.timedelta(weeks=WEEK, seconds=-18)).isoformat() + "Z"
 
 
 def command(body: str) -> bytes:
@@ -41,7 +47,8 @@ def command(body: str) -> bytes:
 def truth(n: int = 800, seed: int = 5) -> Samples:
     """A moving, turning unit with every field the head carries (INS estimate, its sigmas, the GNSS receiver)."""
     rng = np.random.default_rng(seed)
-    t = 3_000_000_000 + np.arange(n, dtype=np.int64) * int(1e9 / RATE)
+    # 3 s into GPS week WEEK, as UTC Unix ns
+    t = WEEK * WEEK_NS + 3_000_000_000 - GPS_MINUS_UNIX_NS + np.arange(n, dtype=np.int64) * int(1e9 / RATE)
     quat = rng.normal(size=(n, 4))
     quat /= np.linalg.norm(quat, axis=1, keepdims=True)
     quat *= np.sign(quat[:, :1])
@@ -120,7 +127,7 @@ ROS1_STRUCT = "<3f4f3f3d3f3fff" + "QH" + "bBBBBBH" + "3f" + "H3d3d3f3f3fff"
 
 def test_ros1_node_configures_its_output_and_every_field_equals_the_truth():
     model = "VN-200T-CR"
-    device = VectorNavDevice(RATE, model=model, gps_week_offset=WEEK)
+    device = VectorNavDevice(RATE, model=model)
     replay(device, [("VNRRG,01", f"VNRRG,01,{model}"), ("VNWRG,05,115200", "VNWRG,05,115200"),
                     ("VNRRG,01", f"VNRRG,01,{model}")] + identity(model)
            + [("VNRRG,01", f"VNRRG,01,{model}"), ("VNWRG,06,0", "VNWRG,06,0"),
@@ -142,7 +149,7 @@ def test_ros1_node_configures_its_output_and_every_field_equals_the_truth():
     np.testing.assert_array_equal(col(19, 20)[:, 0], f32(samples.temperature_c[k]))
     np.testing.assert_array_equal(col(20, 21)[:, 0], f32(samples.pressure_pa[k] / 1000))
     # Time group: GPS time of week and week, UTC calendar (year - 2000) with milliseconds
-    gps = samples.time_ns[k] + WEEK * WEEK_NS
+    gps = samples.time_ns[k] + GPS_MINUS_UNIX_NS
     np.testing.assert_array_equal(col(21, 22)[:, 0], gps % WEEK_NS)
     np.testing.assert_array_equal(col(22, 23)[:, 0], WEEK)
     for row, g in zip(rows, gps):
@@ -182,7 +189,7 @@ ROS2_VN300_READS = [("VNRRG,01", "VNRRG,01,VN-300-CR"), ("VNRRG,55", "VNRRG,55,0
 
 def test_ros2_node_configures_every_output_turns_two_off_and_every_field_equals_the_truth():
     model = "VN-300-CR"
-    device = VectorNavDevice(RATE, model=model, gps_week_offset=WEEK,
+    device = VectorNavDevice(RATE, model=model,
                              fields="common:timestartup;imu:accel", preset=None)
     replay(device, [("VNRRG,01", f"VNRRG,01,{model}"), ("VNRRG,01", f"VNRRG,01,{model}")] + identity(model)
            + [("VNRRG,00", "VNRRG,00,")] + ROS2_CONFIG + ROS2_VN300_READS)
@@ -196,7 +203,7 @@ def test_ros2_node_configures_every_output_turns_two_off_and_every_field_equals_
     assert len(data) == len(rows) * (1 + len(ROS2_HEADER) + struct.calcsize(ROS2_STRUCT) + 2)
     k = np.arange(len(rows)) * 40
     v = np.array(rows, dtype=np.float64)
-    gps = samples.time_ns[k] + WEEK * WEEK_NS
+    gps = samples.time_ns[k] + GPS_MINUS_UNIX_NS
     np.testing.assert_array_equal(v[:, 0], samples.time_ns[k])
     np.testing.assert_array_equal(v[:, 1], gps)
     np.testing.assert_array_equal(v[:, 2], gps % 10**9)                 # TimeSyncIn: SyncIn on the PPS
@@ -339,11 +346,12 @@ def test_integer_time_fields_saturate_and_count_and_status_follows_the_fix():
     """TimeUtc's int8 year beyond 2127 and SyncInCnt beyond 2^32 seconds saturate (counted per wire field);
     TimeStatus and GPS TimeInfo say 0 without any fix."""
     from firmware_protocols.wire_formats.vectornav_binary import BinaryDecoder, BinaryEncoder
-    from firmware_protocols.wire_formats.vectornav_binary import MAX_GPS_WEEK
-    with pytest.raises(ValueError, match="gps_week_offset"):
-        BinaryEncoder("time:timeutc", gps_week_offset=MAX_GPS_WEEK + 1)      # past int64 nanoseconds
-    encoder = BinaryEncoder("time:timeutc,syncincnt,timestatus;gps:timeinfo", gps_week_offset=MAX_GPS_WEEK)
-    later = int(2**32 + 5) * 10**9
+    for retired in (lambda: BinaryEncoder("time:timeutc", gps_week_offset=2345),
+                    lambda: VectorNavDevice(RATE, gps_week_offset=2345)):
+        with pytest.raises(ValueError, match="gps_week_offset: retired.*--start-time"):
+            retired()
+    encoder = BinaryEncoder("time:timeutc,syncincnt,timestatus;gps:timeinfo")
+    later = 5 * 10**18          # UTC 2128-06: TimeUtc's year - 2000 > 127, and 5e9 s > SyncInCnt's 2^32
     fields = BinaryDecoder().feed(encoder.encode(Samples([later], [[0, 0, 0]], [[0, 0, 0]], gnss_fix=[0])).data)
     f = fields[0].fields
     assert f["time.timeutc.year"] == 127 and f["time.syncincnt"] == 2**32 - 1
@@ -366,7 +374,7 @@ PX4_SEQUENCE = [("VNRRG,01", "VNRRG,01,VN-300-CR"), ("VNWRG,05,921600", "VNWRG,0
 
 
 def test_px4_configures_its_three_outputs_and_parses_them_to_the_truth():
-    device = VectorNavDevice(800.0, model="VN-300-CR", gps_week_offset=WEEK)
+    device = VectorNavDevice(800.0, model="VN-300-CR")
     replay(device, PX4_SEQUENCE)
     n = 1600
     samples = truth(n)

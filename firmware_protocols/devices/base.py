@@ -101,7 +101,7 @@ class Device:
         return notes
 
 
-_SAMPLE_FIELDS = tuple(f.name for f in dataclasses.fields(Samples))
+_SAMPLE_FIELDS = tuple(f.name for f in dataclasses.fields(Samples) if f.name != "start_ns")   # the arrays
 
 
 def single(samples: Samples, i: int) -> Samples:
@@ -112,6 +112,7 @@ def single(samples: Samples, i: int) -> Samples:
     for name in _SAMPLE_FIELDS:
         value = getattr(samples, name)
         setattr(one, name, None if value is None else value[i:i + 1])
+    one.start_ns = samples.start_ns
     return one
 
 

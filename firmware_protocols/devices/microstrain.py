@@ -117,7 +117,7 @@ def _text(value: str) -> bytes:
 
 class MipDevice(Device):
     carries_increments = True    # a driver may configure the integrated outputs at any time
-    def __init__(self, rate_hz: float, fields=DEFAULT_FIELDS, gps_week_offset: int = 0, gps_flags: int = 0x1C,
+    def __init__(self, rate_hz: float, fields=DEFAULT_FIELDS, gps_week_offset=None, gps_flags: int = 0x1C,
                  model_name: str | None = None, model_number: str | None = None, serial_number: str = "6284.12345",
                  firmware_version: int = 1100, filter_family: str | None = None, filter_state: int | None = None,
                  preset: str | None = None):

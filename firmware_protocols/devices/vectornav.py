@@ -38,9 +38,10 @@ from one counter, so outputs with related divisors fall on the same samples as o
 ROS 1 / ROS 2 nodes and ArduPilot / PX4 ask for is produced (wire_formats.vectornav_binary lists what each
 carries); the ones the emulator has no data for (Attitude Dcm, IMU Raw) are error 7, never a packet with
 invented layout. The GPS groups (VN-200/300) carry the GNSS receiver's solution (Samples.gnss_*, else the INS
-estimate and the configured satellite count, fix and uncertainties), GPS time = sample time + `gps_week_offset`
-weeks: ArduPilot's VN-300 sequence (`$VNWRG,77,3,80,49,0003,26B8,0018`) gets its GNSS packet. A VN-200/300 also
-has the GNSS registers the ROS 2 node reads after configuring: 55 GNSS configuration (5 integers), 57 antenna
+estimate and the configured satellite count, fix and uncertainties), GPS time = the sample time (UTC Unix ns:
+the run's `--start-time` + scene time) + leap seconds, firmware_protocols.gnss_time: ArduPilot's VN-300
+sequence (`$VNWRG,77,3,80,49,0003,26B8,0018`) gets its GNSS packet. A VN-200/300 also has the GNSS registers the ROS 2
+node reads after configuring: 55 GNSS configuration (5 integers), 57 antenna
 offset (3 reals) and, on a VN-300, 93 compass baseline (6 reals), stored and read back (a VN-1xx answers 8).
 
 Errors (`$VNERR,<2 digits>`): 03 bad checksum (or none), 04 unknown command, 05 / 06 too few / too many
@@ -55,6 +56,7 @@ import re
 from firmware_protocols import attitude
 from firmware_protocols.base import Samples
 from firmware_protocols.devices.base import Device, LinkRequest, SinceLastOutput, single
+from firmware_protocols.gnss_time import GPS_WEEK_OFFSET_RETIRED
 from firmware_protocols.registry import attach_device
 from firmware_protocols.vectornav_common import sentence, verify_line
 from firmware_protocols.wire_formats.vectornav_ascii import AsciiEncoder
@@ -140,14 +142,16 @@ class VectorNavDevice(Device):
     def __init__(self, rate_hz: float, fields=None, ascii_type: int = 0, checksum: str = "xor",
                  model: str = DEFAULT_MODEL, preset: str | None = None, base_rate_hz: float | None = None,
                  serial_number: int = 100012345, firmware: str = "2.1.0.0", hardware_revision: int = 2,
-                 baud: int = 115200, gps_week_offset: int = 0, num_sats: int | None = None,
+                 baud: int = 115200, gps_week_offset=None, num_sats: int | None = None,
                  gnss_fix: int | None = None, gnss_pos_u=None, gnss_vel_u: float | None = None):
         super().__init__(rate_hz)
         constants = {name: value for name, value in (("gnss_num_sats", num_sats), ("gnss_fix", gnss_fix),
                                                       ("gnss_pos_u", gnss_pos_u), ("gnss_vel_u", gnss_vel_u))
                      if value is not None}
         # every binary output's encoder, the configured ones and those a register write makes, encodes so
-        self._encoding = {"gps_week_offset": gps_week_offset, "constants": constants}
+        if gps_week_offset is not None:
+            raise ValueError(GPS_WEEK_OFFSET_RETIRED)
+        self._encoding = {"constants": constants}
         BinaryEncoder(DEFAULT_FIELDS, **self._encoding)      # bad values fail here, at start
         outputs = ((fields if fields is not None else DEFAULT_FIELDS, 1),) if ascii_type == 0 else ()
         if preset is not None:
@@ -495,7 +499,7 @@ _OPTIONS = {
     "firmware": "register 4 (default 2.1.0.0)",
     "hardware_revision": "register 2 (default 2)",
     "baud": "register 5 at start (default 115200)",
-    "gps_week_offset": "GPS week added to the sample time for the GPS time fields (default 0)",
+    "gps_week_offset": "retired: GPS time follows --start-time (UTC) + scene time",
     "num_sats": "GNSS NumSats (default 12)",
     "gnss_fix": "GNSS Fix: 0 none, 1 time only, 2 2D, 3 3D (default 3)",
     "gnss_pos_u": "GNSS PosU, 1 sigma north, east, down in m (default [1.0, 1.0, 1.5])",

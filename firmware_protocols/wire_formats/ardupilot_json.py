@@ -12,8 +12,9 @@ never be read.
 Fields (keys and units as SIM_JSON reads them; Samples' conventions are the same, nothing is rotated):
 
 ==========================  =================================================================================
-timestamp                   s, double: time_ns / 1e9. SITL's clock advances by its differences (a step back
-                            is "physics reset")
+timestamp                   s, double: (time_ns - start_ns) / 1e9, the physics time since the run's start
+                            (a Unix-epoch double would keep only 0.24 us). SITL's clock advances by its
+                            differences (a step back is "physics reset")
 imu.gyro                    rad/s, body forward-right-down, float32
 imu.accel_body              specific force, m/s^2, body FRD, float32
 position                    m north, east, down of the origin (double): SITL adds origin-to-home itself and
@@ -103,7 +104,7 @@ class ArduPilotJsonEncoder:
         accel = self._float32(samples.accel, "imu.accel_body")
         quat = samples.field_or("quat", (1.0, 0.0, 0.0, 0.0))
         velocity = self._float32(samples.field_or("velocity_ned", (0.0, 0.0, 0.0)), "velocity")
-        times = samples.time_ns / 1e9
+        times = (samples.time_ns - samples.start_ns) / 1e9     # since the run's start: SITL's physics time
         lines = [line(float(times[i]), gyro[i], accel[i], position[i], quat[i], velocity[i]) for i in range(n)]
         offsets = np.zeros(n + 1, dtype=np.int64)
         offsets[1:] = np.cumsum([len(b) for b in lines])

@@ -30,7 +30,8 @@ Wire-level choices, each matching pydronecan (the oracle):
   float32, then to half with ties away from zero. It differs from IEEE round-half-even only on exact
   ties, and it is what real DroneCAN nodes put on the bus. Magnitudes beyond 65504 saturate to ±65504 and
   are counted (libuavcan would send inf).
-- The timestamp is floor(time_ns / 1000) µs; negative times saturate to 0 (counted). int64 nanoseconds
+- The timestamp (uavcan.Timestamp, the node's own clock: no time sync is emulated) counts since the run's
+  start, floor((time_ns - start_ns) / 1000) µs; negative times saturate to 0 (counted). int64 nanoseconds
   never reach 2^56 µs, so the DSDL's `truncated` (wrapping) cast never applies.
 
 Integrals (RawIMU): integration_interval is Samples.delta_time_s when given (the emulator's streams give
@@ -367,7 +368,8 @@ class _DroneCanEncoder:
         params[4] = self.transfer_id
         counts = self._counts
         ops = message.program(self.fd)
-        written, bad_sample, bad_op, saturated = _encode_transfers(samples.time_ns, sources, ops, params, counts,
+        since_start = samples.time_ns - np.int64(samples.start_ns) if samples.start_ns else samples.time_ns
+        written, bad_sample, bad_op, saturated = _encode_transfers(since_start, sources, ops, params, counts,
                                                                    frame_bytes(frames))
         if bad_sample >= 0:
             field = message.sources[ops[bad_op, 1]]

@@ -16,8 +16,9 @@ Messages (DSDL as shipped with pydronecan, dronecan/dsdl_specs/uavcan/equipment/
   bytes, one 64-byte frame.
 
 Fix2 values: timestamp = gnss_timestamp = the solution's time of validity, (time_ns - gnss_age_s) // 1000 us,
-with gnss_time_standard UTC (2) (time_ns read as Unix-epoch ns, as gnss_time does) and num_leap_seconds =
-gnss_time.GNSS_DEFAULTS["leap_seconds"]; longitude/latitude x 1e8, heights in mm (no geoid model: height_msl =
+with gnss_time_standard UTC (2) (time_ns is UTC Unix ns: the run's --start-time + scene time,
+firmware_protocols.gnss_time) and num_leap_seconds = gnss_time.GNSS_DEFAULTS["leap_seconds"]; longitude/latitude x 1e8,
+heights in mm (no geoid model: height_msl =
 ellipsoid height, as gnss_time's records); ned_velocity m/s; sats_used (0..63); status from Samples.gnss_fix
 (0 no fix, 2 2D, 3 3D); mode SINGLE; covariance the diagonal [h^2, h^2, v^2, s^2, s^2, s^2] of the horizontal,
 vertical and speed 1-sigma accuracies (what ArduPilot's AP_GPS_DroneCAN reads back as sqrt(cov[0]), sqrt(cov[2]),
@@ -303,7 +304,7 @@ class GnssCompassBaroEncoder:
         for name in ("mag", "pressure_pa", "temperature_c"):
             value = getattr(samples, name)
             kw[name] = None if value is None else value[index]
-        frames = encoder.encode(Samples(samples.time_ns[index], **kw))
+        frames = encoder.encode(Samples(samples.time_ns[index], **kw, start_ns=samples.start_ns))
         frames["sample"] = index[frames["sample"]]
         return frames
 

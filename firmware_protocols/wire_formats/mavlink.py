@@ -9,7 +9,11 @@ Wire units and ranges (SI in, SI out of the decoder; conversions happen only her
 ==============  =========================  ==================================================
 message         field                      wire unit / range
 ==============  =========================  ==================================================
-HIGHRES_IMU,    time_usec u64              time_ns // 1000; negative time saturates to 0
+HIGHRES_IMU,    time_usec u64              (time_ns - start_ns) // 1000: time since the run's
+                                           start (common.xml: "UNIX Epoch time or time since
+                                           system boot"; PX4 SITL sets its clock from
+                                           HIL_SENSOR's, as from Gazebo's sim time); negative
+                                           time saturates to 0
 HIL_SENSOR      x/y/z acc, gyro, mag f32   m/s^2, rad/s, gauss; |v| > FLT_MAX saturates
                 abs_pressure f32           hPa (pressure_pa / 100)
                 diff_pressure f32          hPa: Samples.differential_pressure_pa, or the
@@ -24,7 +28,8 @@ HIL_SENSOR      x/y/z acc, gyro, mag f32   m/s^2, rad/s, gauss; |v| > FLT_MAX sa
                                            `baro_rate_hz`; None = every sample); HIL_SENSOR's
                                            bit 31 (reset) is never set
                 id u8 (extension)          the `id` option (sensor instance)
-SCALED_IMU,     time_boot_ms u32           (time_ns // 1_000_000) mod 2^32: wraps after 49.7
+SCALED_IMU,     time_boot_ms u32           ((time_ns - start_ns) // 1_000_000) mod 2^32: since
+                                           the run's start (the unit's boot); wraps after 49.7
 SCALED_IMU2,                               days exactly as the autopilot's counter does
 SCALED_IMU3     x/y/z acc i16              mG  (1 g = 9.80665 m/s^2), +-32767 mG ~ +-321 m/s^2
                 x/y/z gyro i16             mrad/s, +-32.767 rad/s
@@ -51,9 +56,9 @@ temperature "not sent" convention for the integer messages); fields a message do
 not checked for finiteness.
 
 Signing timestamps (units of 10 us since 2015-01-01 UTC) come either from the sample time
-(``sign_time="sample"``: time_ns is read as Unix-epoch nanoseconds, deterministic) or from the wall
-clock at the moment ``encode`` is called (``sign_time="wall"``, the default, right for live links
-whose time_ns counts from start). Either way each packet's timestamp is max(candidate, previous + 1)
+(``sign_time="sample"``: time_ns, UTC Unix nanoseconds as firmware_protocols.gnss_time has it, deterministic)
+or from the wall clock at the moment ``encode`` is called (``sign_time="wall"``, the default: a live link's
+peer checks the stamps against its own clock). Either way each packet's timestamp is max(candidate, previous + 1)
 for its `SigningLink`, so it is strictly increasing per link even when samples come faster than
 100 kHz, within one batch or when several encoders share a link.
 """
@@ -100,7 +105,7 @@ L_SOURCE, L_TYPE, L_OFFSET, L_ZERO_ABSENT = range(4)
 
 # Encoder parameter slots (int64 array).
 (P_SEQ, P_SYSID, P_COMPID, P_MSGID, P_CRC_EXTRA, P_TRUNCATE, P_SIGN_MODE, P_LINK_ID, P_WALL_TS,
- P_ID, P_PAYLOAD_LEN, P_COUNT) = range(12)
+ P_ID, P_PAYLOAD_LEN, P_START, P_COUNT) = range(13)       # P_START: Samples.start_ns, per encode
 SIGN_NONE, SIGN_SAMPLE, SIGN_WALL = range(3)
 
 # Constant-source slots (float64 array); NaN = not provided.
@@ -330,13 +335,13 @@ def _encode_block(time_ns, accel, gyro, mag, pressure, diff_pressure, temperatur
                         iv = 1   # the smallest reading that is not "not sent"
                     _put_le(out, at, iv, 2)
             elif s == S_TIME_USEC:
-                usec = t // 1000
+                usec = (t - params[P_START]) // 1000
                 if usec < 0:
                     usec = 0
                     sat[f] += 1
                 _put_le(out, at, usec, 8)
             elif s == S_TIME_BOOT_MS:
-                _put_le(out, at, (t // 1_000_000) & 0xFFFFFFFF, 4)
+                _put_le(out, at, ((t - params[P_START]) // 1_000_000) & 0xFFFFFFFF, 4)
             elif s == S_FIELDS_UPDATED:
                 bits = present & updated[i] if has_updated else present
                 _put_le(out, at, bits, 4 if typ == T_U32 else 2)
@@ -533,6 +538,7 @@ class MavlinkEncoder:
         link_state = _NO_LINK if link is None else link.state
         if link is not None and params[P_SIGN_MODE] == SIGN_WALL:
             params[P_WALL_TS] = (time.time_ns() - EPOCH_2015_NS) // 10_000
+        params[P_START] = samples.start_ns      # the wire times count since the run's start
         diff = samples.differential_pressure_pa
         arrays = (samples.time_ns, samples.accel, samples.gyro, _NO_ROWS3 if mag is None else mag,
                   pressure if pressure is not None and self._uses_pressure else _NO_ROWS,

@@ -6,7 +6,8 @@ Values come from Samples (SI, FRD body axes, quat FRD -> NED, scalar first: MAVL
 nothing is rotated here):
 
 ==================  ======================================================================================
-HIL_GPS (113)       time_usec u64: the solution's time of validity, (time_ns - gnss_age_s) // 1000;
+HIL_GPS (113)       time_usec u64: the solution's time of validity in UTC Unix us (firmware_protocols.gnss_time;
+                    PX4 takes it as time_utc_usec), (time_ns - gnss_age_s) // 1000;
                     lat, lon i32 degE7; alt i32 mm (see "height" below); eph, epv u16 cm: the horizontal
                     and vertical 1-sigma accuracy, as PX4 reads them (simulator_mavlink handle_message_hil_gps:
                     eph * 1e-2 "cm -> m"; common.xml calls the field HDOP x 100, PX4 is the consumer);
@@ -15,9 +16,10 @@ HIL_GPS (113)       time_usec u64: the solution's time of validity, (time_ns - g
 GPS_RAW_INT (24)    time_usec, lat, lon, alt, vel, cog, fix_type, satellites_visible as HIL_GPS; eph, epv u16:
                     HDOP, VDOP x 100 (common.xml); alt_ellipsoid i32 mm; h_acc, v_acc u32 mm; vel_acc u32
                     mm/s; hdg_acc u32 0 and yaw u16 0 (no heading from a single antenna)
-SCALED_PRESSURE     time_boot_ms u32; press_abs f32 hPa; press_diff f32 hPa (0 when absent); temperature
-(29)                i16 cdegC; temperature_press_diff i16 cdegC, the sensor head's temperature when a
-                    differential pressure is given, else 0 ("not available"; a reading of 0 goes out as 1)
+SCALED_PRESSURE     time_boot_ms u32: since the run's start, ((time_ns - start_ns) // 1e6) mod 2^32;
+(29)                press_abs f32 hPa; press_diff f32 hPa (0 when absent); temperature i16 cdegC;
+                    temperature_press_diff i16 cdegC, the sensor head's temperature when a differential
+                    pressure is given, else 0 ("not available"; a reading of 0 goes out as 1)
 ATTITUDE (30)       time_boot_ms; roll, pitch, yaw f32 rad (Samples.euler, else z-y-x angles of quat);
                     rollspeed, pitchspeed, yawspeed f32 rad/s: the body rates (Samples.gyro)
 ATTITUDE_QUATERNION time_boot_ms; q1..q4 f32 = w, x, y, z of quat; the three body rates;
@@ -83,7 +85,7 @@ def _time_usec(samples: Samples, stats: SaturationStats) -> np.ndarray:
 
 
 def _time_boot_ms(samples: Samples) -> np.ndarray:
-    return (samples.time_ns // 1_000_000) & 0xFFFFFFFF
+    return ((samples.time_ns - samples.start_ns) // 1_000_000) & 0xFFFFFFFF     # since the run's start
 
 
 def _gnss_solution(samples: Samples) -> dict:
@@ -274,13 +276,13 @@ class MavlinkNavEncoder:
         return SerialBatch(b"".join(frames), offsets)
 
 
-_OPTIONAL = tuple(f.name for f in dataclasses.fields(Samples) if f.name != "time_ns")
+_OPTIONAL = tuple(f.name for f in dataclasses.fields(Samples) if f.name not in ("time_ns", "start_ns"))
 
 
 def _rows(samples: Samples, index: np.ndarray) -> Samples:
     """The samples at `index` (a block of them)."""
     kw = {name: (None if getattr(samples, name) is None else getattr(samples, name)[index]) for name in _OPTIONAL}
-    return Samples(samples.time_ns[index], **kw)
+    return Samples(samples.time_ns[index], **kw, start_ns=samples.start_ns)
 
 
 _COMMON_OPTIONS = {

@@ -24,10 +24,11 @@ src/mip/definitions/data_sensor.h):
 - g: the SDK only says "[g]"; this module uses standard gravity g = 9.80665 m/s^2 both ways.
 - The quaternion and Euler angles are defined relative to NED (data_sensor.h: p_veh = q^-1 p_ned q),
   so the caller gives sensor->NED attitude in `quat`; nothing is converted here.
-- GPS timestamp: GPS time = time_ns + gps_week_offset weeks; week = GPS time // 1 week, time of week =
-  the remainder in seconds. With a time base starting at 0 the default offset (0) gives week 0; pass the
-  GPS week your scenario starts in. Flags (data_sensor.h): 0x01 PPS valid, 0x02 time refreshed (toggles),
-  0x04 time initialized, 0x08 time of week valid, 0x10 week number valid; default 0x1C (no PPS line
+- GPS timestamp: GPS time of time_ns (UTC Unix ns, the run's --start-time + scene time) + 18 leap seconds -
+  the GPS epoch (firmware_protocols.gnss_time); week = GPS time // 1 week (no 1024-week rollover), time of
+  week = the remainder in seconds; the decoder gives time_ns back as UTC Unix ns. Flags (data_sensor.h): 0x01
+  PPS valid, 0x02 time refreshed (toggles), 0x04 time initialized, 0x08 time of week valid, 0x10 week number valid;
+  default 0x1C (no PPS line
   exists in an emulator). Weeks outside u16 saturate (counted).
 Values beyond float32 range saturate to +-3.4e38 and are counted in `encoder.saturated`.
 
@@ -47,7 +48,7 @@ from itertools import accumulate
 
 import numpy as np
 
-from firmware_protocols.gnss_time import GNSS_DEFAULTS, dops
+from firmware_protocols.gnss_time import GNSS_DEFAULTS, GPS_WEEK_OFFSET_RETIRED, dops, gps_offset_ns
 from firmware_protocols.base import INCREMENT_FIELDS, DecoderStats, Packet, SaturationStats, Samples, SerialBatch
 from firmware_protocols.registry import FormatInfo, register
 from firmware_protocols.packing import (CHECKSUM_FLETCHER16, FROM_CONSTANT, FROM_FIELD, FROM_TIME_DIV,
@@ -204,7 +205,7 @@ class MipEncoder:
     axes_source = "MicroStrain MIP DCP: sensor frame x forward y right z down (-1 g on z at rest); data_sensor.h NED"
 
 
-    def __init__(self, fields=DEFAULT_FIELDS, gps_week_offset: int = 0, gps_flags: int = GPS_FLAGS_DEFAULT,
+    def __init__(self, fields=DEFAULT_FIELDS, gps_week_offset=None, gps_flags: int = GPS_FLAGS_DEFAULT,
                  descriptor_set: int = SENSOR_DATA_SET, filter_family: str = "gq7", filter_state: int | None = None):
         if descriptor_set not in DATA_SETS:
             raise ValueError(f"descriptor_set: one of {', '.join(f'{d:#04x}' for d in DATA_SETS)}")
@@ -219,10 +220,11 @@ class MipEncoder:
         self.descriptor_set = descriptor_set
         self.fields = parse_names(fields, table, "fields")
         self.uses_increments = any(table[name].source in INCREMENT_FIELDS for name in self.fields)
-        gps_week_offset, gps_flags = as_int(gps_week_offset), as_int(gps_flags)
+        if gps_week_offset is not None:
+            raise ValueError(GPS_WEEK_OFFSET_RETIRED)
+        gps_flags = as_int(gps_flags)
         if not 0 <= gps_flags <= 0xFFFF:
             raise ValueError(f"gps_flags: must fit in 16 bits, got {gps_flags!r}")
-        self.gps_week_offset = gps_week_offset
         self.gps_flags = gps_flags
         self.saturated = SaturationStats()
 
@@ -231,7 +233,7 @@ class MipEncoder:
         for name in self.fields:
             f = table[name]
             if f.source == "time_ns":
-                offset = self.gps_week_offset * WEEK_NS
+                offset = gps_offset_ns()      # GPS time - time_ns
                 # 0x80's flags are the GPS-correlation flags; the other sets' last word is valid flags
                 flags = self.gps_flags if descriptor_set == SENSOR_DATA_SET else 0x3
                 layout = [Column(KIND_F64, 0, f"{name}.tow", FROM_TIME_REM_S, divisor=WEEK_NS, offset=offset),
@@ -307,8 +309,9 @@ class MipDecoder:
     and for the GNSS and filter sets also "values": {field name: its numbers as on the wire, valid flags
     included}. Never raises."""
 
-    def __init__(self, gps_week_offset: int = 0):
-        self.gps_week_offset = as_int(gps_week_offset)
+    def __init__(self, gps_week_offset=None):
+        if gps_week_offset is not None:
+            raise ValueError(GPS_WEEK_OFFSET_RETIRED)
         self._scanner = FrameScanner(SYNC, mip_length, mip_checksum_ok)
 
     @property
@@ -342,7 +345,7 @@ class MipDecoder:
                 week, flags = int.from_bytes(data[8:10], "big"), int.from_bytes(data[10:12], "big")
                 out.update(gps_tow=tow, gps_week=week, gps_flags=flags)
                 if math.isfinite(tow):
-                    out["time_ns"] = (week - self.gps_week_offset) * WEEK_NS + round(tow * 1e9)
+                    out["time_ns"] = week * WEEK_NS + round(tow * 1e9) - gps_offset_ns()   # UTC Unix ns
             elif name is not None and name != "gps_timestamp" and len(data) == 4 * FIELDS[name].count:
                 f = FIELDS[name]
                 values = tuple(float(v) * f.unit for v in np.frombuffer(data, ">f4"))
@@ -384,7 +387,7 @@ _OPTIONS = {
     "fields": "comma-separated fields of the descriptor set in wire order; "
               f"0x80: {', '.join(FIELDS)}; 0x81, 0x91, 0x92: {', '.join(GNSS_FIELDS)}; "
               f"0x82: {', '.join(FILTER_FIELDS)}",
-    "gps_week_offset": "GPS week added to time_ns for the GPS timestamp field, >= 0",
+    "gps_week_offset": "retired: GPS time follows --start-time (UTC) + scene time",
     "gps_flags": "GPS timestamp valid flags 0..0xFFFF (0x1C: initialized, TOW and week valid)",
     "descriptor_set": "MIP data set: 0x80 sensor, 0x81 GNSS (0x91, 0x92: GNSS receiver 1, 2) or 0x82 filter "
                       "data (each with its own fields)",

@@ -13,7 +13,8 @@ bit 13 DOP 28), the layout ArduPilot's VN-300 GNSS packet assumes; older librari
 
 What the encoder can fill, wire units, and the Samples field each comes from:
 
-    TimeStartup     u64 ns          time_ns (negative times saturate to 0, counted)
+    TimeStartup     u64 ns          time_ns - start_ns: since the run's start (the unit's power-up; negative
+                                    times saturate to 0, counted)
     YawPitchRoll    3 x f32 deg     euler, reordered yaw, pitch, roll         default 0, 0, 0
     Quaternion      4 x f32         quat, reordered x, y, z, w (scalar LAST)  default identity
     AngularRate,
@@ -28,12 +29,13 @@ What the encoder can fill, wire units, and the Samples field each comes from:
                                     previous sample), delta_theta (required: no rate x dt stand-in)
     IMU.DeltaVel    3 x f32 m/s     delta_velocity (required)
     Common.DeltaTheta  IMU.DeltaTheta + IMU.DeltaVel
-    TimeGps         u64 ns          time_ns + gps_week_offset weeks (GPS time); Time.GpsTow u64 ns and
-                                    Time/GPS Week u16 split it
+    TimeGps         u64 ns          GPS time of time_ns (UTC Unix ns + 18 leap seconds - the GPS epoch,
+                                    firmware_protocols.gnss_time); Time.GpsTow u64 ns and Time/GPS Week u16
+                                    split it; before 1980-01-06 they clip to 0 (counted)
     TimeUtc, GPS Utc  i8 year-2000, u8 month, day, hour, minute, second, u16 ms: GPS time - 18 leap seconds
     TimeGpsPps,     u64 ns          ns since the last PPS edge, on whole GPS seconds; the SyncIn pin is taken as
     TimeSyncIn                      wired to the PPS, so TimeSyncIn is the same and
-    SyncInCnt       u32             counts the edges since start-up (whole seconds of time_ns); SyncOutCnt 0
+    SyncInCnt       u32             counts the edges since start-up (whole seconds of TimeStartup); SyncOutCnt 0
     TimeStatus, GPS TimeInfo  u8 7 (time of week, week, UTC valid; 0 without any fix) [+ i8 leap seconds 18]
     Common.Position = INS.PosLla  3 x f64 deg, deg, m    position_llh (the INS estimate)   default PX4's home
     Common.Velocity = INS.VelNed  3 x f32 m/s            velocity_ned                     default 0
@@ -78,7 +80,7 @@ import numpy as np
 from firmware_protocols.base import (DecoderStats, EncodeError, Packet, SaturationStats, Samples,
                                      SerialBatch, integration_intervals)
 from firmware_protocols.crc import crc16_ccitt, crc16_ccitt_bytes
-from firmware_protocols.gnss_time import GNSS_DEFAULTS, dops
+from firmware_protocols.gnss_time import GNSS_DEFAULTS, GPS_WEEK_OFFSET_RETIRED, dops, gps_offset_ns
 from firmware_protocols import vectornav_quantities
 from firmware_protocols.registry import FormatInfo, register
 from firmware_protocols.vectornav_common import DEG, SAMPLE_DEFAULTS
@@ -111,9 +113,6 @@ _WIRE_CODE = {"f": 0, "Q": 1, "d": 2, "H": 3, "B": 4}
 # Integers made from a value (extras): u32, u64 (exact below 2^53), i8.
 _VALUE_CODE = {"f": 0, "d": 2, "H": 3, "B": 4, "I": 8, "Q": 9, "b": 10}
 _TIME_CODE = {"startup": 1, "gps": 7, "tow": 5, "week": 6}
-WEEK_NS = 7 * 86400 * 1_000_000_000
-#: the last GPS week whose start fits the int64 nanoseconds the GPS time is computed in (year 2272)
-MAX_GPS_WEEK = (2**63 - 1) // WEEK_NS
 
 
 # Documented defaults for the navigation and status quantities (one row, broadcast), after those of Samples.
@@ -189,7 +188,7 @@ def _derived():
         "gnss_time_info": lambda s, e: np.column_stack(
             (vq.time_valid(s, fix_default(e)), np.full(len(s), float(vectornav_quantities.LEAP_SECONDS)))),
         "since_pps": lambda s, e: vq.since_pps(s.time_ns, e.gps_offset_ns),
-        "sync_in_count": lambda s, e: vq.sync_in_count(s.time_ns),
+        "sync_in_count": lambda s, e: vq.sync_in_count(s.time_ns - s.start_ns),
     }
 
 
@@ -226,7 +225,7 @@ def _q(source, n=3, order=None, scale=1.0, label="", wire="f", time=""):
 
 
 _TIME = (_q("time_ns", 1, wire="Q", time="startup"),)
-# GPS time: time_ns + gps_week_offset weeks, as u64 ns since the GPS epoch (ArduPilot divides it into week
+# GPS time of time_ns (firmware_protocols.gnss_time), as u64 ns since the GPS epoch (ArduPilot divides it into week
 # and time of week), the same split as u64 ns into the week and u16 week.
 _GPS_TIME = (_q("time_ns", 1, wire="Q", time="gps"),)
 _GPS_TOW = (_q("time_ns", 1, wire="Q", time="tow"),)
@@ -452,7 +451,7 @@ def parse_fields(fields) -> Layout:
 
 @jit(cache=True, nogil=True)
 def _pack(out, size, header, items, scales, time_ns, accel, gyro, mag, quat, euler, temp, pres, extra, steps, sat,
-          gps_offset_ns):
+          gps_offset_ns, startup_ns):
     """Write len(time_ns) packets of `size` bytes into `out`. items[j] = (source id, column, wire type
     0 f32 / 1 u64 time / 2 f64 / 3 u16 / 4 u8 / 5 u64 GPS time of week / 6 u16 GPS week / 7 u64 GPS time /
     8 u32 / 9 u64 / 10 i8, the last three from a value) in wire order. Returns the first sample with a
@@ -472,16 +471,15 @@ def _pack(out, size, header, items, scales, time_ns, accel, gyro, mag, quat, eul
             src = items[j, 0]
             kind = items[j, 2]
             if kind == 1 or 5 <= kind <= 7:
+                # TimeStartup counts since the run's start; the GPS times are UTC Unix time + gps_offset_ns (< 0).
+                # `zero` is the time_ns that goes out as 0; earlier ones clip to it (compared first: no overflow)
                 t = time_ns[i]
-                if t < 0:
+                zero = startup_ns if kind == 1 else -gps_offset_ns
+                if t < zero:
                     t = 0
                     sat[j] += 1
-                if kind != 1:
-                    if t > 9223372036854775807 - gps_offset_ns:
-                        t = 9223372036854775807
-                        sat[j] += 1
-                    else:
-                        t += gps_offset_ns
+                else:
+                    t -= zero
                 if kind == 6:
                     week = t // 604800000000000
                     if week > 65535:
@@ -591,20 +589,19 @@ class BinaryEncoder:
     axes_source = "VN-100 User Manual UM001 4.4.3-4.4.5: body frame w.r.t. NED (so x fwd, y right, z down)"
 
 
-    def __init__(self, fields=None, sample_period_s: float | None = None, gps_week_offset: int = 0,
+    def __init__(self, fields=None, sample_period_s: float | None = None, gps_week_offset=None,
                  constants: dict | None = None):
-        """`gps_week_offset`: GPS weeks added to time_ns for the GPS time fields (time_ns counts from the start
-        of week 0 otherwise). `constants`: values for the quantities no Samples field carries (GNSS_CONSTANTS,
-        the INS uncertainties and status), replacing the documented defaults."""
+        """`constants`: values for the quantities no Samples field carries (GNSS_CONSTANTS, the INS uncertainties
+        and status), replacing the documented defaults. `gps_week_offset` is retired (a one-line error naming
+        --start-time): GPS time follows time_ns, UTC since the Unix epoch (firmware_protocols.gnss_time)."""
         self.layout = parse_fields(fields)
         if sample_period_s is not None and not (np.isfinite(sample_period_s) and sample_period_s > 0):
             raise ValueError(f"sample_period_s must be a positive number, got {sample_period_s}")
         self.sample_period_s = sample_period_s
         self._last_time_ns = None
-        if isinstance(gps_week_offset, bool) or not isinstance(gps_week_offset, (int, np.integer)) \
-                or not 0 <= gps_week_offset <= MAX_GPS_WEEK:
-            raise ValueError(f"gps_week_offset: a GPS week 0..{MAX_GPS_WEEK}, got {gps_week_offset!r}")
-        self.gps_offset_ns = int(gps_week_offset) * WEEK_NS
+        if gps_week_offset is not None:
+            raise ValueError(GPS_WEEK_OFFSET_RETIRED)
+        self.gps_offset_ns = gps_offset_ns(vectornav_quantities.LEAP_SECONDS)    # GPS time - time_ns (negative)
         undecodable = [f.key for f in self.layout.fields if not f.quantities]
         if undecodable:
             raise ValueError(f"VectorNav fields: the emulator has no data for {', '.join(undecodable)}")
@@ -675,7 +672,7 @@ class BinaryEncoder:
         arrays, steps = self._columns(samples)
         sat = np.zeros(len(self._items), dtype=np.int64)
         bad = _pack(out, size, self._header, self._items, self._scales, samples.time_ns, *arrays, steps, sat,
-                    self.gps_offset_ns)
+                    self.gps_offset_ns, samples.start_ns)
         if bad >= 0:
             samples.require_finite(self._sources)     # names field and sample
             raise EncodeError(f"non-finite value at sample {bad}")
@@ -793,7 +790,7 @@ register(FormatInfo(
                        f"(default {DEFAULT_FIELDS!r}, PX4's binary output 1)",
              "sample_period_s": "DeltaTheta's dtime in s, > 0, when the samples carry none (None: time since the "
                                 "previous sample)",
-             "gps_week_offset": f"GPS week added to time_ns for the GPS time fields, 0..{MAX_GPS_WEEK}",
+             "gps_week_offset": "retired: GPS time follows --start-time (UTC) + scene time",
              "constants": "values for quantities no sample carries: " + ", ".join(_SETTABLE)
                           + " (e.g. {gnss_num_sats = 9})"},
 ))

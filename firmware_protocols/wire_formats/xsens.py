@@ -36,8 +36,8 @@ Items, units on the wire, source in `Samples`:
 | item               | XDI    | wire                               | from                         |
 |--------------------|--------|------------------------------------|------------------------------|
 | packet_counter     | 0x1020 | u16, +1 per packet, wraps 65535->0 | encoder state                |
-| sample_time_fine   | 0x1060 | u32, 10 kHz ticks, wraps at 2**32  | time_ns // 100 000           |
-| sample_time_coarse | 0x1070 | u32, whole seconds                 | time_ns // 10**9             |
+| sample_time_fine   | 0x1060 | u32, 10 kHz ticks, wraps at 2**32  | (time_ns - start_ns) // 1e5  |
+| sample_time_coarse | 0x1070 | u32, whole seconds                 | (time_ns - start_ns) // 1e9  |
 | quaternion         | 0x2010 | 4 reals (w, x, y, z)               | quat (default identity)      |
 | euler_angles       | 0x2030 | 3 reals roll, pitch, yaw in DEGREES| euler (rad; default zeros)   |
 | baro_pressure      | 0x3010 | u32 Pa                             | pressure_pa (default 101325) |
@@ -78,6 +78,7 @@ with firmware_protocols.wire_formats.microstrain (MIP).
 """
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass
 
@@ -327,6 +328,11 @@ class XsensEncoder:
             extra["utc"] = utc_rows(samples.time_ns, self.gnss)
         if self._wants_pvt:
             extra["gnss_pvt"] = receiver_pvt(samples, self.gnss)
+        if samples.start_ns:
+            # SampleTimeFine / Coarse are the unit's clock since power-up: the run's start (UtcTime and GnssPvtData,
+            # above, took the UTC time_ns)
+            samples = copy.copy(samples)
+            samples.time_ns = samples.time_ns - np.int64(samples.start_ns)
         batch = self._packer.pack(samples, self.saturated, self.packet_counter, extra)
         self.packet_counter = (self.packet_counter + len(samples)) & 0xFFFF
         return batch

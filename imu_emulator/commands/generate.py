@@ -6,7 +6,7 @@ import signal
 import sys
 import threading
 
-from imu_emulator.commands.shared import add_increments_option, load_scene_with_warnings, number
+from imu_emulator.commands.shared import add_increments_option, load_scene_with_warnings, number, start_time
 from imu_emulator.runtime.progress import CompileStatus, Progress
 
 
@@ -22,9 +22,10 @@ def register(subparsers) -> None:
     gen.add_argument("--truth", action="store_true", help="add position, velocity, attitude and body rates "
                      "(and each IMU's realized bias when a bias effect is on)")
     add_increments_option(gen)
-    gen.add_argument("--start-time", type=_start_time, default=None, metavar="ISO8601|now",
-                     help="the instant of scene time 0 in a ROS 2 bag's stamps (\"2026-03-01T12:00:00Z\"; no zone "
-                     "is UTC; default 2024-01-01T00:00:00Z, never 0, which ROS treats as unset)")
+    gen.add_argument("--start-time", type=start_time, default=None, metavar="ISO8601|now",
+                     help="the UTC instant of scene time 0: a ROS 2 bag's stamps are it + scene time, as stream's "
+                     "wire times (\"2026-03-01T12:00:00Z\"; no zone is UTC; now = the wall clock at start; default "
+                     "2024-01-01T00:00:00Z, never 0, which ROS treats as unset)")
     gen.add_argument("--ros-axes", choices=("rep103", "scene"), default="rep103",
                      help="a ROS 2 bag's axes: REP 103 (bodies forward-left-up, world ENU, whatever the scene's "
                      "frame; default) or the scene's own, with frame ids saying so (<imu>_frd, world_ned)")
@@ -34,13 +35,12 @@ def register(subparsers) -> None:
     gen.set_defaults(func=cmd_generate)
 
 
-def _start_time(text: str) -> int:
-    """--start-time as Unix ns; argparse prints the one-line reason of a bad value."""
-    from imu_emulator.output.ros2.conventions import parse_start_time
-    try:
-        return parse_start_time(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+def _resolved(start):
+    """--start-time's value as Unix ns: "now" is the wall clock as the run begins."""
+    if start == "now":
+        import time
+        return time.time_ns()
+    return start
 
 
 def cmd_generate(args) -> int:
@@ -78,7 +78,7 @@ def _generate(args, scene, stopped) -> int:
                      metadata=record.run_metadata(scene) if record.run_metadata else None, conventions=conventions,
                      covariances=variances(scene), frame=scene.frame,
                      attitude_reference=scene.attitude_reference, effects=scene.effects,
-                     companions=scene_companions(scene), start_ns=args.start_time, ros_axes=args.ros_axes,
+                     companions=scene_companions(scene), start_ns=_resolved(args.start_time), ros_axes=args.ros_axes,
                      placements=placements(scene)) as writer:
         check_output(scene, args.output, args.truth, args.allow_large, increments=bool(args.increments))
         attitude = record.attitude    # a ROS Imu message has an orientation field: the sensor frame's attitude

@@ -35,6 +35,18 @@ def number(low: float, high: float, integer: bool = False, zero: bool = False):
     return parse
 
 
+def start_time(text: str):
+    """An argparse type for --start-time: "now" as is (each command decides which instant that is), else ISO 8601
+    as UTC Unix ns (imu_emulator.output.ros2.conventions.parse_start_time); a bad value is argparse's one line."""
+    from imu_emulator.output.ros2.conventions import parse_start_time
+    if text.strip().lower() == "now":
+        return "now"
+    try:
+        return parse_start_time(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def add_increments_option(parser) -> None:
     """--increments [NODES]: the integrated outputs dtheta, dvel (imu_emulator.codegen.increments); 0 when not given."""
     from imu_emulator.codegen.increments import DEFAULT_NODES, MAX_NODES

@@ -1,11 +1,12 @@
 """`imu-emulator stream`: a scene live to ports, buses, UDP or capture files at wall-clock rate."""
 from __future__ import annotations
 
+import argparse
+import math
+import sys
 from dataclasses import replace
 
-import math
-
-from imu_emulator.commands.shared import load_scene_with_warnings, number
+from imu_emulator.commands.shared import load_scene_with_warnings, number, start_time
 
 # Beyond any UART or CAN bus there is, and far from where the numbers stop being exact.
 _MAX_RATE = 100_000_000
@@ -38,7 +39,11 @@ def register(subparsers) -> None:
     p.add_argument("--speed", type=number(1e-6, 1e6, zero=True), default=1.0,
                    help="time factor; 0 = as fast as the link takes")
     p.add_argument("--loop", action="store_true", help="repeat the scene; time keeps increasing")
-    p.add_argument("--epoch-time", action="store_true", help="time fields on the Unix epoch (default: since start)")
+    p.add_argument("--start-time", type=start_time, metavar="ISO8601|now", default=None,
+                   help="the UTC instant of scene time 0: GNSS/UTC fields are it + scene time, fields counting "
+                        "since power-up count from it (\"2026-03-01T12:00:00Z\"; no zone is UTC; \"now\" = the first sample is the "
+                        "wall clock; default 2024-01-01T00:00:00Z, as generate)")
+    p.add_argument("--epoch-time", action="store_true", help=argparse.SUPPRESS)    # deprecated: --start-time now
     p.add_argument("--duration", type=number(1e-9, _MAX_DURATION_S), metavar="SECONDS",
                    help="stop after this much scene time")
     p.add_argument("--count", type=number(1, 10**15, integer=True), help="stop after this many samples")
@@ -81,6 +86,20 @@ def _parse_options(pairs) -> dict:
             raise StreamError(f"--option: expected KEY=VALUE, got {pair!r}")
         options[key] = _option_value(key, value)
     return options
+
+
+def _start(args) -> tuple:
+    """(start, wall clock?) of --start-time and the deprecated --epoch-time (= --start-time now, said in one line)."""
+    from imu_emulator.live.config import StreamError
+    from imu_emulator.output.ros2.conventions import DEFAULT_START_NS
+    if args.epoch_time:
+        if args.start_time not in (None, "now"):
+            raise StreamError("--epoch-time (deprecated) means --start-time now: give one of them")
+        print("warning: --epoch-time is deprecated: use --start-time now", file=sys.stderr, flush=True)
+        return DEFAULT_START_NS, True
+    if args.start_time == "now":
+        return DEFAULT_START_NS, True
+    return (DEFAULT_START_NS if args.start_time is None else args.start_time), False
 
 
 def cmd_stream(args) -> int:
@@ -126,7 +145,9 @@ def _stream(args, stats) -> None:
             configs = [c for c in configs if c.imu == args.imu]
             if not configs:
                 raise StreamError(f"--imu: no [[stream]] for IMU {args.imu!r}")
-    options = RunOptions(speed=args.speed, loop=args.loop, epoch_time=args.epoch_time, duration_s=args.duration,
+    start_ns, wall_clock = _start(args)
+    options = RunOptions(speed=args.speed, loop=args.loop, epoch_time=wall_clock, start_ns=start_ns,
+                         duration_s=args.duration,
                          count=args.count, quiet=args.quiet, allow_overload=args.allow_overload,
                          realtime=args.realtime, stats_json=stats)
     truth = needs_truth(configs)

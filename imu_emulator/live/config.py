@@ -7,6 +7,7 @@ from dataclasses import dataclass, field, replace
 import firmware_protocols
 from imu_emulator.errors import ImuEmulatorError, SceneError
 from imu_emulator.live.transport import TargetOptions
+from imu_emulator.output.ros2.conventions import DEFAULT_START_NS
 
 STREAM_TABLE_KEYS = {"imu", "format", "to", "options", "link", "pace_baud", "bitrate", "data_bitrate", "fd", "device"}
 
@@ -29,7 +30,8 @@ class StreamConfig:
 class RunOptions:
     speed: float = 1.0               # 0 = as fast as the link takes
     loop: bool = False
-    epoch_time: bool = False
+    epoch_time: bool = False         # True: start_ns is the wall clock at the first sample's deadline ("now")
+    start_ns: int = DEFAULT_START_NS     # UTC Unix ns of scene time 0 (--start-time)
     duration_s: float | None = None
     count: int | None = None
     quiet: bool = False

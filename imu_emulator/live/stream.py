@@ -51,6 +51,7 @@ class Stream:
         self.link = {}              # what the link itself reported, read just before closing it
         self._before = None         # (next k, attitude, increment) of the last sample: see _attitude_change
         self.exact_gyro = False     # the gyro senses the true attitude's rate exactly (run_streams)
+        self.start_ns = 0           # UTC Unix ns of the run's scene time 0 (the streamer sets it before sending)
 
     def open(self) -> None:
         self.transport = open_target(self.spec, self.info.kind, self.config.target_options)
@@ -93,7 +94,7 @@ class Stream:
                                     *self.navigation)
         # the unit's own estimate (companion INS) replaces the truth's position and velocity
         samples = reexpress(Samples(time_ns, block.accel[i], block.gyro[i], quat=quat, temperature_c=temperature,
-                                    **{**nav, **companion}, **increments), body, "FRD")
+                                    **{**nav, **companion}, **increments, start_ns=self.start_ns), body, "FRD")
         if self.device is not None:     # a device may be asked for any field its format knows at any moment
             samples.euler = quat_to_euler(samples.quat)
         return samples

@@ -96,9 +96,13 @@ class Streamer:
                 print(f"{stream.config.imu} {stream.config.format} -> {stream.transport.describe()}", flush=True)
             paced = self.options.speed > 0
             start = time.monotonic_ns() + _LEAD_NS
+            # One time base for every wire (firmware_protocols.gnss_time): UTC Unix ns = the run's start + scene time.
+            self._time_offset_ns = int(self.options.start_ns)
             if self.options.epoch_time:
-                # Sample k's time = the wall clock at its ideal deadline.
+                # "now": sample k's time = the wall clock at its ideal deadline.
                 self._time_offset_ns = time.time_ns() + (start - time.monotonic_ns()) - int(round(self.t0_s * 1e9))
+            for stream in self.streams:     # formats whose wire time counts since start subtract it (Samples.start_ns)
+                stream.start_ns = self._time_offset_ns
             producer, blocks = Producer(self.sim, self.rate_hz, self.streams, self.total, self.options.loop,
                                          self._time_offset_ns).start()
             # RT only for paced runs: speed 0 never sleeps, and a busy SCHED_FIFO loop starves the machine.
