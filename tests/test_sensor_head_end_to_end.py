@@ -283,3 +283,112 @@ def test_xsens_mag_baro_and_gnss_pvt(run):
         vel = ref["gnss_velocity_ned"][k]
         assert (pvt["velN"], pvt["velE"], pvt["velD"]) == tuple(round(v * 1e3) for v in vel)       # mm/s, NED
         assert pvt["fixType"] == int(ref["gnss_fix"][k])
+
+
+# --- ENU and NED: one motion, two habits, the same messages ---------------------------------------------------
+
+# The companions on test_axes_at_the_wire's moving scene: vectors of the scene (hard iron, the antenna's lever arm)
+# written in each scene's body axes (FLU for ENU, FRD for NED), the rest equal.
+COMPANIONS = """
+[imu.magnetometer]
+rate_hz = 100
+noise_density = "140 ugauss/sqrt(Hz)"
+turn_on_bias = "2 mgauss"
+hard_iron = {hard_iron}
+[imu.barometer]
+noise = "1.2 Pa"
+bias = "0.5 hPa"
+[imu.gnss]
+rate_hz = 5
+latency_s = "50 ms"
+lever_arm_m = {antenna}
+position_noise = [0.3, 0.3, 0.6]
+velocity_noise = 0.05
+[imu.ins]
+attitude_error = ["0.5 deg", "0.5 deg", "2 deg"]
+position_error = [0.5, 0.5, 1.0]
+velocity_error = 0.05
+"""
+BODY_VECTORS = {"ENU": ('["20 uT", "5 uT", "-3 uT"]', "[0.3, 0.1, 0.2]"),
+                "NED": ('["20 uT", "-5 uT", "3 uT"]', "[0.3, -0.1, -0.2]")}
+FRD_WIRES = (("hil_sensor", "mavlink-hil-sensor", "{ mag_rate_hz = 100 }", "bin"),
+             ("hil_gps", "mavlink-hil-gps", "{}", "bin"),
+             ("dronecan", "dronecan-gnss-compass-baro", "{ mag_rate_hz = 100 }", "log"),
+             ("vectornav", "vectornav-binary", "{ fields = 'imu:pres,mag;gps:fix,poslla,velned' }", "bin"),
+             ("mip_gnss", "microstrain-mip", "{ descriptor_set = 0x81, fields = 'position_llh,velocity_ned' }", "bin"))
+
+
+@pytest.fixture(scope="module")
+def both_frames(tmp_path_factory):
+    from test_axes_at_the_wire import SCENES
+    out = {}
+    for frame, text in SCENES.items():
+        where = tmp_path_factory.mktemp(frame)
+        hard_iron, antenna = BODY_VECTORS[frame]
+        text = text.replace("[scene]\n", "[scene]\nseed = 3\n"
+                            "origin = { lat_deg = 47.397742, lon_deg = 8.545594, height_m = 488.0 }\n")
+        text = text.replace("\n[effects]", COMPANIONS.format(hard_iron=hard_iron, antenna=antenna) + "\n[effects]")
+        for name, fmt, options, suffix in FRD_WIRES:
+            text += (f'\n[[stream]]\nimu = "imu0"\nformat = "{fmt}"\nto = "file:{where / name}.{suffix}"\n'
+                     f"options = {options}\n")
+        (where / "scene.toml").write_text(text)
+        cli("generate", where / "scene.toml", "-o", where / "bag.mcap", "--quiet")
+        cli("stream", where / "scene.toml", "--speed", "0", "--quiet")
+        out[frame] = where
+    return out
+
+
+def ros_messages(path: Path) -> dict:
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    topics = {}
+    with open(path, "rb") as f:
+        for _, channel, message, ros in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            topics.setdefault(channel.topic, []).append((message.log_time, ros))
+    return topics
+
+
+def fields(msg, prefix="") -> dict:
+    """Every leaf field of a decoded ROS message, by its dotted path."""
+    if hasattr(msg, "__slots__"):
+        out = {}
+        for name in msg.__slots__:
+            out.update(fields(getattr(msg, name), f"{prefix}{name}."))
+        return out
+    if isinstance(msg, (list, tuple)) and msg and hasattr(msg[0], "__slots__"):
+        out = {}
+        for i, item in enumerate(msg):
+            out.update(fields(item, f"{prefix}{i}."))
+        return out
+    return {prefix.rstrip("."): msg}
+
+
+def test_enu_and_ned_scenes_give_the_same_ros2_messages(both_frames):
+    """REP 103 / 105: both bags carry FLU bodies in ENU; every topic, stamp and field equal. The two kernels'
+    attitudes differ in the last bits of a double (test_axes_at_the_wire), so the orientation and the magnetic field
+    turned by it agree to a few ulp; everything else exactly."""
+    enu, ned = ros_messages(both_frames["ENU"] / "bag.mcap"), ros_messages(both_frames["NED"] / "bag.mcap")
+    assert set(enu) == set(ned) >= {"/imu/imu0", "/imu/imu0/mag", "/imu/imu0/pressure", "/imu/imu0/fix"}
+    assert len(enu["/imu/imu0"]) == 400 and len(enu["/imu/imu0/fix"]) == 10
+    for topic in enu:
+        assert len(enu[topic]) == len(ned[topic]), topic
+        for (t_enu, a), (t_ned, b) in zip(enu[topic], ned[topic]):
+            assert t_enu == t_ned
+            fa, fb = fields(a), fields(b)
+            assert fa.keys() == fb.keys()
+            for key, value in fa.items():
+                if key.startswith("orientation.") or key.startswith("magnetic_field."):
+                    assert value == pytest.approx(fb[key], rel=0, abs=1e-15 if "orientation" in key else 1e-19), \
+                        (topic, key)
+                elif isinstance(value, float) or isinstance(value, np.ndarray):
+                    assert np.array_equal(value, fb[key]), (topic, key)
+                else:
+                    assert value == fb[key], (topic, key)
+
+
+@pytest.mark.parametrize("name", [name for name, *_ in FRD_WIRES])
+def test_enu_and_ned_scenes_give_the_same_companion_bytes_on_frd_wires(both_frames, name):
+    suffix = dict((n, s) for n, _, _, s in FRD_WIRES)[name]
+    enu = (both_frames["ENU"] / f"{name}.{suffix}").read_bytes()
+    ned = (both_frames["NED"] / f"{name}.{suffix}").read_bytes()
+    assert len(enu) > 400 and enu == ned          # ten fixes at least, or 400 samples
