@@ -392,3 +392,38 @@ def test_enu_and_ned_scenes_give_the_same_companion_bytes_on_frd_wires(both_fram
     enu = (both_frames["ENU"] / f"{name}.{suffix}").read_bytes()
     ned = (both_frames["NED"] / f"{name}.{suffix}").read_bytes()
     assert len(enu) > 400 and enu == ned          # ten fixes at least, or 400 samples
+
+
+@pytest.mark.parametrize("preset, descriptor_set, period", [("ardupilot", 0x91, 100), ("ardupilot-gx5", 0x81, 50)])
+def test_microstrain_device_sends_each_solution_once_at_no_more_than_its_rate(run, preset, descriptor_set, period):
+    """The device's GNSS set follows the receiver (gnss_new) under the preset's rate (GQ7 2 Hz: every 100th sample of
+    200 Hz; GX5-45 4 Hz: every 50th): a solution is never sent twice, packets are at least a period apart and
+    follow within one solution interval (40 samples of the 5 Hz receiver) of the period's end, each carrying the
+    newest solution then."""
+    from firmware_protocols import Samples, create_device
+    _, ref = run
+    samples = Samples(np.rint(ref["t"] * 1e9).astype(np.int64), ref["accel"], ref["gyro"], mag=ref["mag"],
+                      pressure_pa=ref["pressure_pa"], gnss_llh=ref["gnss_llh"],
+                      gnss_velocity_ned=ref["gnss_velocity_ned"], gnss_fix=ref["gnss_fix"], gnss_new=ref["gnss_new"])
+    device = create_device("microstrain-mip", RATE, preset=preset)
+    sent = []
+    for k in range(len(samples)):
+        data = device.output(samples, k)
+        pos = 0
+        while pos < len(data):
+            end = pos + 4 + data[pos + 3] + 2
+            if data[pos + 2] == descriptor_set:
+                (packet,) = mip_packets(data[pos:end], descriptor_set)
+                sent.append((k, struct.unpack(">3d", packet[0x03][:24])))
+            pos = end
+    new = new_solutions(ref)
+    ticks = [k for k, _ in sent]
+    assert ticks[0] == new[0]                                   # the first solution at once
+    assert all(b - a >= period for a, b in zip(ticks, ticks[1:]))
+    assert all(b - a <= period + 40 for a, b in zip(ticks, ticks[1:]))
+    # the solution each packet carries (the newest at its sample; in the outage the receiver holds its position,
+    # so solutions are told apart by their arrival, not their values): never the same twice
+    carried = np.searchsorted(new, ticks, side="right") - 1
+    assert carried.min() >= 0 and len(set(carried.tolist())) == len(carried)
+    for k, llh in sent:
+        assert llh == tuple(ref["gnss_llh"][k])               # the newest solution at that sample
