@@ -71,6 +71,17 @@ def run(tmp_path_factory):
     return out, ref
 
 
+def test_the_reference_file_states_each_companion_array_s_units(run):
+    """The NPZ's "units" line of each array names that array's own units (the GNSS keys are 3, 3, 1, 1 wide)."""
+    _, ref = run
+    lines = {line.split(":")[0]: line for line in ref["units"]}
+    assert lines["mag"].startswith("mag: gauss (")
+    assert lines["pressure_pa"].startswith("pressure_pa: Pa (") and "degC" in lines["baro_temperature_c"]
+    assert lines["gnss_llh"].startswith("gnss_llh: deg, m (GNSS antenna latitude")
+    assert lines["gnss_velocity_ned"].startswith("gnss_velocity_ned: m/s (GNSS velocity north")
+    assert lines["gnss_fix"].startswith("gnss_fix:  (fix type") and lines["gnss_new"].startswith("gnss_new:  (1 ")
+
+
 def new_solutions(ref) -> np.ndarray:
     new = np.flatnonzero(ref["gnss_new"] != 0)
     # 5 Hz receiver over 3 s, every solution reported (those in the outage without a fix)
