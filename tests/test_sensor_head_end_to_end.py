@@ -438,3 +438,39 @@ def test_microstrain_device_sends_each_solution_once_at_no_more_than_its_rate(ru
     assert carried.min() >= 0 and len(set(carried.tolist())) == len(carried)
     for k, llh in sent:
         assert llh == tuple(ref["gnss_llh"][k])               # the newest solution at that sample
+
+
+def test_mavlink_device_carries_the_head_on_one_link(run):
+    """The MAVLink device with also= (what a pty or UDP stream runs): HIL_SENSOR every sample, HIL_GPS at each new
+    solution and SCALED_PRESSURE at the barometer's rate on one sequence, the same fields as the encoders'."""
+    from firmware_protocols import Samples, create_device
+    out, ref = run
+    samples = Samples(np.rint(ref["t"] * 1e9).astype(np.int64), ref["accel"], ref["gyro"], mag=ref["mag"],
+                      pressure_pa=ref["pressure_pa"], temperature_c=ref["baro_temperature_c"],
+                      gnss_llh=ref["gnss_llh"], gnss_velocity_ned=ref["gnss_velocity_ned"], gnss_fix=ref["gnss_fix"],
+                      gnss_new=ref["gnss_new"], gnss_age_s=np.full(600, LATENCY_US / 1e6))   # at each new solution
+    device = create_device("mavlink-hil-sensor", RATE, also="mavlink-hil-gps,mavlink-scaled-pressure",
+                           mag_rate_hz=100.0, baro_rate_hz=50.0)
+    messages = mavlink2.MAVLink(None).parse_buffer(b"".join(device.output(samples, k) for k in range(600)))
+    kinds = [m.get_type() for m in messages]
+    assert kinds.count("HIL_SENSOR") == 600 and kinds.count("SCALED_PRESSURE") == 150
+    assert kinds.count("HIL_GPS") == len(new_solutions(ref)) and kinds.count("HEARTBEAT") == 3
+    seqs = [m.get_seq() for m in messages]
+    assert all((b - a) % 256 == 1 for a, b in zip(seqs, seqs[1:]))
+    streamed = {kind: [m.to_dict() for m in mavlink(out / f"{name}.bin")]
+                for kind, name in (("HIL_SENSOR", "hil_sensor"), ("HIL_GPS", "hil_gps"),
+                                   ("SCALED_PRESSURE", "scaled_pressure"))}
+    for kind, want in streamed.items():
+        got = [m.to_dict() for m in messages if m.get_type() == kind]
+        assert len(got) == len(want), kind
+        for k, (a, b) in enumerate(zip(got, want)):
+            # the NPZ has no column for the differential pressure (HIL_SENSOR bit 10) nor the receiver's DOPs and
+            # satellites (HIL_GPS eph, epv, satellites_visible): those are taken from the stream
+            if kind == "HIL_SENSOR":
+                a = {**a, "diff_pressure": b["diff_pressure"],
+                     "fields_updated": a["fields_updated"] & ~0x400 | b["fields_updated"] & 0x400}
+            if kind == "HIL_GPS":
+                a = {**a, **{key: b[key] for key in ("eph", "epv", "satellites_visible")}}
+            if kind == "SCALED_PRESSURE":
+                a = {**a, **{key: b[key] for key in ("press_diff", "temperature_press_diff")}}
+            assert a == b, (kind, k, {key: (a[key], b[key]) for key in a if a[key] != b[key]})
