@@ -12,7 +12,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import dronecan
 import numpy as np
 import pytest
 from dronecan.transport import Frame, Transfer

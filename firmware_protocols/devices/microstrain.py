@@ -48,7 +48,8 @@ import struct
 from firmware_protocols.base import Samples
 from firmware_protocols.devices.base import Device, SinceLastOutput, single
 from firmware_protocols.wire_formats.microstrain import (DATA_SETS, DEFAULT_FIELDS, FILTER_SET, GNSS_RECEIVER_1,
-                                                         GNSS_RECEIVER_2, GNSS_SET, GNSS_SETS, SENSOR_DATA_SET, MipEncoder,
+                                                         GNSS_RECEIVER_2, GNSS_SET, GNSS_SETS, SENSOR_DATA_SET,
+                                                         MipEncoder,
                                                          fletcher16, mip_checksum_ok, mip_length)
 from firmware_protocols.packing import FrameScanner
 from firmware_protocols.registry import attach_device

@@ -85,9 +85,9 @@ class _Magnetometer(Runner):
             sigma = np.asarray(v["noise_density"]) * np.sqrt(v["rate_hz"])
             for axis in range(3):
                 if sigma[axis]:
-                    measured[:, axis] += self.frd[axis] * sigma[axis] * normals(self.seed, self.m, f"magnetometer.noise.{axis}",
-                                                               int(j[at[0]]), int(j[at[-1]] - j[at[0]] + 1))[
-                                                                   j[at] - j[at[0]]]
+                    draws = normals(self.seed, self.m, f"magnetometer.noise.{axis}", int(j[at[0]]),
+                                    int(j[at[-1]] - j[at[0]] + 1))[j[at] - j[at[0]]]
+                    measured[:, axis] += self.frd[axis] * sigma[axis] * draws
             full_scale = np.asarray(v["range"])
             if full_scale.any():
                 limit = np.where(full_scale > 0, full_scale, np.inf)
