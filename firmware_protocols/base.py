@@ -124,6 +124,12 @@ class Samples:
               for name in _FIELD_WIDTHS}
         return Samples(self.time_ns[start:stop], **kw, start_ns=self.start_ns)
 
+    def rows(self, index: np.ndarray) -> "Samples":
+        """The samples at `index` (an integer array), as a block of their own: what an encoder that sends only
+        at some samples (a GNSS message on each new solution) packs."""
+        kw = {name: (None if getattr(self, name) is None else getattr(self, name)[index]) for name in _FIELD_WIDTHS}
+        return Samples(self.time_ns[index], **kw, start_ns=self.start_ns)
+
     def field_or(self, name: str, default) -> np.ndarray:
         """The named field, or `default` broadcast to the block's shape."""
         value = getattr(self, name)

@@ -55,8 +55,8 @@ def _values(name: str, **keys) -> dict:
     return companion_specs({name: keys}, "imu[0]")[name]
 
 
-def _scene(rate_hz: float, seed: int = 11, t0: float = 0.0):
-    return SimpleNamespace(seed=seed, t0_s=t0, rate_hz=rate_hz)
+def _scene(rate_hz: float, seed: int = 11, t0: float = 0.0, frame: str = "NED"):
+    return SimpleNamespace(seed=seed, t0_s=t0, rate_hz=rate_hz, frame=frame)
 
 
 def _truth(s, rate_hz, llh=None, v_ned=None, c_ns=None, c_nb=None, omega=None) -> Truth:

@@ -429,7 +429,8 @@ def test_mag_baro_and_gnss_pvt_read_as_ardupilot_does():
     batch = encoder.encode(samples)
     for i in range(n):
         data = ap_parse_mtdata2(batch.packet(i))
-        assert list(data["magneticField"]) == [float(np.float32(v / reference)) for v in samples.mag[i]]
+        # the MTi's sensor frame is forward-left-up (Samples are FRD): the encoder turns the field at its edge
+        assert list(data["magneticField"]) == [float(np.float32(v / reference)) for v in samples.mag[i] * FLU]
         assert data["barometricPressure"] == round(samples.pressure_pa[i])
         pvt = data["gnssPvtData"]
         llh, v = samples.gnss_llh[i], samples.gnss_velocity_ned[i]

@@ -30,7 +30,10 @@ a model name containing GX5 numbers like a 3DM-GX5-45, others like a GQ7).
 
 The base rate of every data set is the scene's sample rate (the emulator has no other), so a decimation d
 sends the field every d-th sample; fields of one set due at the same sample share one packet, in the
-configured order. Data flow only while the device is not idle and the set's stream is enabled. A
+configured order. A GNSS set (0x81, 0x91, 0x92) follows the receiver instead when the samples say when its
+solutions arrive (gnss_new): a new solution goes out at once unless the set's period (its smallest decimation) has
+not passed since the last packet, then when it has, so each solution is sent once, never repeated, at no more
+than the configured rate. Data flow only while the device is not idle and the set's stream is enabled. A
 field the emulator cannot produce is NACKed with 0x03 (invalid parameter) as a device does for a field it
 lacks; an unknown command with 0x01; a packet with a bad checksum with 0x02 (echoing the first field's
 descriptor; false syncs inside a packet just NACKed are not answered again); a command whose reply would
@@ -39,12 +42,14 @@ with 0x03. Bytes outside packets are ignored and counted.
 """
 from __future__ import annotations
 
+import copy
 import struct
 
 from firmware_protocols.base import Samples
 from firmware_protocols.devices.base import Device, SinceLastOutput, single
 from firmware_protocols.wire_formats.microstrain import (DATA_SETS, DEFAULT_FIELDS, FILTER_SET, GNSS_RECEIVER_1,
-                                                         GNSS_RECEIVER_2, GNSS_SET, SENSOR_DATA_SET, MipEncoder,
+                                                         GNSS_RECEIVER_2, GNSS_SET, GNSS_SETS, SENSOR_DATA_SET,
+                                                         MipEncoder,
                                                          fletcher16, mip_checksum_ok, mip_length)
 from firmware_protocols.packing import FrameScanner
 from firmware_protocols.registry import attach_device
@@ -89,6 +94,13 @@ PRESETS = {
                       "gyro, mag, pressure, quaternion) 50 Hz, GNSS 0x81 4 Hz, filter 0x82 (state 2 running, "
                       "position, velocity) 50 Hz"),
 }
+
+
+def _held_solution(one: Samples) -> Samples:
+    """The sample without its gnss_new mark (a copy): the receiver's solution it holds, sent now."""
+    held = copy.copy(one)
+    held.gnss_new = None
+    return held
 
 
 def _decimation(rate_hz: float, wanted_hz: float) -> int:
@@ -157,6 +169,7 @@ class MipDevice(Device):
         self.enabled = {k: True for k in DATA_SETS}
         self.idle = False
         self.tick = 0
+        self._gnss = {}                # GNSS set -> (a solution waiting to be sent, tick of the last packet)
         self.increments = SinceLastOutput()
         self._encoders: dict = {}
         self._scanner = FrameScanner(b"\x75\x65", mip_length, mip_checksum_ok)   # as the decoder finds packets
@@ -185,13 +198,27 @@ class MipDevice(Device):
         for descriptor_set, entries in self.formats.items():
             if not self.enabled[descriptor_set]:
                 continue
-            due = tuple(name for name, decimation in entries if tick % decimation == 0)
+            solution = descriptor_set in GNSS_SETS and samples.gnss_new is not None
+            if solution:
+                due = self._gnss_due(descriptor_set, entries, tick, samples.gnss_new[i] != 0)
+            else:
+                due = tuple(name for name, decimation in entries if tick % decimation == 0)
             if due:
                 one = one or self.increments.attach(single(samples, i))
                 encoder = self._encoder(descriptor_set, due)
-                parts.append(encoder.encode(one).data)
+                # the device decided when: the encoder sends this sample's held solution whatever its gnss_new
+                parts.append(encoder.encode(_held_solution(one) if solution else one).data)
                 self.increments.sent(encoder)
         return b"".join(parts)
+
+    def _gnss_due(self, descriptor_set: int, entries: list, tick: int, new: bool) -> tuple:
+        pending, last = self._gnss.get(descriptor_set, (False, None))
+        pending = pending or new
+        if not entries or not pending or (last is not None and tick - last < min(d for _, d in entries)):
+            self._gnss[descriptor_set] = (pending, last)
+            return ()
+        self._gnss[descriptor_set] = (False, tick)
+        return tuple(name for name, _ in entries)
 
     # - input -
     def _receive(self, data: bytes, now_ns: int) -> list:
@@ -266,6 +293,7 @@ class MipDevice(Device):
             self.formats = {k: list(v) for k, v in self._startup.items()}
             self.enabled = {k: True for k in DATA_SETS}
             self.idle = False
+            self._gnss = {}
         elif command == 0x03:
             return ACK_OK, [(0x81, self.info)]
         elif command == 0x04:

@@ -42,7 +42,6 @@ packed at a time here: these messages are sent at GNSS/baro rates or by devices 
 """
 from __future__ import annotations
 
-import dataclasses
 import functools
 import time
 
@@ -254,7 +253,7 @@ class MavlinkNavEncoder:
         due = np.flatnonzero(self._due(samples))
         # only what is sent is checked (a GNSS message between fixes or a pressure between readings is not)
         samples.require_finite(_INPUTS[self.spec.source] + ("gyro",), None if len(due) == n else due)
-        picked = samples if len(due) == n else _rows(samples, due)
+        picked = samples if len(due) == n else samples.rows(due)
         payloads = np.zeros(len(due), dtype=self.spec.dtype)
         for name, values in self.spec.fill(self, picked).items():
             if payloads.dtype[name].kind == "f":
@@ -274,15 +273,6 @@ class MavlinkNavEncoder:
         offsets = np.zeros(n + 1, dtype=np.int64)
         np.cumsum(sizes, out=offsets[1:])
         return SerialBatch(b"".join(frames), offsets)
-
-
-_OPTIONAL = tuple(f.name for f in dataclasses.fields(Samples) if f.name not in ("time_ns", "start_ns"))
-
-
-def _rows(samples: Samples, index: np.ndarray) -> Samples:
-    """The samples at `index` (a block of them)."""
-    kw = {name: (None if getattr(samples, name) is None else getattr(samples, name)[index]) for name in _OPTIONAL}
-    return Samples(samples.time_ns[index], **kw, start_ns=samples.start_ns)
 
 
 _COMMON_OPTIONS = {

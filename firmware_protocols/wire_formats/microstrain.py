@@ -36,7 +36,8 @@ GNSS and filter sets (`descriptor_set`, tables GNSS_FIELDS and FILTER_FIELDS bel
 receiver's solution (Samples.gnss_*: fix, satellites, accuracies, DOPs), the filter fields the unit's estimate
 (position_llh, velocity_ned, quat, euler and their *_sigma) with the filter state its model family reports for
 Samples.ins_mode. Fields the block lacks take the documented defaults (a healthy receiver under open sky, a
-tracking filter, PX4 SITL's home position).
+tracking filter, PX4 SITL's home position). A GNSS set's packet goes out only at the samples where a new solution
+arrived (gnss_new), as the receiver reports each solution once; at every sample when the block has no gnss_new.
 """
 from __future__ import annotations
 
@@ -136,6 +137,7 @@ GNSS_FIELDS = {
     "gps_time": Field(0x09, "time_ns", 3),
     "gps_timestamp": Field(0xD3, "time_ns", 3),
 }
+GNSS_SETS = (GNSS_SET, GNSS_RECEIVER_1, GNSS_RECEIVER_2)
 DATA_SETS = {SENSOR_DATA_SET: FIELDS, GNSS_SET: GNSS_FIELDS, FILTER_SET: FILTER_FIELDS,
              GNSS_RECEIVER_1: GNSS_FIELDS, GNSS_RECEIVER_2: GNSS_FIELDS}
 GPS_FLAGS_DEFAULT = 0x1C
@@ -272,6 +274,20 @@ class MipEncoder:
         return self._packer.packet_size
 
     def encode(self, samples: Samples) -> SerialBatch:
+        """One packet per sample; a GNSS set's only at the samples where the receiver has a new solution
+        (gnss_new), as a receiver reports each solution once (every sample when the block has no gnss_new)."""
+        if self.descriptor_set not in GNSS_SETS or samples.gnss_new is None:
+            return self._encode(samples)
+        samples.require_finite(("gnss_new",))
+        due = np.flatnonzero(samples.gnss_new != 0)
+        batch = self._encode(samples.rows(due))
+        sizes = np.zeros(len(samples), dtype=np.int64)
+        sizes[due] = np.diff(batch.offsets)
+        offsets = np.zeros(len(samples) + 1, dtype=np.int64)
+        np.cumsum(sizes, out=offsets[1:])
+        return SerialBatch(batch.data, offsets)
+
+    def _encode(self, samples: Samples) -> SerialBatch:
         extra = None
         if self._solution_time and samples.gnss_age_s is not None:
             # a GNSS set's GPS time is its solution's time of validity: the sample time less the solution's age

@@ -66,8 +66,12 @@ messagepublishers/timereferencepublisher.h) converts it with SAMPLE_TIME_FINE_HZ
 
 MagneticField is not in gauss: the same driver (magneticfieldpublisher.h) says "Sensor gives normalized
 magnetic field vector with unknown units"; Xsens calls them arbitrary units, normalised to the field
-strength where the device was calibrated. `mag_reference_gauss` is the field strength that reads 1.0
-(default 0.5 G, a mid-latitude Earth field); the decoder multiplies back by the same option.
+strength where the device was calibrated (MT Low-Level Communication Protocol, MagneticField: "a.u.",
+normalised to the field where the magnetic field mapping was done). `mag_reference_gauss` is the field strength
+that reads 1.0. Its default, 0.49 G, is what the drivers assume: ArduPilot's AP_ExternalAHRS_Xsens.cpp
+(ArduPilot/ardupilot 1056c40f, publish_sensor_data: "1 a.u = 0.49Gauss", A_U_TO_MILLIGAUSS = 490) multiplies
+by exactly that, so with the default the compass ArduPilot reads equals the samples' field. The decoder
+multiplies back by the same option.
 
 "reals" are float32 / 12.20 / 16.32 / float64 by the `precision` option. Values outside a type's range
 saturate to the nearest representable value and are counted in `encoder.saturated` (for float32 that is
@@ -106,6 +110,8 @@ EXTENDED_LENGTH = 0xFF
 MAX_DATA_LENGTH = 8192 - 7          # XS_MAXDATALEN in xsmessage.h
 TICKS_PER_SECOND = 10_000           # SampleTimeFine
 NS_PER_TICK = 1_000_000_000 // TICKS_PER_SECOND
+#: gauss that read 1.0 a.u. of MagneticField: ArduPilot's A_U_TO_MILLIGAUSS = 490 (see the module docstring)
+MAG_REFERENCE_GAUSS = 0.49
 
 PRECISIONS = {"float32": (0, KIND_F32, 4), "fp1220": (1, KIND_FP1220, 4),
               "fp1632": (2, KIND_FP1632, 6), "float64": (3, KIND_F64, 8)}
@@ -223,7 +229,7 @@ class XsensEncoder:
 
 
     def __init__(self, items=DEFAULT_ITEMS, precision: str = "float32", frame: str = "ENU",
-                 mag_reference_gauss: float = 0.5, status_word: int = 0, packet_counter_start: int = 0,
+                 mag_reference_gauss: float = MAG_REFERENCE_GAUSS, status_word: int = 0, packet_counter_start: int = 0,
                  precisions: dict | None = None, gnss: dict | None = None):
         """`gnss`: settings of the GnssPvtData record (firmware_protocols.gnss_time.GNSS_DEFAULTS)."""
         self.items = parse_names(items, ITEMS, "items")
@@ -385,7 +391,7 @@ class XsensDecoder:
     """Bytes -> Packets. MTData2 messages become kind "mtdata2" with SI fields; any other Xbus message
     (acks, errors) becomes kind "xbus" with its message id and raw data. Never raises."""
 
-    def __init__(self, mag_reference_gauss: float = 0.5):
+    def __init__(self, mag_reference_gauss: float = MAG_REFERENCE_GAUSS):
         self.mag_reference_gauss = float(mag_reference_gauss)
         self._scanner = FrameScanner(bytes((PREAMBLE, BUS_MASTER)), xbus_length, xbus_checksum_ok)
 
@@ -476,7 +482,7 @@ _OPTIONS = {
     "precisions": "per-item precision overriding `precision`, e.g. {acceleration = 'fp1632'}",
     "frame": "ENU, NED or NWU: declared in the orientation and velocity XDIs; attitude and velocity are "
              "converted to it",
-    "mag_reference_gauss": "field strength in gauss that reads 1.0 arbitrary unit, > 0",
+    "mag_reference_gauss": "field strength in gauss that reads 1.0 arbitrary unit, > 0 (default 0.49, ArduPilot's)",
     "status_word": "constant StatusWord value 0..0xFFFFFFFF",
     "packet_counter_start": "first PacketCounter value 0..65535; wraps 65535 -> 0",
     "gnss": "GnssPvtData / UtcTime settings (firmware_protocols.gnss_time.GNSS_DEFAULTS), e.g. {num_sats = 9}",

@@ -14,7 +14,10 @@ Measurement, in the sensor's axes, at `rate_hz` and held between updates:
     m = S (C_sn^T B_ned) + hard_iron + b_turn_on + noise,   then clipped to +-range, rounded to resolution
 where S is the soft-iron matrix (identity when none), b_turn_on is drawn once per run (turn_on_bias, 1 sigma) and
 the noise is white with density noise_density (sigma = density sqrt(rate_hz) per update). Gauss: 1 G = 1e-4 T,
-the unit Samples.mag and the wire formats' fields start from.
+the unit Samples.mag and the wire formats' fields start from. The random draws (noise, turn-on bias) belong to the
+part's own forward-right-down axes: an ENU scene's sensor axes are forward-left-up, so its y and z draws are
+negated, and the same motion written as an ENU or a NED scene reads the same field, noise included (the
+parameters themselves, hard_iron, soft_iron, are in the scene's sensor axes, as every vector of the scene).
 """
 from __future__ import annotations
 
@@ -61,9 +64,11 @@ class _Magnetometer(Runner):
     def __init__(self, scene, m: int, values: dict):
         super().__init__()
         self.seed, self.m, self.v = scene.seed, m, values
+        # the draws' signs in the scene's sensor axes: forward-right-down draws seen in forward-left-up axes
+        self.frd = np.array([1.0, -1.0, -1.0]) if scene.frame == "ENU" else np.ones(3)
         self.soft = np.asarray(values["soft_iron"], dtype=float)
-        self.offset = np.asarray(values["hard_iron"], dtype=float) + np.asarray(values["turn_on_bias"]) * np.array(
-            [normals(scene.seed, m, f"magnetometer.turn_on.{axis}", 0, 1)[0] for axis in range(3)])
+        self.offset = np.asarray(values["hard_iron"], dtype=float) + np.asarray(values["turn_on_bias"]) * self.frd * (
+            np.array([normals(scene.seed, m, f"magnetometer.turn_on.{axis}", 0, 1)[0] for axis in range(3)]))
         self.last_j = -1
         self.last = np.zeros(3)
 
@@ -80,9 +85,9 @@ class _Magnetometer(Runner):
             sigma = np.asarray(v["noise_density"]) * np.sqrt(v["rate_hz"])
             for axis in range(3):
                 if sigma[axis]:
-                    measured[:, axis] += sigma[axis] * normals(self.seed, self.m, f"magnetometer.noise.{axis}",
-                                                               int(j[at[0]]), int(j[at[-1]] - j[at[0]] + 1))[
-                                                                   j[at] - j[at[0]]]
+                    draws = normals(self.seed, self.m, f"magnetometer.noise.{axis}", int(j[at[0]]),
+                                    int(j[at[-1]] - j[at[0]] + 1))[j[at] - j[at[0]]]
+                    measured[:, axis] += self.frd[axis] * sigma[axis] * draws
             full_scale = np.asarray(v["range"])
             if full_scale.any():
                 limit = np.where(full_scale > 0, full_scale, np.inf)

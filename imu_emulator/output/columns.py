@@ -37,10 +37,17 @@ class Group:
     keys: tuple[str, ...]
     columns: tuple[Column, ...]
     in_companion: bool = False     # read from SampleBlock.companion (per IMU {field: values}), NaN where absent
+    widths: tuple[int, ...] | None = None      # columns per key when the keys' widths differ (else an equal split)
 
     @property
     def names(self) -> tuple[str, ...]:
         return tuple(column.name for column in self.columns)
+
+    def key_columns(self) -> list[tuple[str, tuple[Column, ...]]]:
+        """Each key with the columns its array holds, in order."""
+        widths = self.widths or (len(self.columns) // len(self.keys),) * len(self.keys)
+        bounds = np.cumsum((0,) + tuple(widths)).tolist()
+        return [(key, self.columns[bounds[i]:bounds[i + 1]]) for i, key in enumerate(self.keys)]
 
     def arrays(self, block) -> list[np.ndarray]:
         """The group's values in a block: per IMU (n_imu, n, k), shared (n, k)."""
@@ -104,7 +111,8 @@ GNSS = Group("gnss", True, False, ("gnss_llh", "gnss_velocity_ned", "gnss_fix", 
               Column("gnss_vn", "m/s", "GNSS velocity north"), Column("gnss_ve", "m/s", "GNSS velocity east"),
               Column("gnss_vd", "m/s", "GNSS velocity down"),
               Column("gnss_fix", "", "fix type: 0 none, 3 3D"),
-              Column("gnss_new", "", "1 where a new solution arrived at this sample")), in_companion=True)
+              Column("gnss_new", "", "1 where a new solution arrived at this sample")), in_companion=True,
+             widths=(3, 3, 1, 1))
 COMPANION_GROUPS = (MAGNETOMETER, BAROMETER, GNSS)
 
 

@@ -86,9 +86,7 @@ def unit_lines(layout) -> dict[str, str]:
              "quat": "quat: 1 (attitude sensor -> navigation, scalar first)",
              "alpha_body": "alpha_body: rad/s^2 (angular acceleration of the body, body frame)"}
     for group in layout.groups():
-        per_key = len(group.columns) // len(group.keys)
-        for i, key in enumerate(group.keys):
-            columns = group.columns[i * per_key:(i + 1) * per_key]
+        for key, columns in group.key_columns():
             units = ", ".join(dict.fromkeys(c.unit for c in columns))
             what = re.sub(r", [xyz]$", "", columns[0].what)         # the quantity, not its first axis
             lines[key] = f"{key}: {units} ({what})"

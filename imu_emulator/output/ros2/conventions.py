@@ -74,8 +74,11 @@ class Axes:
 
     def quaternions(self, q: np.ndarray) -> np.ndarray:
         """(n, 4) scalar-first attitudes (scene body or sensor -> navigation) -> (n, 4) x, y, z, w of the bag's
-        body -> the bag's world: q_world (x) q (x) q_body^-1 as one 4x4 matrix (both factors are constant)."""
-        return q @ self._quaternion_map
+        body -> the bag's world: q_world (x) q (x) q_body^-1 as one 4x4 matrix (both factors are constant).
+        q and -q are one attitude; the bag gets the one with w >= 0, so the same motion written as an ENU or a NED
+        scene gives the same message (the frame change's quaternions would otherwise flip the sign of one)."""
+        out = q @ self._quaternion_map
+        return np.where(out[..., 3:] < 0, -out, out)
 
     def rotation(self, matrix: np.ndarray) -> np.ndarray:
         """A rotation between two scene-body frames (mounting: sensor -> body) in the bag's body axes."""
