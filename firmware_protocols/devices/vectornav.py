@@ -61,7 +61,8 @@ from firmware_protocols.registry import attach_device
 from firmware_protocols.vectornav_common import sentence, verify_line
 from firmware_protocols.wire_formats.vectornav_ascii import AsciiEncoder
 from firmware_protocols.wire_formats.vectornav_binary import (_FIELDS, DEFAULT_FIELDS, BinaryEncoder,
-                                                              _layout_from_selection, parse_fields)
+                                                              _layout_from_selection, every_field_layout,
+                                                              parse_fields)
 
 DEFAULT_MODEL = "VN-100T-CR"
 ERR_CHECKSUM, ERR_COMMAND, ERR_FEW, ERR_MANY, ERR_PARAMETER, ERR_REGISTER = 3, 4, 5, 6, 7, 8
@@ -267,6 +268,11 @@ class VectorNavDevice(Device):
         return attitude.increments_in_reference(quat, samples.delta_theta[i], samples.delta_velocity[i])
 
     # - input -
+    def warm_up(self, samples: Samples) -> None:
+        """Every binary field a driver may ask for (register 75-77), encoded once: the derived quantities' compiled
+        code (vectornav_quantities) is then loaded before the first deadline, not at the driver's write."""
+        BinaryEncoder(every_field_layout(samples.delta_theta is not None), **self._encoding).encode(samples)
+
     def _receive(self, data: bytes, now_ns: int) -> list:
         """Lines out of the byte stream in one pass: positions move forward and the buffer is cut once, since
         cutting or searching from its start per line is quadratic in a flood of lines (`$VNRRG,` x 128 KiB: 42 s).
