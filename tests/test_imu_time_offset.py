@@ -1,6 +1,8 @@
 """[[imu]] time_offset_s: added to that IMU's time stamps in every output that carries stamps (CSV, NPZ, MCAP,
 wire formats), never to the samples themselves. Expected stamps are the closed form t0 + k/rate + offset; the
 MCAP bag is read back with rosbags, the wire stream with pymavlink (independent readers)."""
+import calendar
+
 import numpy as np
 import pytest
 
@@ -54,7 +56,8 @@ def test_mcap_stamps_are_shifted_per_imu(tmp_path):
     bag = tmp_path / "run.mcap"
     assert main(["generate", str(write_scene(tmp_path)), "-o", str(bag), "--quiet"]) == 0
     topics = read_bag(bag)
-    ns = np.rint(nominal(50) * 1e9).astype(np.int64)
+    # stamped on generate's default --start-time, 2024-01-01T00:00:00Z (README conventions)
+    ns = calendar.timegm((2024, 1, 1, 0, 0, 0)) * 10**9 + np.rint(nominal(50) * 1e9).astype(np.int64)
     for name, shift in (("a", 0), ("b", 3_700_000)):
         stamps = np.array([d.header.stamp.sec * 10**9 + d.header.stamp.nanosec for _, d in topics[f"/imu/{name}"]])
         np.testing.assert_array_equal(stamps, ns + shift)

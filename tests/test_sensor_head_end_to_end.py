@@ -5,6 +5,7 @@ with an oracle - pymavlink, pydronecan, decoders written here from the vendors' 
 mip_sdk data_gnss.h, VectorNav ICD binary output, Xsens MT Low-Level Communication Protocol through the transcription
 of ArduPilot's parser in test_xsens.py) - and every new field must equal the NPZ column, turned into the wire's axes
 and units, at the wire's resolution; GNSS messages only where the receiver had a new solution (gnss_new)."""
+import calendar
 import math
 import re
 import struct
@@ -22,6 +23,8 @@ from test_xsens import ap_parse_mtdata2
 ROOT = Path(__file__).resolve().parents[1]
 RATE = 200.0
 LATENCY_US = 50_000      # examples/companions.toml [imu.gnss] latency_s
+# `stream`'s default --start-time (README conventions: 2024-01-01T00:00:00Z): UTC fields count from it
+START_NS = calendar.timegm((2024, 1, 1, 0, 0, 0)) * 10**9
 
 # Capture files: (name, [[stream]] format, options as TOML, file suffix)
 STREAMS = (
@@ -128,7 +131,7 @@ def test_mavlink_hil_gps_on_each_new_solution(run):
         lat, lon, h = ref["gnss_llh"][k]
         vn, ve, vd = ref["gnss_velocity_ned"][k]
         # the fix's time of validity: the sample it arrived at less the receiver's latency_s (50 ms)
-        assert m.time_usec == round(ref["t"][k] * 1e6) - LATENCY_US
+        assert m.time_usec == START_NS // 1000 + round(ref["t"][k] * 1e6) - LATENCY_US     # UTC, time of validity
         assert (m.lat, m.lon, m.alt) == (round(lat * 1e7), round(lon * 1e7), round(h * 1e3))     # 1e-7 deg, mm
         assert (m.vn, m.ve, m.vd) == (round(vn * 100), round(ve * 100), round(vd * 100))       # cm/s
         assert m.vel == round(math.hypot(vn, ve) * 100)
@@ -167,7 +170,8 @@ def test_dronecan_node_compass_baro_and_fix2(run):
     by_kind = {}
     for stamp, transfer in candump_transfers(out / "dronecan.log"):
         assert transfer.source_node_id == 42
-        by_kind.setdefault(transfer.payload._type.full_name, []).append((round(stamp * RATE), transfer.payload))
+        by_kind.setdefault(transfer.payload._type.full_name, []).append((round((stamp - START_NS / 1e9) * RATE),
+                                                                         transfer.payload))
     eq = "uavcan.equipment."
     assert set(by_kind) == {eq + "ahrs.MagneticFieldStrength2", eq + "air_data.StaticPressure",
                             eq + "air_data.StaticTemperature", eq + "gnss.Fix2"}
@@ -412,7 +416,8 @@ def test_microstrain_device_sends_each_solution_once_at_no_more_than_its_rate(ru
     newest solution then."""
     from firmware_protocols import Samples, create_device
     _, ref = run
-    samples = Samples(np.rint(ref["t"] * 1e9).astype(np.int64), ref["accel"], ref["gyro"], mag=ref["mag"],
+    samples = Samples(START_NS + np.rint(ref["t"] * 1e9).astype(np.int64), ref["accel"], ref["gyro"], mag=ref["mag"],
+                      start_ns=START_NS,
                       pressure_pa=ref["pressure_pa"], gnss_llh=ref["gnss_llh"],
                       gnss_velocity_ned=ref["gnss_velocity_ned"], gnss_fix=ref["gnss_fix"], gnss_new=ref["gnss_new"])
     device = create_device("microstrain-mip", RATE, preset=preset)
@@ -444,7 +449,8 @@ def test_mavlink_device_carries_the_head_on_one_link(run):
     solution and SCALED_PRESSURE at the barometer's rate on one sequence, the same fields as the encoders'."""
     from firmware_protocols import Samples, create_device
     out, ref = run
-    samples = Samples(np.rint(ref["t"] * 1e9).astype(np.int64), ref["accel"], ref["gyro"], mag=ref["mag"],
+    samples = Samples(START_NS + np.rint(ref["t"] * 1e9).astype(np.int64), ref["accel"], ref["gyro"], mag=ref["mag"],
+                      start_ns=START_NS,
                       pressure_pa=ref["pressure_pa"], temperature_c=ref["baro_temperature_c"],
                       gnss_llh=ref["gnss_llh"], gnss_velocity_ned=ref["gnss_velocity_ned"], gnss_fix=ref["gnss_fix"],
                       gnss_new=ref["gnss_new"], gnss_age_s=np.full(600, LATENCY_US / 1e6))   # at each new solution
