@@ -3,9 +3,11 @@
 The source is KERNEL_TEMPLATE (imu_emulator.codegen.template) with its slots filled: the motion
 (imu_emulator.motion.code), then the effects of each stage (imu_emulator.effects: navigation frame, body frame at
 the IMU, sensor frame, sensor output), in their declared order (imu_emulator.codegen.plan). A switched-off effect
-contributes no line, so it is absent from the machine code rather than multiplied by zero. Scene constants are
-literals that LLVM folds; the seed is not: it arrives at run time as stream keys, so a Monte Carlo over seeds
-compiles once. Variables each stage may read and update: imu_emulator.effects.STAGE_CONTRACT. How the kernel is
+contributes no line, so it is absent from the machine code rather than multiplied by zero. The scene's numbers
+are not in the source: the effects' parameters, lever arms, mountings, t0 and the sample interval arrive at run
+time in the array `prm` (imu_emulator.codegen.plan), the seed as stream keys, so scenes that differ only in them
+(a Monte Carlo over seeds, a --vary over parameters, another duration) compile once. What stays literal: which
+values are zero (a zero removes its line), the motion's expressions and their phase constants, the origin. Variables each stage may read and update: imu_emulator.effects.STAGE_CONTRACT. How the kernel is
 called: imu_emulator.codegen.signature; how it is cached, compiled and loaded: imu_emulator.runtime.kernels.
 """
 from __future__ import annotations
@@ -18,14 +20,13 @@ from imu_emulator.codegen import explain
 from imu_emulator.codegen.plan import EffectPlan
 from imu_emulator.codegen.signature import ARG_NOTES, ARGS, RUNTIME_IMPORTS, TRUTH_OUTPUTS
 from imu_emulator.codegen.template import CHUNK, IMU_FRAME_TEMPLATE, KERNEL_TEMPLATE, PER_IMU_TEMPLATE, fill
-from imu_emulator.effects import EFFECTS, AXES, EmitContext, TRIADS
-from imu_emulator.effects.mounting import rotation as mounting_rotation
+from imu_emulator.effects import AXES, TRIADS
 # From the package, not scene.model: the cache key's fingerprint follows this module's imports, and the scene's
 # loaders (units, presets, shapes, sources) decide the values a kernel is generated from, as they did when they
 # were one module.
 from imu_emulator.scene import Scene
 
-CODEGEN_VERSION = "2"
+CODEGEN_VERSION = "3"
 EPS_SPEED = 1e-6     # m/s: below this the body is standing still for tangent attitude
 
 
@@ -98,11 +99,8 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
             for lines, turn in plan.axes_turns.get(m, []):   # the IMU's axes turned in the body stage
                 quat += lines + [f"qw, qx, qy, qz = quat_multiply_scalar({q}, {', '.join(turn)})"]
                 q = "qw, qx, qy, qz"
-            M = mounting_rotation(EmitContext(plan, EFFECTS["mounting"], scene, imu, m))
-            if M is not None:
-                from imu_emulator.geo.rotations import matrix_to_quat
-                quat += [f"qw, qx, qy, qz = quat_multiply_scalar({q}, "
-                         + ", ".join(repr(float(v)) for v in matrix_to_quat(M)) + ")"]
+            if m in plan.mounting_quat:
+                quat += [f"qw, qx, qy, qz = quat_multiply_scalar({q}, {', '.join(plan.mounting_quat[m])})"]
             elif not quat:
                 quat = ["qw, qx, qy, qz = qbw, qbx, qby, qbz"]
             quat = (["# this IMU's attitude: the body's, then its axes' turns, then its mounting"] + quat
@@ -145,13 +143,13 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
             increments, n_imu=len(scene.imus), clock=plan.clock, phase_lines=motion.phase_lines,
             motion=node_motion + ([] if motion.rotation_given else _rotation_and_rates()) + motion.after_rotation,
             navigation=navigation,
-            imu_frames=frames, t0=float(scene.t0_s), dt=1.0 / scene.rate_hz))
+            imu_frames=frames, t0=plan.t0, dt=plan.dt))
     # Many IMUs: each IMU's lines are a function of its own (compile time linear in the IMU count). A few
     # compile faster inline (16 IMUs: 4.5 s inline, 7.0 s as functions; 64: 39.8 s against 20.8 s,
     # tools/bench_compile_imus.py). With increments the node loop in the body shares the IMUs' variables, so
     # their lines stay in the loop there.
     separate = len(per_imu) > INLINE_IMUS and not increments
-    module_names = {"math", "np", "numba", "EPS_V2", "CHUNK", "N_PHASE", *motion.constants, *plan.constants,
+    module_names = {"math", "np", "numba", "EPS_V2", "CHUNK", "N_PHASE", *motion.constants,
                     *(name for names in RUNTIME_IMPORTS.values() for name in names)}
     # slots without a variable (state blocks) are read as state[i] where they are used
     shared_slots = [(i, var) for i, (var, m, _) in enumerate(plan.slots)
@@ -171,13 +169,19 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
     load_state = ["# the state slots this loop keeps in local variables (the glossary names them)"] * bool(shared_slots)
     return explain.stamp(fill(
         KERNEL_TEMPLATE, header=header, imports=imports, eps_v2=repr(EPS_SPEED ** 2), chunk=CHUNK,
-        constants=constants + [f"{name} = np.array({list(values)!r})" for name, values in plan.constants.items()],
+        constants=constants, load_params=_load_params(plan),
         imu_functions=imu_functions, args=", ".join(args), increments=integrate,
         load_state=load_state + [f"{var} = state[{i}]" for i, var in shared_slots],
         store_state=[f"state[{i}] = {var}" for i, var in shared_slots],
-        n_phase=max(n_phase, 1), phase_stage=phase_stage, t0=repr(float(scene.t0_s)), dt=repr(1.0 / scene.rate_hz),
-        clock=plan.clock, clock_shift=f" + clk * {1.0 / scene.rate_hz!r}" if plan.clock else "",
+        n_phase=max(n_phase, 1), phase_stage=phase_stage, t0=plan.t0, dt=plan.dt,
+        clock=plan.clock, clock_shift=f" + clk * {plan.dt}" if plan.clock else "",
         motion=body, navigation=navigation, attitude=attitude_lines, per_imu=per_imu_lines, truth=truth_lines))
+
+
+def _load_params(plan: EffectPlan) -> list[str]:
+    """prm_i = prm[i] for the scalar parameters (the arrays' elements are read as prm[base + i] where used)."""
+    in_arrays = {plan.constant_bases[name] + i for name, values in plan.constants.items() for i in range(len(values))}
+    return [f"prm_{i} = prm[{i}]" for i in range(len(plan.params)) if i not in in_arrays]
 
 
 class _ReadsBeforeAssigned(ast.NodeVisitor):

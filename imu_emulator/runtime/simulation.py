@@ -35,6 +35,7 @@ class Simulation:
         # Sampled input is fitted before the kernel compiles: bad data is reported in a second, not after it.
         self._plan = EffectPlan(scene)
         self._keys = self._plan.keys(scene.seed)
+        self._params = self._plan.param_values()     # the scene's numbers, the kernel's `prm`
         self._stateful = bool(self._plan.slots)
         #: each IMU's temperature profile reaches the samples when the temperature effect is on
         self.temperature = "temperature" in scene.effects
@@ -42,7 +43,8 @@ class Simulation:
         self._earth_truth = truth and model_on(scene)   # geodetic, NED, ECEF truth (earth_truth.KEYS)
         self._position = self._series(scene.trajectory, 3 if scene.attitude_mode == "tangent" else 2, "trajectory")
         self._euler = self._series(scene.attitude, 2, "attitude")
-        self.kernel = compile_kernel(scene, attitude=attitude, truth=truth, increments=self.increments)
+        self.kernel = compile_kernel(scene, attitude=attitude, truth=truth, increments=self.increments,
+                                     plan=self._plan)
         offsets = np.array([imu.time_offset_s for imu in scene.imus])
         self._time_offsets = offsets if offsets.any() else None     # SampleBlock.time_offset_s
         # Tangent attitude holds the last defined heading (cos, sin) and pitch (cos, sin) across blocks.
@@ -145,7 +147,8 @@ class Simulation:
     def _call(self, k0: int, n: int, s0: int, out: SampleBlock) -> None:
         mot = self._evaluate(self._position, k0, n, s0)
         att = self._evaluate(self._euler, k0, n, s0)
-        self.kernel(*arguments(k0, n, s0, mot, att, self._hold, self._keys, self._state, out.accel, out.gyro,
+        self.kernel(*arguments(k0, n, s0, mot, att, self._hold, self._keys, self._state, self._params,
+                               out.accel, out.gyro,
                                quat=out.quat if self.attitude else None,
                                truth=[out.truth[k] for k in TRUTH_KEYS] if self.truth else None,
                                bias=[out.truth[k] for k in BIAS_TRUTH_KEYS] if self.bias_truth else None,
