@@ -5,7 +5,7 @@ cache's secret, imu_emulator.files.trust), its machine code kernel.o (imu_emulat
 it without importing numba; sealed the same way) and numba's __pycache__ beside it. Nothing of an entry is loaded
 unless the cache and the entry are the running user's alone and the seal matches. The key hashes the scene's
 structure: the validated scene (imu_emulator.scene.digest) less the numbers that reach the kernel at run time
-(PARAMETRIC; TIMING unless the motion is symbolic), with the effects' plan (imu_emulator.codegen.plan: its lines
+(PARAMETRIC; TIMING unless the motion is periodic), with the effects' plan (imu_emulator.codegen.plan: its lines
 hold parameter slots, not values, and which values are zero), the outputs and the bytes of every module of the
 generator;
 imu_emulator.runtime.kernels publishes an entry (directory rename) only after it compiled, and removes and
@@ -90,14 +90,23 @@ def _code_fingerprint() -> str:
 #: Scene fields no line of the kernel holds: the duration (no line reads it) and the IMUs (their names reach no
 #: line; their values reach the lines only as parameter slots, so EffectPlan.structure() stands for them).
 PARAMETRIC = ("duration_s", "imus")
-#: Run-time parameters too (prm's t0, dt), but symbolic motion's phase constants (imu_emulator.motion.phases) and
-#: an ECI scene's Earth-rotation phase are literals computed from them: keyed while the motion has such.
+#: Run-time parameters too (prm's t0, dt), but the phase constants of periodic motion (imu_emulator.motion.phases:
+#: sin, cos, tan of a phase linear in t, reduced exactly) are literals computed from them: keyed while the motion
+#: may have such (periodic_motion).
 TIMING = ("t0_s", "rate_hz")
+_TRIG = re.compile(r"sin|cos|tan")
 
 
-def _phase_constants_possible(scene: Scene) -> bool:
-    return (isinstance(scene.trajectory, Expressions) or isinstance(scene.attitude, Expressions)
-            or scene.frame == "ECI" or scene.attitude_reference == "ECI")
+def periodic_motion(scene: Scene) -> bool:
+    """Whether the motion's source may hold phase constants: attitude angles as expressions (their cos and sin),
+    a trajectory expression with a trigonometric function or in geodetic keys (cos and sin of latitude and
+    longitude), an ECI frame or reference (the Earth's rotation angle). Decided from the texts, without sympy:
+    a false yes only keys t0 and rate (a recompile), a false no would run stale phases, so it errs to yes."""
+    if scene.frame == "ECI" or scene.attitude_reference == "ECI" or isinstance(scene.attitude, Expressions):
+        return True
+    trajectory = scene.trajectory
+    return isinstance(trajectory, Expressions) and (tuple(trajectory.keys) != ("x", "y", "z")
+                                                    or any(_TRIG.search(text) for text in trajectory.texts))
 
 
 def scene_key(scene: Scene, attitude: bool, truth: bool, increments: int = 0, plan: EffectPlan | None = None) -> str:
@@ -106,7 +115,7 @@ def scene_key(scene: Scene, attitude: bool, truth: bool, increments: int = 0, pl
     EffectPlan when the caller has it (building one costs about a millisecond)."""
     outputs = [attitude, truth] + ([increments] if increments else [])
     described = canonical(scene)
-    for name in PARAMETRIC + (() if _phase_constants_possible(scene) else TIMING):
+    for name in PARAMETRIC + (() if periodic_motion(scene) else TIMING):
         described.pop(name)
     spec = {"scene": described, "plan": (plan or EffectPlan(scene)).structure(), "outputs": outputs,
             "code": _code_fingerprint(), "python": list(sys.version_info[:2])}
