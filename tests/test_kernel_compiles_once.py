@@ -142,3 +142,21 @@ def _tangent(scene):
     """The scene in tangent attitude (heading from the velocity): no attitude expression, so no attitude phase."""
     import dataclasses
     return dataclasses.replace(scene, attitude_mode="tangent", attitude=None)
+
+
+def test_the_origin_is_a_number_and_its_exact_zeros_are_structure():
+    """Another origin reuses the kernel (r0 and C arrive in prm); an origin where C has exact zeros or ones (lat 0,
+    lon 0) leaves those terms out, so it is another structure. The values are the closed forms of
+    tests/test_earth.py (normal gravity at rest at each latitude), which run through the shared kernels."""
+    from imu_emulator import scene_from_dict
+    from imu_emulator.runtime.cache import scene_key
+
+    def at(lat, lon, h):
+        return scene_from_dict({"scene": {"rate_hz": 100, "duration_s": 1.0, "frame": "NED",
+                                          "origin": {"lat_deg": lat, "lon_deg": lon, "height_m": h},
+                                          "gravity_model": "wgs84"},
+                                "trajectory": {"x": "0", "y": "0", "z": "0"}, "attitude": {"roll": "0", "pitch": "0",
+                                                                                          "yaw": "0"},
+                                "imu": [{"name": "a"}], "effects": {"gravity": True, "earth_rate": True}})
+    assert scene_key(at(47.0, 8.0, 400.0), True, True) == scene_key(at(-33.5, 151.2, -20.0), True, True)
+    assert scene_key(at(0.0, 0.0, 0.0), True, True) != scene_key(at(47.0, 8.0, 400.0), True, True)

@@ -105,7 +105,7 @@ def glossary(plan, *, args, arg_notes, motion_constants) -> list[str]:
               "#   prm[0]: t0 (s), prm[1]: dt = 1 / rate (s)"]
     arrays = {base for base in plan.constant_bases.values()}
     i = 2
-    while i < len(plan.params):     # consecutive scalars of one effect (None: the IMUs' mounting quaternions)
+    while i < len(plan.params):     # consecutive scalars of one effect, or of the kernel's own ("(what)")
         if i in arrays:
             i += len(plan.constants[next(n for n, b in plan.constant_bases.items() if b == i)])
             continue
@@ -113,7 +113,7 @@ def glossary(plan, *, args, arg_notes, motion_constants) -> list[str]:
         while end + 1 < len(plan.params) and plan.param_effects[end + 1] == plan.param_effects[i] and end + 1 not in arrays:
             end += 1
         owner = plan.param_effects[i]
-        lines.append(f"#   prm_{i}..prm_{end}: " + (f"effect {owner}" if owner else "mounting quaternions (attitude output)"))
+        lines.append(f"#   prm_{i}..prm_{end}: " + (owner[1:-1] if owner.startswith("(") else f"effect {owner}"))
         i = end + 1
     lines += [f"#   prm[{plan.constant_bases[name]}..{plan.constant_bases[name] + len(values) - 1}]: {name}, array of "
               f"effect {plan.constant_effects[name]}" for name, values in plan.constants.items()]

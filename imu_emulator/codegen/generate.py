@@ -57,8 +57,8 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
     outputs, 0 for none). No user text reaches it except validated numbers as repr."""
     from imu_emulator.motion.code import motion_code
 
-    motion = motion_code(scene, angles=truth)
     plan = EffectPlan(scene)
+    motion = motion_code(scene, angles=truth, origin=plan.origin)
     n_phase = len(motion.phase_vars)
     phase_stage = []
     if n_phase:

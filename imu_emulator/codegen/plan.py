@@ -17,6 +17,7 @@ from imu_emulator.codegen.explain import effect_comment
 from imu_emulator.effects import EFFECTS, FRAME_ORDERS, EmitContext, Stage
 from imu_emulator.effects.mounting import rotation as mounting_rotation
 from imu_emulator.geo.rotations import matrix_to_quat
+from imu_emulator.scene.earth import model_on
 from imu_emulator.scene.model import Scene
 
 
@@ -33,7 +34,7 @@ class EffectPlan:
         self.constants: dict[str, tuple[float, ...]] = {}  # arrays of parameters, read as prm[base + i]
         self.constant_bases: dict[str, int] = {}
         self.params: list[float] = []                      # the run-time parameters, prm[i]
-        self.param_effects: list[str | None] = []          # which effect asked for each (None: the kernel's own)
+        self.param_effects: list[str | None] = []          # which effect asked for each ("(...)": the kernel's own)
         self.axes_turns: dict[int, list[tuple[list[str], tuple]]] = {}  # imu -> [(lines, quaternion)], body stage
         # which effect asked for each slot, stream and constant, and which emitted lines (the source's glossary)
         self.slot_effects: list[str] = []
@@ -44,6 +45,13 @@ class EffectPlan:
         # the time of scene sample k, t = t0 + k dt: the kernel's own parameters, first in prm
         self.t0 = self.add_param(scene.t0_s)
         self.dt = self.add_param(1.0 / scene.rate_hz)
+        # the tangent frame's origin in ECEF (r0, C) where the Earth model is on: parameters, less its exact 0s and 1s
+        self.origin = None
+        if model_on(scene):
+            from imu_emulator.motion.earth import origin_terms
+            self._effect = "(the origin: ECEF position r0 and axes C of the navigation frame)"
+            self.origin = origin_terms(scene, self.add_param)
+            self._effect = None
         navigation = [e for e in self.active if e.stage == Stage.NAVIGATION]
         self.clock = self._emit([e for e in navigation if e.sample_clock], None, None)
         self.navigation = self._emit([e for e in navigation if not e.sample_clock], None, None)
@@ -59,10 +67,12 @@ class EffectPlan:
             })
         # each IMU's mounting as a quaternion, for the attitude output (its axes turned after the body's)
         self.mounting_quat: dict[int, tuple[str, ...]] = {}
+        self._effect = "(mounting quaternions, for the attitude output)"
         for m, imu in enumerate(scene.imus):
             M = mounting_rotation(EmitContext(self, EFFECTS["mounting"], scene, imu, m))
             if M is not None:
                 self.mounting_quat[m] = tuple(self.add_param(v) for v in matrix_to_quat(M))
+        self._effect = None
         self.bias_truth = any("bgx +=" in line or "bax +=" in line
                               for stages in self.per_imu for line in stages["sensor"])
 
@@ -120,7 +130,7 @@ class EffectPlan:
                 "slots": [(var, m) for var, m, _ in self.slots], "streams": self.streams, "counters": self.counters,
                 "constants": {name: [self.constant_bases[name], len(v)] for name, v in self.constants.items()},
                 "axes_turns": sorted(self.axes_turns.items()), "mounting_quat": sorted(self.mounting_quat.items()),
-                "params": len(self.params), "bias_truth": self.bias_truth}
+                "origin": self.origin, "params": len(self.params), "bias_truth": self.bias_truth}
 
     def add_axes_turn(self, m: int, lines: list[str], quaternion: tuple) -> None:
         self.axes_turns.setdefault(m, []).append((lines, quaternion))

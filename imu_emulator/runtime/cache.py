@@ -87,9 +87,10 @@ def _code_fingerprint() -> str:
         h.update(path.read_bytes())
     return h.hexdigest()
 
-#: Scene fields no line of the kernel holds: the duration (no line reads it) and the IMUs (their names reach no
-#: line; their values reach the lines only as parameter slots, so EffectPlan.structure() stands for them).
-PARAMETRIC = ("duration_s", "imus")
+#: Scene fields no line of the kernel holds: the duration (no line reads it), the IMUs (their names reach no
+#: line; their values reach the lines only as parameter slots, so EffectPlan.structure() stands for them) and the
+#: origin (parameters too; which of its ECEF terms are exactly 0 or 1 is in EffectPlan.structure()).
+PARAMETRIC = ("duration_s", "imus", "origin")
 #: Run-time parameters too (prm's t0, dt), but the phase constants of periodic motion (imu_emulator.motion.phases:
 #: sin, cos, tan of a phase linear in t, reduced exactly) are literals computed from them: keyed while the motion
 #: may have such (periodic_motion).
