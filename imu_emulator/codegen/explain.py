@@ -101,7 +101,7 @@ def glossary(plan, *, args, arg_notes, motion_constants) -> list[str]:
                   "#     split in halves for Dekker's exact product (the phase block in the chunk loop)"]
     lines += [f"#   {name}: motion constant (imu_emulator.motion)" for name in motion_constants
               if not re.match(r"PH\d+_", name)]
-    lines += ["# Run-time parameters prm[i] (EffectPlan.params; the scalars are read once into prm_i): the scene's numbers",
+    lines += ["# Run-time parameters prm[i] (EffectPlan.params; scalars read once into prm_i): the scene's numbers",
               "#   prm[0]: t0 (s), prm[1]: dt = 1 / rate (s)"]
     arrays = {base for base in plan.constant_bases.values()}
     i = 2
@@ -110,7 +110,8 @@ def glossary(plan, *, args, arg_notes, motion_constants) -> list[str]:
             i += len(plan.constants[next(n for n, b in plan.constant_bases.items() if b == i)])
             continue
         end = i
-        while end + 1 < len(plan.params) and plan.param_effects[end + 1] == plan.param_effects[i] and end + 1 not in arrays:
+        while (end + 1 < len(plan.params) and plan.param_effects[end + 1] == plan.param_effects[i]
+               and end + 1 not in arrays):
             end += 1
         owner = plan.param_effects[i]
         lines.append(f"#   prm_{i}..prm_{end}: " + (owner[1:-1] if owner.startswith("(") else f"effect {owner}"))
