@@ -28,8 +28,11 @@ def _children_cpu() -> float:
 
 def one(scene: str, runs: int, workers: int, out: Path, vary: list[str]) -> dict:
     from imu_emulator.analysis import batch
+    batch.KERNEL_LOADS.clear()
     cpu, children, wall = time.process_time(), _children_cpu(), time.perf_counter()
-    if workers == 0:
+    if workers == 0:     # as a fresh worker would: the kernel loaded from the cache, not kept from a round before
+        from imu_emulator.runtime import kernels
+        kernels._loaded.clear()
         result = batch.run(scene, runs, 1, out, executor=None, vary=vary)
     else:
         from distributed import Client, LocalCluster
