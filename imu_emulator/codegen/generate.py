@@ -168,21 +168,30 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
                             increments=increments)
     header += explain.glossary(plan, args=args, arg_notes=ARG_NOTES, motion_constants=motion.constants)
     load_state = ["# the state slots this loop keeps in local variables (the glossary names them)"] * bool(shared_slots)
-    return explain.stamp(fill(
+    return explain.stamp(_load_params(fill(
         KERNEL_TEMPLATE, header=header, imports=imports, eps_v2=repr(EPS_SPEED ** 2), chunk=CHUNK,
-        constants=constants, load_params=_load_params(plan),
+        constants=constants, load_params=[_LOAD_PARAMS],
         imu_functions=imu_functions, args=", ".join(args), increments=integrate,
         load_state=load_state + [f"{var} = state[{i}]" for i, var in shared_slots],
         store_state=[f"state[{i}] = {var}" for i, var in shared_slots],
         n_phase=max(n_phase, 1), phase_stage=phase_stage, t0=plan.t0, dt=plan.dt,
         clock=plan.clock, clock_shift=f" + clk * {plan.dt}" if plan.clock else "",
-        motion=body, navigation=navigation, attitude=attitude_lines, per_imu=per_imu_lines, truth=truth_lines))
+        motion=body, navigation=navigation, attitude=attitude_lines, per_imu=per_imu_lines, truth=truth_lines)))
 
 
-def _load_params(plan: EffectPlan) -> list[str]:
-    """prm_i = prm[i] for the scalar parameters (the arrays' elements are read as prm[base + i] where used)."""
-    in_arrays = {plan.constant_bases[name] + i for name, values in plan.constants.items() for i in range(len(values))}
-    return [f"prm_{i} = prm[{i}]" for i in range(len(plan.params)) if i not in in_arrays]
+_LOAD_PARAMS = "#@load_params"
+_PARAM = re.compile(r"\bprm_(\d+)\b")
+
+
+def _load_params(source: str) -> str:
+    """kernel_body's `prm_i = prm[i]` lines, for the scalar parameters its own lines read (an IMU of its own
+    function loads its own: 100 IMUs' parameters as locals of one function is what made numba's typing slow)."""
+    head, _, body = source.partition("def kernel_body(")
+    used = sorted({int(i) for i in _PARAM.findall(body)})
+    indent = "    "
+    loads = "\n".join(f"{indent}prm_{i} = prm[{i}]" for i in used)
+    return head + "def kernel_body(" + body.replace(f"{indent}{_LOAD_PARAMS}", loads) if loads else \
+        head + "def kernel_body(" + body.replace(f"{indent}{_LOAD_PARAMS}\n", "")
 
 
 class _ReadsBeforeAssigned(ast.NodeVisitor):
@@ -226,9 +235,12 @@ def _imu_function(m: int, lines: list[str], slots: list[tuple[int, str]], module
     code; its state slots are read at its start and written back at its end."""
     reads = _read_before_assigned(ast.parse("\n".join(lines)), {var for _, var in slots})
     args = [name for name in reads if name not in module_names and not hasattr(builtins, name)]
+    params = [name for name in args if _PARAM.fullmatch(name)]     # its parameters: loaded here, from prm
+    args = [name for name in args if name not in params] + (["prm"] if params and "prm" not in args else [])
     if slots and "state" not in args:
         args.append("state")
-    body = ([f"{var} = state[{i}]" for i, var in slots] + lines + [f"state[{i}] = {var}" for i, var in slots])
+    body = ([f"{name} = prm[{name[4:]}]" for name in params] + [f"{var} = state[{i}]" for i, var in slots] + lines
+            + [f"state[{i}] = {var}" for i, var in slots])
     function = ["", "", f"# IMU {m}'s stages 2-4, a function of its own: numba types it alone (compile time linear in "
                 "the IMU count)", "@numba.njit(cache=True, nogil=True, error_model='numpy')",
                 f"def imu_{m}({', '.join(args)}):"] + ["    " + line for line in body]
