@@ -256,3 +256,43 @@ def test_restart_with_truth_does_not_take_files_written_without_it(tmp_path, cac
     assert [f["index"] for f in again.failures] == [0, 1]
     assert all("--truth differ" in f["error"] for f in again.failures)
     assert batch.run(scene, 2, ROOT_SEED, out).ok     # the same batch again still restarts cleanly
+
+
+def test_realizations_go_to_an_executor_in_chunks_each_answered_once(monkeypatch):
+    """An executor gets chunks (one submit per chunk, not per realization); every realization comes back once,
+    a failing one as its own error while the rest of its chunk goes on, a chunk whose call fails as an error for
+    each of its realizations."""
+    from concurrent.futures import ThreadPoolExecutor
+    from dataclasses import dataclass
+
+    @dataclass(frozen=True)
+    class Fake:
+        index: int
+
+    def realize(task):
+        if task.index == 3:
+            raise batch.ImuEmulatorError("drawn value refused")
+        return {"index": task.index}
+    monkeypatch.setattr(batch, "realize", realize)
+    tasks = [Fake(i) for i in range(40)]
+    submitted = []
+
+    class Counting(ThreadPoolExecutor):
+        def submit(self, fn, *args, **kwargs):
+            submitted.append(len(args[0]))
+            return super().submit(fn, *args, **kwargs)
+    with Counting(max_workers=2) as executor:
+        results = list(batch._execute(tasks, executor))
+    assert submitted == [batch.chunk_size(40, 2)] * (40 // batch.chunk_size(40, 2)) and submitted[0] == 5
+    assert sorted(task.index for task, _, _ in results) == list(range(40))
+    assert [(task.index, error) for task, row, error in results if error] == [(3, "drawn value refused")]
+    assert all(row == {"index": task.index} for task, row, error in results if not error)
+
+    class Broken(ThreadPoolExecutor):
+        def submit(self, fn, *args, **kwargs):
+            return super().submit(lambda chunk: 1 / 0, *args)
+    with Broken(max_workers=1) as executor:
+        results = list(batch._execute(tasks[:8], executor))
+    assert sorted(task.index for task, _, _ in results) == list(range(8))
+    assert {error for _, _, error in results} == {"ZeroDivisionError: division by zero"}
+    assert batch.chunk_size(3, 8) == 1 and batch.chunk_size(10_000, 2) == batch.MAX_CHUNK

@@ -61,18 +61,35 @@ def _imu_with(values: dict) -> dict:
     return imu
 
 
-def test_every_parameter_of_every_effect_changes_key_and_source():
+def test_every_parameter_of_every_effect_reaches_the_kernel_as_a_number_or_as_structure():
+    """Each parameter reaches the kernel: as run-time numbers (EffectPlan.param_values, the kernel's `prm`) with the
+    key and source unchanged, or, for those that shape the code (how many lines, which grid, an expression), as a
+    new key and source. A parameter that reached neither would be ignored silently."""
     everything = {name: True for name in EFFECTS}
     base = {param: _sample_value(param, 1.0) for _, param in all_params()}
     origin = {"lat_deg": 47.0, "lon_deg": 8.0, "height_m": 400.0}    # the Earth effects need one
     reference = _scene(everything, _imu_with(base), origin=origin)
     ref_key, ref_source = scene_key(reference, True, False), generate_source(reference, True, False)
+    ref_params = EffectPlan(reference).param_values()
     assert all_params(), "the effects declare parameters"
+    structural = set()
     for effect, param in all_params():
         # x11 crosses a decade (the flicker band)
         changed = _scene(everything, _imu_with({**base, param: _sample_value(param, 11.0)}), origin=origin)
-        assert scene_key(changed, True, False) != ref_key, param.path
-        assert generate_source(changed, True, False) != ref_source, f"{effect.name}: {param.path}"
+        key, source = scene_key(changed, True, False), generate_source(changed, True, False)
+        if key == ref_key:
+            assert source == ref_source, f"{param.path}: the source changed under the same key"
+            params = EffectPlan(changed).param_values()
+            assert params.shape != ref_params.shape or not np.array_equal(params, ref_params), param.path
+        else:
+            assert source != ref_source, f"{effect.name}: {param.path}"
+            structural.add(param.path)
+    # Those that shape the code: the correlation times (a Gauss-Markov process steps every sample or on a coarser
+    # grid of a whole number of samples, chosen from tau / dt: the grid is in the lines), the PSD line count, the
+    # temperature expression (its tree is printed into the source)
+    assert structural == {f"imu.{triad}.{key}" for triad in ("gyro", "accel") for key in (
+        "gauss_markov_tau_s", "bias_instability_tau_min_s", "bias_instability_tau_max_s")} | {
+        "imu.vibration.psd_lines", "imu.temperature_c"}, structural
 
 
 def test_effect_named_false_gives_the_same_source_as_not_named():
@@ -108,7 +125,8 @@ def test_imu_names_and_seed_do_not_reach_the_source():
     b = _scene({"lever_arm": True}, {"name": "x\"; import os  # 'quoted' \u00e9", "lever_arm_m": [0.1, 0, 0]},
                seed=12345)
     assert generate_source(a, True, True) == generate_source(b, True, True)
-    assert scene_key(a, True, True) != scene_key(b, True, True)      # the key is the whole scene
+    # names reach no line: the two scenes share a kernel (the key is the structure, imu_emulator.runtime.cache)
+    assert scene_key(a, True, True) == scene_key(b, True, True)
     seeded = _scene({"lever_arm": True}, {"name": "first", "lever_arm_m": [0.1, 0, 0]}, seed=7)
     assert scene_key(seeded, True, True) == scene_key(a, True, True)   # the seed arrives at run time
 

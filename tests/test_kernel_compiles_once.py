@@ -46,3 +46,117 @@ def test_a_cold_cache_compiles_the_kernel_once_and_a_warm_one_never(tmp_path, na
         assert (published[0] / "kernel.o").exists() and not numba_imported, warm
     else:
         assert f"data loaded from '{published[0]}" in cold and f"data loaded from '{published[0]}" in warm, warm
+
+
+# --- one kernel per structure (issue 25) ---------------------------------------------------------------------
+# The scene's numbers arrive at run time (imu_emulator.codegen.plan: the kernel's `prm`), so scenes that differ only
+# in them share one kernel. The witness is the count of kernels generated (one per key) and of cache entries, not a
+# time; the samples are checked against the closed form of each scene's own numbers.
+
+W = 0.7          # rad/s, yaw rate about the up axis (ENU): body rate (0, 0, W), no angular acceleration
+G = 9.80665      # [scene] gravity_mps2 default: at rest and level in ENU the specific force is (0, 0, +g)
+
+
+def _turning(duration=2.0, seed=1, t0=0.0, bias=(0.01, -0.02, 0.03), gbias=(1e-3, 2e-3, -3e-3),
+             lever=(0.3, -0.2, 0.1), roll_deg=90.0, noise=0.0, trajectory=None):
+    from imu_emulator import scene_from_dict
+    accel = {"bias": list(bias)}
+    if noise:
+        accel["noise_density"] = noise
+    return scene_from_dict({
+        "scene": {"rate_hz": 100, "duration_s": duration, "frame": "ENU", "seed": seed, "t0_s": t0},
+        "trajectory": trajectory or {"x": "0", "y": "0", "z": "0"},
+        "attitude": {"roll": "0", "pitch": "0", "yaw": f"{W!r}*t"},
+        "imu": [{"name": "a", "lever_arm_m": list(lever), "mounting_rpy_deg": [roll_deg, 0.0, 0.0],
+                 "accel": accel, "gyro": {"bias": list(gbias)}}],
+        "effects": {"gravity": True, "lever_arm": True, "mounting": True, "bias": True, "noise": bool(noise)}})
+
+
+def _closed_form(lever, roll_deg, bias, gbias):
+    """Sensor = Rx(roll)^T body + bias; body: f = (0, 0, g) + w x (w x r) = (-W^2 rx, -W^2 ry, g), w = (0, 0, W)."""
+    import numpy as np
+    a = np.radians(roll_deg)
+    rx_t = np.array([[1, 0, 0], [0, np.cos(a), np.sin(a)], [0, -np.sin(a), np.cos(a)]])
+    f = rx_t @ np.array([-W * W * lever[0], -W * W * lever[1], G]) + np.array(bias)
+    w = rx_t @ np.array([0.0, 0.0, W]) + np.array(gbias)
+    return f, w
+
+
+@pytest.fixture
+def fresh_cache(tmp_path, monkeypatch):
+    from imu_emulator.runtime import kernels
+    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path))
+    monkeypatch.setattr(kernels, "_loaded", {})
+    return tmp_path / "kernels"
+
+
+def test_scenes_differing_only_in_numbers_compile_one_kernel_and_give_their_own_closed_forms(fresh_cache,
+                                                                                             monkeypatch):
+    import numpy as np
+
+    from imu_emulator.codegen import generate
+    from imu_emulator.runtime import kernels
+    from imu_emulator.runtime.simulation import Simulation
+    generated = []
+    original = kernels.generate_source
+    monkeypatch.setattr(kernels, "generate_source", lambda *a, **k: generated.append(1) or original(*a, **k))
+    variants = [dict(), dict(duration=3.5), dict(seed=99), dict(bias=(-0.5, 0.25, 0.125)),
+                dict(gbias=(-1e-2, 5e-3, 7e-3)), dict(lever=(-1.5, 0.75, 2.0)), dict(roll_deg=-30.0),
+                dict(roll_deg=135.0, lever=(0.01, 0.02, -0.03), bias=(1.0, 2.0, 3.0), duration=0.5)]
+    for change in variants:
+        options = {"bias": (0.01, -0.02, 0.03), "gbias": (1e-3, 2e-3, -3e-3), "lever": (0.3, -0.2, 0.1),
+                   "roll_deg": 90.0, **change}
+        block = Simulation(_turning(**change), attitude=False).run()
+        f, w = _closed_form(options["lever"], options["roll_deg"], options["bias"], options["gbias"])
+        assert block.accel.shape[1] == round(options.get("duration", 2.0) * 100), change
+        # the sums' rounding: a few ulp of g
+        np.testing.assert_allclose(block.accel[0], np.broadcast_to(f, block.accel[0].shape), rtol=0, atol=1e-12,
+                                   err_msg=str(change))
+        np.testing.assert_allclose(block.gyro[0], np.broadcast_to(w, block.gyro[0].shape), rtol=0, atol=1e-15,
+                                   err_msg=str(change))
+    assert len(generated) == 1, f"{len(generated)} kernels generated for {len(variants)} scenes of one structure"
+    assert len([p for p in fresh_cache.iterdir() if not p.name.startswith(".")]) == 1
+    assert len(kernels._loaded) == 1
+    assert generate.CODEGEN_VERSION    # the module the counter wraps is the generator's
+
+
+def test_a_zero_still_removes_its_line_and_so_is_another_structure(fresh_cache):
+    """Which values are zero stays in the key (a zero lever arm has no lines), as does t0 while the motion is
+    periodic (its phase constants are literals) and is not when it is not (t0 then only enters t = t0 + k dt)."""
+    from imu_emulator.runtime.cache import scene_key
+    base = scene_key(_turning(), False, False)
+    assert scene_key(_turning(lever=(0.0, 0.0, 0.0)), False, False) != base
+    assert scene_key(_turning(noise=1e-3), False, False) != base
+    assert scene_key(_turning(noise=1e-3), False, False) == scene_key(_turning(noise=5e-2), False, False)
+    assert scene_key(_turning(t0=10.0), False, False) != base      # yaw = W t: cos and sin of a phase
+    still = {"x": "0.5*t*t", "y": "2*t", "z": "0"}
+    periodic = {"x": "cos(t)", "y": "0", "z": "0"}
+    for trajectory, shared in ((still, True), (periodic, False)):
+        a, b = (_turning(t0=t0, trajectory=trajectory) for t0 in (0.0, 10.0))
+        # the attitude's yaw expression is periodic: same attitude given as no expression needs the tangent mode
+        a, b = (_tangent(s) for s in (a, b))
+        assert (scene_key(a, False, False) == scene_key(b, False, False)) is shared, trajectory
+
+
+def _tangent(scene):
+    """The scene in tangent attitude (heading from the velocity): no attitude expression, so no attitude phase."""
+    import dataclasses
+    return dataclasses.replace(scene, attitude_mode="tangent", attitude=None)
+
+
+def test_the_origin_is_a_number_and_its_exact_zeros_are_structure():
+    """Another origin reuses the kernel (r0 and C arrive in prm); an origin where C has exact zeros or ones (lat 0,
+    lon 0) leaves those terms out, so it is another structure. The values are the closed forms of
+    tests/test_earth.py (normal gravity at rest at each latitude), which run through the shared kernels."""
+    from imu_emulator import scene_from_dict
+    from imu_emulator.runtime.cache import scene_key
+
+    def at(lat, lon, h):
+        return scene_from_dict({"scene": {"rate_hz": 100, "duration_s": 1.0, "frame": "NED",
+                                          "origin": {"lat_deg": lat, "lon_deg": lon, "height_m": h},
+                                          "gravity_model": "wgs84"},
+                                "trajectory": {"x": "0", "y": "0", "z": "0"}, "attitude": {"roll": "0", "pitch": "0",
+                                                                                          "yaw": "0"},
+                                "imu": [{"name": "a"}], "effects": {"gravity": True, "earth_rate": True}})
+    assert scene_key(at(47.0, 8.0, 400.0), True, True) == scene_key(at(-33.5, 151.2, -20.0), True, True)
+    assert scene_key(at(0.0, 0.0, 0.0), True, True) != scene_key(at(47.0, 8.0, 400.0), True, True)

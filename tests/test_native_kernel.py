@@ -15,7 +15,7 @@ from imu_emulator.runtime import kernels as kernel_module
 from imu_emulator import load_scene, scene_from_dict
 from imu_emulator.native import objects as native
 from imu_emulator.effects import EFFECTS, all_params
-from imu_emulator.codegen.signature import trial_arguments
+from imu_emulator.codegen.signature import ARGS, trial_arguments
 from imu_emulator.runtime.simulation import Simulation
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -130,6 +130,6 @@ def test_native_kernel_refuses_wrong_arguments(cache):
     args = list(trial_arguments(scene, True, False))
     with pytest.raises(TypeError, match="takes"):
         kernel(*args[:-1])
-    args[8] = np.zeros((1, 0))      # out_acc of the wrong rank
+    args[ARGS.index("out_acc")] = np.zeros((1, 0))      # out_acc of the wrong rank
     with pytest.raises(TypeError, match="dimensions"):
         kernel(*args)

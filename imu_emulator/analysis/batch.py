@@ -254,8 +254,37 @@ def _error_text(exc: BaseException) -> str:
     return str(exc) if isinstance(exc, ImuEmulatorError) else f"{type(exc).__name__}: {exc}"
 
 
+def realize_chunk(tasks) -> list[tuple[int, dict | None, str | None]]:
+    """Several realizations on one worker, one call: (index, row, None) or (index, None, error text) each. A
+    chunk costs one round trip to the scheduler instead of one per realization, and the worker keeps its kernel
+    between them (one load per structure, KERNEL_LOADS)."""
+    out = []
+    for task in tasks:
+        try:
+            out.append((task.index, realize(task), None))
+        except Exception as exc:     # one realization's failure is its row, not the chunk's end
+            out.append((task.index, None, _error_text(exc)))
+    return out
+
+
+#: realizations per chunk at most: a chunk's results return together, so the progress line moves per chunk
+MAX_CHUNK = 16
+
+
+def chunk_size(n_tasks: int, workers: int) -> int:
+    """Realizations per submitted call: about four chunks per worker (a slow chunk at the end waits for no more
+    than a quarter of a worker's share), at most MAX_CHUNK."""
+    return max(1, min(MAX_CHUNK, n_tasks // (4 * max(1, workers))))
+
+
+def _worker_count(executor) -> int:
+    if _is_dask(executor):
+        return len(executor.scheduler_info().get("workers", {})) or 1
+    return int(getattr(executor, "_max_workers", 1) or 1)
+
+
 def _execute(tasks, executor):
-    """(task, row, None) or (task, None, error text) for each task, as they finish."""
+    """(task, row, None) or (task, None, error text) for each task, as they finish (in chunks on an executor)."""
     if executor is None:
         for task in tasks:
             try:
@@ -263,13 +292,20 @@ def _execute(tasks, executor):
             except Exception as exc:     # one realization's failure is its row, not the batch's end
                 yield task, None, _error_text(exc)
         return
-    futures = {executor.submit(realize, task, **_submit_options(executor)): task for task in tasks}
+    size = chunk_size(len(tasks), _worker_count(executor))
+    chunks = [tasks[i:i + size] for i in range(0, len(tasks), size)]
+    futures = {executor.submit(realize_chunk, chunk, **_submit_options(executor)): chunk for chunk in chunks}
     for future in _as_completed(executor, futures):
-        task = futures[future]
+        chunk = futures[future]
+        by_index = {task.index: task for task in chunk}
         try:
-            yield task, future.result(), None
-        except Exception as exc:
-            yield task, None, _error_text(exc)
+            results = future.result()
+        except Exception as exc:     # the worker died or the chunk could not be sent: each of its tasks failed
+            for task in chunk:
+                yield task, None, _error_text(exc)
+            continue
+        for index, row, error in results:
+            yield by_index[index], row, error
 
 
 def _is_dask(executor) -> bool:

@@ -101,7 +101,23 @@ def glossary(plan, *, args, arg_notes, motion_constants) -> list[str]:
                   "#     split in halves for Dekker's exact product (the phase block in the chunk loop)"]
     lines += [f"#   {name}: motion constant (imu_emulator.motion)" for name in motion_constants
               if not re.match(r"PH\d+_", name)]
-    lines += [f"#   {name}: array of effect {plan.constant_effects[name]}" for name in plan.constants]
+    lines += ["# Run-time parameters prm[i] (EffectPlan.params; scalars read once into prm_i): the scene's numbers",
+              "#   prm[0]: t0 (s), prm[1]: dt = 1 / rate (s)"]
+    arrays = {base for base in plan.constant_bases.values()}
+    i = 2
+    while i < len(plan.params):     # consecutive scalars of one effect, or of the kernel's own ("(what)")
+        if i in arrays:
+            i += len(plan.constants[next(n for n, b in plan.constant_bases.items() if b == i)])
+            continue
+        end = i
+        while (end + 1 < len(plan.params) and plan.param_effects[end + 1] == plan.param_effects[i]
+               and end + 1 not in arrays):
+            end += 1
+        owner = plan.param_effects[i]
+        lines.append(f"#   prm_{i}..prm_{end}: " + (owner[1:-1] if owner.startswith("(") else f"effect {owner}"))
+        i = end + 1
+    lines += [f"#   prm[{plan.constant_bases[name]}..{plan.constant_bases[name] + len(values) - 1}]: {name}, array of "
+              f"effect {plan.constant_effects[name]}" for name, values in plan.constants.items()]
     lines += ["# Variables (imu_emulator.effects.STAGE_CONTRACT): p.., v.., a.., j.. motion of the reference point S",
               "#   (navigation axes); r00..r22 body -> navigation; w.., al.. body rate and its derivative (body axes);",
               "#   fn.., fb.. specific force at S (navigation, body axes); fa.., gw.. specific force and inertial rate",

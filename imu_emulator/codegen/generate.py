@@ -3,10 +3,13 @@
 The source is KERNEL_TEMPLATE (imu_emulator.codegen.template) with its slots filled: the motion
 (imu_emulator.motion.code), then the effects of each stage (imu_emulator.effects: navigation frame, body frame at
 the IMU, sensor frame, sensor output), in their declared order (imu_emulator.codegen.plan). A switched-off effect
-contributes no line, so it is absent from the machine code rather than multiplied by zero. Scene constants are
-literals that LLVM folds; the seed is not: it arrives at run time as stream keys, so a Monte Carlo over seeds
-compiles once. Variables each stage may read and update: imu_emulator.effects.STAGE_CONTRACT. How the kernel is
-called: imu_emulator.codegen.signature; how it is cached, compiled and loaded: imu_emulator.runtime.kernels.
+contributes no line, so it is absent from the machine code rather than multiplied by zero. The scene's numbers
+are not in the source: the effects' parameters, lever arms, mountings, t0 and the sample interval arrive at run
+time in the array `prm` (imu_emulator.codegen.plan), the seed as stream keys, so scenes that differ only in them
+(a Monte Carlo over seeds, a --vary over parameters, another duration) compile once. What stays literal: which
+values are zero (a zero removes its line), the motion's expressions and their phase constants (the origin is a
+parameter: imu_emulator.motion.earth.origin_terms). Variables each stage may read and update:
+imu_emulator.effects.STAGE_CONTRACT. How the kernel is called: imu_emulator.codegen.signature; how it is cached, compiled and loaded: imu_emulator.runtime.kernels.
 """
 from __future__ import annotations
 
@@ -18,14 +21,13 @@ from imu_emulator.codegen import explain
 from imu_emulator.codegen.plan import EffectPlan
 from imu_emulator.codegen.signature import ARG_NOTES, ARGS, RUNTIME_IMPORTS, TRUTH_OUTPUTS
 from imu_emulator.codegen.template import CHUNK, IMU_FRAME_TEMPLATE, KERNEL_TEMPLATE, PER_IMU_TEMPLATE, fill
-from imu_emulator.effects import EFFECTS, AXES, EmitContext, TRIADS
-from imu_emulator.effects.mounting import rotation as mounting_rotation
+from imu_emulator.effects import AXES, TRIADS
 # From the package, not scene.model: the cache key's fingerprint follows this module's imports, and the scene's
 # loaders (units, presets, shapes, sources) decide the values a kernel is generated from, as they did when they
 # were one module.
 from imu_emulator.scene import Scene
 
-CODEGEN_VERSION = "2"
+CODEGEN_VERSION = "3"
 EPS_SPEED = 1e-6     # m/s: below this the body is standing still for tangent attitude
 
 
@@ -56,8 +58,8 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
     outputs, 0 for none). No user text reaches it except validated numbers as repr."""
     from imu_emulator.motion.code import motion_code
 
-    motion = motion_code(scene, angles=truth)
     plan = EffectPlan(scene)
+    motion = motion_code(scene, angles=truth, origin=plan.origin)
     n_phase = len(motion.phase_vars)
     phase_stage = []
     if n_phase:
@@ -98,11 +100,8 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
             for lines, turn in plan.axes_turns.get(m, []):   # the IMU's axes turned in the body stage
                 quat += lines + [f"qw, qx, qy, qz = quat_multiply_scalar({q}, {', '.join(turn)})"]
                 q = "qw, qx, qy, qz"
-            M = mounting_rotation(EmitContext(plan, EFFECTS["mounting"], scene, imu, m))
-            if M is not None:
-                from imu_emulator.geo.rotations import matrix_to_quat
-                quat += [f"qw, qx, qy, qz = quat_multiply_scalar({q}, "
-                         + ", ".join(repr(float(v)) for v in matrix_to_quat(M)) + ")"]
+            if m in plan.mounting_quat:
+                quat += [f"qw, qx, qy, qz = quat_multiply_scalar({q}, {', '.join(plan.mounting_quat[m])})"]
             elif not quat:
                 quat = ["qw, qx, qy, qz = qbw, qbx, qby, qbz"]
             quat = (["# this IMU's attitude: the body's, then its axes' turns, then its mounting"] + quat
@@ -145,13 +144,13 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
             increments, n_imu=len(scene.imus), clock=plan.clock, phase_lines=motion.phase_lines,
             motion=node_motion + ([] if motion.rotation_given else _rotation_and_rates()) + motion.after_rotation,
             navigation=navigation,
-            imu_frames=frames, t0=float(scene.t0_s), dt=1.0 / scene.rate_hz))
+            imu_frames=frames, t0=plan.t0, dt=plan.dt))
     # Many IMUs: each IMU's lines are a function of its own (compile time linear in the IMU count). A few
     # compile faster inline (16 IMUs: 4.5 s inline, 7.0 s as functions; 64: 39.8 s against 20.8 s,
     # tools/bench_compile_imus.py). With increments the node loop in the body shares the IMUs' variables, so
     # their lines stay in the loop there.
     separate = len(per_imu) > INLINE_IMUS and not increments
-    module_names = {"math", "np", "numba", "EPS_V2", "CHUNK", "N_PHASE", *motion.constants, *plan.constants,
+    module_names = {"math", "np", "numba", "EPS_V2", "CHUNK", "N_PHASE", *motion.constants,
                     *(name for names in RUNTIME_IMPORTS.values() for name in names)}
     # slots without a variable (state blocks) are read as state[i] where they are used
     shared_slots = [(i, var) for i, (var, m, _) in enumerate(plan.slots)
@@ -169,15 +168,30 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
                             increments=increments)
     header += explain.glossary(plan, args=args, arg_notes=ARG_NOTES, motion_constants=motion.constants)
     load_state = ["# the state slots this loop keeps in local variables (the glossary names them)"] * bool(shared_slots)
-    return explain.stamp(fill(
+    return explain.stamp(_load_params(fill(
         KERNEL_TEMPLATE, header=header, imports=imports, eps_v2=repr(EPS_SPEED ** 2), chunk=CHUNK,
-        constants=constants + [f"{name} = np.array({list(values)!r})" for name, values in plan.constants.items()],
+        constants=constants, load_params=[_LOAD_PARAMS],
         imu_functions=imu_functions, args=", ".join(args), increments=integrate,
         load_state=load_state + [f"{var} = state[{i}]" for i, var in shared_slots],
         store_state=[f"state[{i}] = {var}" for i, var in shared_slots],
-        n_phase=max(n_phase, 1), phase_stage=phase_stage, t0=repr(float(scene.t0_s)), dt=repr(1.0 / scene.rate_hz),
-        clock=plan.clock, clock_shift=f" + clk * {1.0 / scene.rate_hz!r}" if plan.clock else "",
-        motion=body, navigation=navigation, attitude=attitude_lines, per_imu=per_imu_lines, truth=truth_lines))
+        n_phase=max(n_phase, 1), phase_stage=phase_stage, t0=plan.t0, dt=plan.dt,
+        clock=plan.clock, clock_shift=f" + clk * {plan.dt}" if plan.clock else "",
+        motion=body, navigation=navigation, attitude=attitude_lines, per_imu=per_imu_lines, truth=truth_lines)))
+
+
+_LOAD_PARAMS = "#@load_params"
+_PARAM = re.compile(r"\bprm_(\d+)\b")
+
+
+def _load_params(source: str) -> str:
+    """kernel_body's `prm_i = prm[i]` lines, for the scalar parameters its own lines read (an IMU of its own
+    function loads its own: 100 IMUs' parameters as locals of one function is what made numba's typing slow)."""
+    head, _, body = source.partition("def kernel_body(")
+    used = sorted({int(i) for i in _PARAM.findall(body)})
+    indent = "    "
+    loads = "\n".join(f"{indent}prm_{i} = prm[{i}]" for i in used)
+    return head + "def kernel_body(" + body.replace(f"{indent}{_LOAD_PARAMS}", loads) if loads else \
+        head + "def kernel_body(" + body.replace(f"{indent}{_LOAD_PARAMS}\n", "")
 
 
 class _ReadsBeforeAssigned(ast.NodeVisitor):
@@ -221,9 +235,12 @@ def _imu_function(m: int, lines: list[str], slots: list[tuple[int, str]], module
     code; its state slots are read at its start and written back at its end."""
     reads = _read_before_assigned(ast.parse("\n".join(lines)), {var for _, var in slots})
     args = [name for name in reads if name not in module_names and not hasattr(builtins, name)]
+    params = [name for name in args if _PARAM.fullmatch(name)]     # its parameters: loaded here, from prm
+    args = [name for name in args if name not in params] + (["prm"] if params and "prm" not in args else [])
     if slots and "state" not in args:
         args.append("state")
-    body = ([f"{var} = state[{i}]" for i, var in slots] + lines + [f"state[{i}] = {var}" for i, var in slots])
+    body = ([f"{name} = prm[{name[4:]}]" for name in params] + [f"{var} = state[{i}]" for i, var in slots] + lines
+            + [f"state[{i}] = {var}" for i, var in slots])
     function = ["", "", f"# IMU {m}'s stages 2-4, a function of its own: numba types it alone (compile time linear in "
                 "the IMU count)", "@numba.njit(cache=True, nogil=True, error_model='numpy')",
                 f"def imu_{m}({', '.join(args)}):"] + ["    " + line for line in body]

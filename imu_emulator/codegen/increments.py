@@ -85,18 +85,19 @@ def constants(count: int) -> list[str]:
 
 
 def node_lines(count: int, *, n_imu: int, clock: list[str], phase_lines: list[str], motion: list[str],
-               navigation: list[str], imu_frames: list[list[str]], t0: float, dt: float) -> list[str]:
+               navigation: list[str], imu_frames: list[list[str]], t0: str, dt: str) -> list[str]:
     """The per-sample lines that integrate over (t_{k−1}, t_k]: they leave the integrals in inc_th<m><axis>
     and inc_dv<m><axis> and the interval length in inc_T; the sample's own evaluation runs after them and
-    overwrites every variable they set. `motion` reads the sampled motion at index `jn` for node q."""
+    overwrites every variable they set. `motion` reads the sampled motion at index `jn` for node q; `t0` and `dt`
+    are the source of the scene's start time and sample interval (run-time parameters)."""
     lines = ["# integrated outputs over (t_k-1, t_k]: Gauss-Legendre quadrature of the chain (codegen.increments)"]
     lines += [f"{_acc(kind, m, a)} = 0.0" for m in range(n_imu) for kind in ("th", "dv") for a in "xyz"]
     if clock:   # the previous sample's instant: its clock lines with k - 1, s - 1 (s = -1 wraps, as a counter)
         lines += ["# the interval's start: the previous sample's actual instant (its clock lines at k - 1, s - 1)",
                   "inc_clk = clk", "k -= 1", "s -= 1", *clock, "inc_clkp = clk", "k += 1", "s += 1",
-                  "clk = inc_clk", f"inc_T = (1.0 + inc_clk - inc_clkp) * {dt!r}"]
+                  "clk = inc_clk", f"inc_T = (1.0 + inc_clk - inc_clkp) * {dt}"]
     else:
-        lines += [f"inc_T = {dt!r}"]
+        lines += [f"inc_T = {dt}"]
     # The phase of each periodic term at k, reduced exactly once; a node adds its offset in cycles.
     bases = []
     for line in phase_lines:
@@ -107,7 +108,7 @@ def node_lines(count: int, *, n_imu: int, clock: list[str], phase_lines: list[st
     lines += ["# node q at fraction INC_U[q] of the interval, weight INC_W[q]: motion, stages 1-3 there, summed",
               f"for q in range({count}):"]
     body = ["iu = (inc_clkp - 1.0) + (1.0 + inc_clk - inc_clkp) * INC_U[q]" if clock else "iu = INC_U[q] - 1.0",
-            f"t = {t0!r} + k * {dt!r} + iu * {dt!r}", f"jn = n + j * {count} + q"]
+            f"t = {t0} + k * {dt} + iu * {dt}", f"jn = n + j * {count} + q"]
     body += [f"sph{i}, cph{i} = sincos_cycles(inc_c{i} + iu * PH{i}_HI)" for i in range(n_phases)]
     body += motion + ["fnx = ax", "fny = ay", "fnz = az"] + navigation
     body += ["fbx = r00 * fnx + r10 * fny + r20 * fnz", "fby = r01 * fnx + r11 * fny + r21 * fnz",

@@ -15,7 +15,7 @@ RUNTIME_IMPORTS = {
     "imu_emulator.numerics.counter_rng": ("normal",),
 }
 #: The kernel's arguments (then imu_emulator.codegen.increments.ARGS when it integrates); `arguments` lays them out.
-ARGS = ("k0", "n", "s0", "mot", "att", "hold", "keys", "state", "out_acc", "out_gyro", "out_quat",
+ARGS = ("k0", "n", "s0", "mot", "att", "hold", "keys", "state", "prm", "out_acc", "out_gyro", "out_quat",
         "tr_pos", "tr_vel", "tr_euler", "tr_omega", "tr_alpha", "tr_bias_acc", "tr_bias_gyro")
 #: What each argument holds (the generated source's glossary prints these), kernel_body's scratch included
 ARG_NOTES = {
@@ -28,6 +28,8 @@ ARG_NOTES = {
     "hold": "tangent attitude's last defined heading and pitch (cos, sin, cos, sin), carried across blocks",
     "keys": "one key per random stream (below), made from the seed at run time",
     "state": "the state slots (below), carried across blocks",
+    "prm": "the scene's numbers (below): parameters, lever arms, mountings, t0, dt; the source holds none of them, so "
+           "scenes differing only in them share this kernel",
     "out_acc": "accelerometer output (n_imu, n, 3), m/s^2, sensor axes",
     "out_gyro": "gyro output (n_imu, n, 3), rad/s, sensor axes",
     "out_quat": "attitude of each IMU's axes (n_imu, n, 4), scalar first; empty when not output",
@@ -55,11 +57,11 @@ EMPTY3 = np.zeros((0, 0, 0))
 EMPTY2 = np.zeros((0, 0))
 
 
-def arguments(k0, n, s0, mot, att, hold, keys, state, accel, gyro, quat=None, truth=None, bias=None,
+def arguments(k0, n, s0, mot, att, hold, keys, state, params, accel, gyro, quat=None, truth=None, bias=None,
               increments=None) -> tuple:
     """The kernel's arguments in ARGS order: `quat` (n_imu, n, 4), `truth` the TRUTH_OUTPUTS arrays, `bias` the
     BIAS_TRUTH_KEYS arrays, `increments` (dtheta, dvel), each None when not output."""
-    return (np.int64(k0), np.int64(n), np.int64(s0), mot, att, hold, keys, state, accel, gyro,
+    return (np.int64(k0), np.int64(n), np.int64(s0), mot, att, hold, keys, state, params, accel, gyro,
             EMPTY3 if quat is None else quat,
             *([EMPTY2] * len(TRUTH_OUTPUTS) if truth is None else truth),
             *([EMPTY3] * len(BIAS_TRUTH_KEYS) if bias is None else bias),
@@ -76,7 +78,7 @@ def trial_arguments(scene: Scene, attitude: bool, truth: bool, increments: int =
         return [np.zeros((n_imu, 0, 3))] * count
     return arguments(0, 0, 0, empty if isinstance(scene.trajectory, SampledData) else EMPTY3,
                      empty if isinstance(scene.attitude, SampledData) else EMPTY3, np.zeros(4),
-                     plan.keys(0), plan.initial_state(0), *outputs(2),
+                     plan.keys(0), plan.initial_state(0), plan.param_values(), *outputs(2),
                      quat=np.zeros((n_imu, 0, 4)) if attitude else None,
                      truth=[np.zeros((0, 3))] * len(TRUTH_OUTPUTS) if truth else None,
                      bias=outputs(len(BIAS_TRUTH_KEYS)) if truth and plan.bias_truth else None,

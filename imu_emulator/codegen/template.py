@@ -28,6 +28,8 @@ def kernel_body($args, phases):
     # numba's runtime (imu_emulator.native.objects); `kernel` below allocates the scratch and calls it.
     # tangent attitude's last defined heading and pitch (cos, sin), carried across blocks
     hcy, hsy, hcp, hsp = hold[0], hold[1], hold[2], hold[3]
+    # the scene's numbers, run-time parameters (imu_emulator.codegen.plan): read once per call into locals
+    $load_params
     $load_state
     # samples in chunks of CHUNK: every periodic phase of the chunk first, then the per-sample body
     for c0 in range(0, n, CHUNK):

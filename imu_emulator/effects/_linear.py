@@ -7,11 +7,12 @@ from imu_emulator.errors import SceneError
 TRUE = {"accel": ("tfx", "tfy", "tfz"), "gyro": ("twx", "twy", "twz")}
 
 
-def add_matrix(out: str, matrix, source: str) -> list[str]:
-    """Lines `<out>x += M[0][0] * tfx + ...` for the nonzero elements of M (source: "accel" or "gyro")."""
+def add_matrix(ctx, out: str, matrix, source: str) -> list[str]:
+    """Lines `<out>x += M[0][0] * tfx + ...` for the nonzero elements of M (source: "accel" or "gyro"), the
+    elements run-time parameters (EmitContext.number)."""
     lines = []
     for row in range(3):
-        terms = [f"{float(matrix[row][col])!r} * {TRUE[source][col]}" for col in range(3) if matrix[row][col]]
+        terms = [f"{ctx.number(matrix[row][col])} * {TRUE[source][col]}" for col in range(3) if matrix[row][col]]
         if terms:
             lines.append(f"{out}{AXES[row]} += " + " + ".join(terms))
     return lines

@@ -157,10 +157,16 @@ class EmitContext:
         return self.plan.add_state_block(self.m, [
             lambda draw, initial=initial: initial(lambda s, c: draw(f"{prefix}.{s}", c)) for initial in initials])
 
+    def number(self, value: float) -> str:
+        """Source for a number of the scene (a parameter, or one computed from parameters and the rate): a
+        run-time parameter of the kernel, never a literal, so that scenes differing only in it share a kernel.
+        Test the value (`if value:`) before asking when a zero should remove the line."""
+        return self.plan.add_param(value)
+
     def constant(self, name: str, values) -> str:
-        """A module-level float array of this effect and IMU (numba folds it into the machine code): returns
-        its name in the generated source."""
-        return self.plan.add_constant(f"{self.effect.name.upper()}_{self.m}_{name}", values)
+        """A float array of this effect and IMU, passed at run time in the parameters: returns the index of its
+        first element, read in the source as prm[base + i] (its length is structure, its values are not)."""
+        return str(self.plan.add_constant(f"{self.effect.name.upper()}_{self.m}_{name}", values))
 
     def normal(self, stream: str, counter: str = "s") -> str:
         """Source for the standard normal number `counter` of this IMU's stream `stream` (default: this run

@@ -9,12 +9,12 @@ def emit(ctx) -> list[str]:
         constant = ctx.value(f"imu.{triad}.bias")
         spread = ctx.value(f"imu.{triad}.turn_on_bias_sd")
         for axis in range(3):
-            terms = [repr(constant[axis])] if constant[axis] else []
+            terms = [ctx.number(constant[axis])] if constant[axis] else []
             if spread[axis]:
                 name = f"{triad}.{AXES[axis]}"
                 # the state holds the standard normal drawn for this run; its scale is in the source
                 z = ctx.state(f"turn_on[{name}]", lambda draw, name=name: draw(name, 0))
-                terms.append(f"{spread[axis]!r} * {z}")
+                terms.append(f"{ctx.number(spread[axis])} * {z}")
             if terms:
                 lines += ctx.add_bias(triad, axis, " + ".join(terms))
     return lines

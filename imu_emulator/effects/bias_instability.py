@@ -91,7 +91,7 @@ def emit(ctx) -> list[str]:
                 a, q = _coefficients(sigma, tau, ctx.dt)
                 x = ctx.state(f"gm[{name}]", lambda draw, sigma=sigma, name=name: sigma * draw(name, 0))
                 terms.append(x)
-                after.append(f"{x} = {a!r} * {x} + {q!r} * {ctx.normal(name, '(s + 1)')}")
+                after.append(f"{x} = {ctx.number(a)} * {x} + {ctx.number(q)} * {ctx.normal(name, '(s + 1)')}")
             else:
                 slow.append((name, sigma, grids[name], *_coefficients(sigma, tau, grids[name] * ctx.dt)))
         if not slow:
@@ -125,7 +125,7 @@ def emit(ctx) -> list[str]:
                 initials.append(lambda draw, name=name, sigma=sigma: sigma * draw(name, 0))
             base = ctx.state_block("gm", initials)
             xb, xa = f"state[{base}]", f"state[{base + 1}]"
-            step = f"{xb} = {a!r} * {xb} + {q!r} * {ctx.normal(name, f'(s // {m_p} + 1)')}"
+            step = f"{xb} = {ctx.number(a)} * {xb} + {ctx.number(q)} * {ctx.normal(name, f'(s // {m_p} + 1)')}"
             if m_p == m:
                 advance.setdefault(m_p, []).append(step)
                 nexts.append(xb)

@@ -25,9 +25,9 @@ def emit(ctx) -> list[str]:
     ppm, jitter = settings(ctx.scene)
     terms = []
     if ppm:
-        terms.append(f"k * {ppm * 1e-6!r}")
+        terms.append(f"k * {ctx.number(ppm * 1e-6)}")
     if jitter:
-        terms.append(f"{jitter * ctx.scene.rate_hz!r} * {ctx.normal('jitter')}")
+        terms.append(f"{ctx.number(jitter * ctx.scene.rate_hz)} * {ctx.normal('jitter')}")
     return [f"clk = {' + '.join(terms)}"] if terms else []
 
 

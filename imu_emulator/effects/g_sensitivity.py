@@ -6,7 +6,7 @@ from imu_emulator.effects._record import TRIADS, Effect, Param, Stage
 
 
 def emit(ctx) -> list[str]:
-    return add_matrix(TRIADS["gyro"][1], ctx.value("imu.gyro.g_sensitivity"), "accel")
+    return add_matrix(ctx, TRIADS["gyro"][1], ctx.value("imu.gyro.g_sensitivity"), "accel")
 
 
 EFFECT = Effect(

@@ -3,16 +3,17 @@ from imu_emulator.effects._record import Effect, Param, Stage
 
 
 def emit(ctx) -> list[str]:
-    rx, ry, rz = ctx.value("imu.lever_arm_m")
-    if not (rx or ry or rz):
+    r = ctx.value("imu.lever_arm_m")
+    if not any(r):
         return []
+    rx, ry, rz = (ctx.number(v) for v in r)
     # f_I = f_S + w x (w x r) + alpha x r, body frame (w the inertial rate, alpha its derivative)
     alx, aly, alz = ctx.alpha
     return [
-        f"ux = gwy * {rz!r} - gwz * {ry!r}", f"uy = gwz * {rx!r} - gwx * {rz!r}", f"uz = gwx * {ry!r} - gwy * {rx!r}",
-        f"fax += gwy * uz - gwz * uy + ({aly} * {rz!r} - {alz} * {ry!r})",
-        f"fay += gwz * ux - gwx * uz + ({alz} * {rx!r} - {alx} * {rz!r})",
-        f"faz += gwx * uy - gwy * ux + ({alx} * {ry!r} - {aly} * {rx!r})",
+        f"ux = gwy * {rz} - gwz * {ry}", f"uy = gwz * {rx} - gwx * {rz}", f"uz = gwx * {ry} - gwy * {rx}",
+        f"fax += gwy * uz - gwz * uy + ({aly} * {rz} - {alz} * {ry})",
+        f"fay += gwz * ux - gwx * uz + ({alz} * {rx} - {alx} * {rz})",
+        f"faz += gwx * uy - gwy * ux + ({alx} * {ry} - {aly} * {rx})",
     ]
 
 

@@ -11,7 +11,7 @@ from imu_emulator.effects._record import TRIADS, Effect, Stage, triad_params
 def emit(ctx) -> list[str]:
     lines = []
     for triad, (_, out, _) in TRIADS.items():
-        lines += add_matrix(out, ctx.value(f"imu.{triad}.misalignment"), triad)
+        lines += add_matrix(ctx, out, ctx.value(f"imu.{triad}.misalignment"), triad)
     return lines
 
 

@@ -29,7 +29,8 @@ def emit(ctx) -> list[str]:
         # sensor = M^T body; the right-hand side reads the body values still held in fa*/gw*
         src = {"o": "fa", "g": "gw"}[var]
         for row, axis in enumerate("xyz"):
-            lines.append(f"{var}{axis} = " + " + ".join(f"{float(M[col, row])!r} * {src}{'xyz'[col]}" for col in range(3)))
+            lines.append(f"{var}{axis} = " + " + ".join(f"{ctx.number(M[col, row])} * {src}{'xyz'[col]}"
+                                                        for col in range(3)))
     return lines
 
 

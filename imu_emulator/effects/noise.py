@@ -28,7 +28,7 @@ def emit(ctx) -> list[str]:
         for axis, density in enumerate(ctx.value(f"imu.{triad}.noise_density")):
             if density:
                 sigma = per_sample_sigma(density, ctx.scene.rate_hz)
-                lines.append(f"{out}{AXES[axis]} += {sigma!r} * {ctx.normal(f'{triad}.{AXES[axis]}')}")
+                lines.append(f"{out}{AXES[axis]} += {ctx.number(sigma)} * {ctx.normal(f'{triad}.{AXES[axis]}')}")
     return lines
 
 

@@ -35,7 +35,7 @@ def emit(ctx) -> list[str]:
             k2 = coefficient(ctx.imu.values, triad, axis, range_on, f"imu[{ctx.m}]")
             if k2:
                 true = TRUE[triad][axis]
-                lines.append(f"{out}{AXES[axis]} += {k2!r} * ({true} * {true})")
+                lines.append(f"{out}{AXES[axis]} += {ctx.number(k2)} * ({true} * {true})")
     return lines
 
 

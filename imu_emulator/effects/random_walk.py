@@ -14,7 +14,7 @@ def emit(ctx) -> list[str]:
                 name = f"{triad}.{AXES[axis]}"
                 walk = ctx.state(f"walk[{name}]", lambda draw: 0.0)
                 lines += ctx.add_bias(triad, axis, walk)
-                lines.append(f"{walk} += {k * math.sqrt(ctx.dt)!r} * {ctx.normal(name)}")
+                lines.append(f"{walk} += {ctx.number(k * math.sqrt(ctx.dt))} * {ctx.normal(name)}")
     return lines
 
 

@@ -9,8 +9,9 @@ def emit(ctx) -> list[str]:
     lines = []
     for triad, v, axis, full_scale in per_axis(ctx, "range"):
         count = ctx.count(f"{triad}.{axis}")
-        lines += [f"if {v} > {full_scale!r}:", f"    {v} = {full_scale!r}", f"    {count} += 1.0",
-                  f"elif {v} < {-full_scale!r}:", f"    {v} = {-full_scale!r}", f"    {count} += 1.0"]
+        high, low = ctx.number(full_scale), ctx.number(-full_scale)
+        lines += [f"if {v} > {high}:", f"    {v} = {high}", f"    {count} += 1.0",
+                  f"elif {v} < {low}:", f"    {v} = {low}", f"    {count} += 1.0"]
     return lines
 
 

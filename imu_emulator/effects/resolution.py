@@ -5,7 +5,11 @@ from imu_emulator.effects._record import Effect, Stage, triad_params
 
 
 def emit(ctx) -> list[str]:
-    return [f"{v} = math.floor({v} / {lsb!r} + 0.5) * {lsb!r}" for _, v, _, lsb in per_axis(ctx, "resolution")]
+    lines = []
+    for _, v, _, lsb in per_axis(ctx, "resolution"):
+        step = ctx.number(lsb)
+        lines.append(f"{v} = math.floor({v} / {step} + 0.5) * {step}")
+    return lines
 
 
 EFFECT = Effect(

@@ -7,7 +7,7 @@ def emit(ctx) -> list[str]:
     lines = []
     for triad, (_, out, _) in TRIADS.items():
         s = ctx.value(f"imu.{triad}.scale_factor")
-        lines += add_matrix(out, [[s[i] if i == j else 0.0 for j in range(3)] for i in range(3)], triad)
+        lines += add_matrix(ctx, out, [[s[i] if i == j else 0.0 for j in range(3)] for i in range(3)], triad)
     return lines
 
 

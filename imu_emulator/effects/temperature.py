@@ -31,18 +31,19 @@ def emit(ctx) -> list[str]:
     temperature = ctx.var("T")
     lines = [f"{temperature} = {expressions.to_code(_tree(values), {})}"]
     if values["imu.warmup_rise_c"]:
-        lines.append(f"{temperature} += {values['imu.warmup_rise_c']!r} * -math.expm1(-t / {values['imu.warmup_tau_s']!r})")
+        rise, tau = ctx.number(values["imu.warmup_rise_c"]), ctx.number(values["imu.warmup_tau_s"])
+        lines.append(f"{temperature} += {rise} * -math.expm1(-t / {tau})")
     delta = ctx.var("dT")
-    lines.append(f"{delta} = {temperature} - {values['imu.temperature_ref_c']!r}")
+    lines.append(f"{delta} = {temperature} - {ctx.number(values['imu.temperature_ref_c'])}")
     terms = []
     for triad, (_, out, _) in TRIADS.items():
         for axis in range(3):
             b1 = ctx.value(f"imu.{triad}.bias_tc")[axis]
             s1 = ctx.value(f"imu.{triad}.scale_tc")[axis]
             if b1:
-                terms += ctx.add_bias(triad, axis, f"{b1!r} * {delta}")
+                terms += ctx.add_bias(triad, axis, f"{ctx.number(b1)} * {delta}")
             if s1:
-                terms.append(f"{out}{AXES[axis]} += {s1!r} * {delta} * {TRUE[triad][axis]}")
+                terms.append(f"{out}{AXES[axis]} += {ctx.number(s1)} * {delta} * {TRUE[triad][axis]}")
     return lines + terms if terms else []
 
 

@@ -77,12 +77,13 @@ def emit(ctx) -> list[str]:
     sn, cs = ctx.var("sn"), ctx.var("cs")
     for axis, kind, amplitude, frequency, phase in sines:
         w = 2.0 * math.pi * frequency
-        lines.append(f"{sn}, {cs} = sincos_cycles({frequency!r} * t + {phase / (2.0 * math.pi)!r})")
+        number = ctx.number
+        lines.append(f"{sn}, {cs} = sincos_cycles({number(frequency)} * t + {number(phase / (2.0 * math.pi))})")
         if kind == 0:   # d'' = A sin, d' = -A/w cos, d = -A/w^2 sin
-            lines += [f"{acc[axis]} += {amplitude!r} * {sn}", f"{vel[axis]} -= {amplitude / w!r} * {cs}",
-                      f"{disp[axis]} -= {amplitude / w ** 2!r} * {sn}"]
+            lines += [f"{acc[axis]} += {number(amplitude)} * {sn}", f"{vel[axis]} -= {number(amplitude / w)} * {cs}",
+                      f"{disp[axis]} -= {number(amplitude / w ** 2)} * {sn}"]
         else:           # rate = A sin, angle = -A/w cos
-            lines += [f"{rate[axis]} += {amplitude!r} * {sn}", f"{angle[axis]} -= {amplitude / w!r} * {cs}"]
+            lines += [f"{rate[axis]} += {number(amplitude)} * {sn}", f"{angle[axis]} -= {number(amplitude / w)} * {cs}"]
     i = ctx.var("i")
     for kind, per_axis in psd.items():
         # the same lines as the sines above, in a loop over the constants of each axis
@@ -92,11 +93,11 @@ def emit(ctx) -> list[str]:
             f = ctx.constant(f"F{kind}{a}", [fi for fi, _ in found])
             base = ctx.state_block(STATES[kind], [lambda draw, a=a, k=k: _uniform(draw, a, k) for k in range(n)])
             lines += [f"for {i} in range({n}):",
-                      f"    {sn}, {cs} = sincos_cycles({f}[{i}] * t + state[{base} + {i}])"]
+                      f"    {sn}, {cs} = sincos_cycles(prm[{f} + {i}] * t + state[{base} + {i}])"]
             for order, (target, sign) in enumerate(targets):
                 # integral number `order` of A sin: A / w^order times sin, -cos, -sin
                 amp = ctx.constant(f"A{kind}{order}{a}", [ai / (2.0 * math.pi * fi) ** order for fi, ai in found])
-                lines.append(f"    {target[axis]} {sign}= {amp}[{i}] * {sn if order % 2 == 0 else cs}")
+                lines.append(f"    {target[axis]} {sign}= prm[{amp} + {i}] * {sn if order % 2 == 0 else cs}")
     if linear:
         d = [disp[i] if i in linear else "0.0" for i in range(3)]
         v = [vel[i] if i in linear else "0.0" for i in range(3)]

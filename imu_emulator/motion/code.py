@@ -233,8 +233,9 @@ def tangent_lines(angles: bool, v: str = "v", a: str = "a", j: str = "j") -> lis
     return lines
 
 
-def motion_code(scene: Scene, angles: bool) -> MotionCode:
-    """All motion lines for the kernel: translation first (tangent attitude reads v, a, j)."""
+def motion_code(scene: Scene, angles: bool, origin=None) -> MotionCode:
+    """All motion lines for the kernel: translation first (tangent attitude reads v, a, j). `origin`: the sources
+    of the tangent frame's origin (imu_emulator.motion.earth.origin_terms; default literals)."""
     tangent = scene.attitude_mode == "tangent"
     order = 3 if tangent else 2
     symbolic_parts = []
@@ -250,7 +251,7 @@ def motion_code(scene: Scene, angles: bool) -> MotionCode:
     earth = model_on(scene)
     if tangent and earth:
         # heading and pitch from the velocity in the local level frame at the current position
-        attitude_lines = (geometry_lines(scene, jerk=True) + tangent_level_lines(scene)
+        attitude_lines = (geometry_lines(scene, jerk=True, origin=origin) + tangent_level_lines(scene)
                           + tangent_lines(angles, "t_v", "t_a", "t_j"))
     elif tangent:
         attitude_lines = tangent_lines(angles)
@@ -263,7 +264,7 @@ def motion_code(scene: Scene, angles: bool) -> MotionCode:
         assert isinstance(scene.attitude, SampledData)
         attitude_lines = sampled_attitude_lines(angles)
     if earth and not tangent:
-        attitude_lines = attitude_lines + geometry_lines(scene)
+        attitude_lines = attitude_lines + geometry_lines(scene, origin=origin)
     sym = (_symbolic(symbolic_parts, scene) if symbolic_parts
            else MotionCode(lines=[], constants={}, needs_jerk=tangent))
     if scene.frame == "ECI" and isinstance(scene.trajectory, SampledData):

@@ -51,22 +51,31 @@ def tangent_to_ecef(frame: str, origin) -> tuple[np.ndarray, np.ndarray]:
     return frames.geodetic_to_ecef(*origin), local(origin[0], origin[1]).T
 
 
+def origin_terms(scene, number=repr):
+    """The source of r0 and C (tangent_to_ecef) for the kernel: number(value) for each element, except the exact
+    zeros (None: the term is left out, since 0 * x is not folded: x may be inf) and C's exact ones ("1": x itself).
+    Which elements are 0 or 1 is the source's structure; the codegen passes a run-time parameter as `number`
+    (imu_emulator.codegen.plan), so another origin reuses the kernel."""
+    r0, c = tangent_to_ecef(position_frame(scene), scene.origin)
+    return ([None if v == 0.0 else number(float(v)) for v in r0],
+            [[None if v == 0.0 else "1" if v == 1.0 else number(float(v)) for v in row] for row in c])
+
+
 def _affine(out: str, r0, c, names) -> list[str]:
-    """out{x,y,z} = r0 + C @ names, printed without the exact zeros (0 * x is not folded: x may be inf)."""
+    """out{x,y,z} = r0 + C @ names from origin_terms' sources (r0 None: no offset)."""
     lines = []
     for i, axis in enumerate("xyz"):
-        terms = [repr(float(r0[i]))] if r0 is not None and r0[i] != 0.0 else []
-        terms += [f"{float(c[i, j])!r} * {names[j]}" if c[i, j] != 1.0 else names[j]
-                  for j in range(3) if c[i, j] != 0.0]
+        terms = [r0[i]] if r0 is not None and r0[i] is not None else []
+        terms += [names[j] if c[i][j] == "1" else f"{c[i][j]} * {names[j]}" for j in range(3) if c[i][j] is not None]
         lines.append(f"{out}{axis} = {' + '.join(terms) or '0.0'}")
     return lines
 
 
-def geometry_lines(scene, jerk: bool = False) -> list[str]:
+def geometry_lines(scene, jerk: bool = False, origin=None) -> list[str]:
     """The Earth geometry, after the motion's lines: geodetic position, local-NED velocity and acceleration
     (e_*; and jerk e_jn.. with `jerk`), and ax ay az replaced by the Earth-fixed acceleration in the level
-    axes (the navigation stage's f starts from them)."""
-    r0, c = tangent_to_ecef(position_frame(scene), scene.origin)
+    axes (the navigation stage's f starts from them). `origin`: origin_terms' sources (default: literals)."""
+    r0, c = origin or origin_terms(scene)
     a, e2 = repr(wgs84.A), repr(wgs84.E2)
     lines = _affine("e_r", r0, c, ("px", "py", "pz")) + _affine("e_v", None, c, ("vx", "vy", "vz"))
     lines += _affine("e_a", None, c, ("ax", "ay", "az"))

@@ -3,8 +3,11 @@
 An entry is cache_dir()/<key>/: the generated source kernel.py (its first line an HMAC of the rest under the
 cache's secret, imu_emulator.files.trust), its machine code kernel.o (imu_emulator.native.objects: a warm run loads
 it without importing numba; sealed the same way) and numba's __pycache__ beside it. Nothing of an entry is loaded
-unless the cache and the entry are the running user's alone and the seal matches. The key hashes the whole
-validated scene (imu_emulator.scene.digest), the outputs and the bytes of every module of the generator;
+unless the cache and the entry are the running user's alone and the seal matches. The key hashes the scene's
+structure: the validated scene (imu_emulator.scene.digest) less the numbers that reach the kernel at run time
+(PARAMETRIC; TIMING unless the motion is periodic), with the effects' plan (imu_emulator.codegen.plan: its lines
+hold parameter slots, not values, and which values are zero), the outputs and the bytes of every module of the
+generator;
 imu_emulator.runtime.kernels publishes an entry (directory rename) only after it compiled, and removes and
 regenerates an entry that fails its seal or its compile.
 """
@@ -20,11 +23,12 @@ import sys
 from pathlib import Path
 
 from imu_emulator.codegen.generate import CODEGEN_VERSION
+from imu_emulator.codegen.plan import EffectPlan
 from imu_emulator.codegen.signature import RUNTIME_IMPORTS
 from imu_emulator.effects import EFFECTS
 from imu_emulator.files import trust
 from imu_emulator.scene.digest import KEY_EXCLUDES, canonical  # noqa: F401 (KEY_EXCLUDES: what the key leaves out)
-from imu_emulator.scene.model import Scene
+from imu_emulator.scene.model import Expressions, Scene
 
 
 def cache_dir() -> Path:
@@ -83,11 +87,39 @@ def _code_fingerprint() -> str:
         h.update(path.read_bytes())
     return h.hexdigest()
 
-def scene_key(scene: Scene, attitude: bool, truth: bool, increments: int = 0) -> str:
-    """The whole validated scene (less KEY_EXCLUDES), the outputs and every generator module, hashed."""
+#: Scene fields no line of the kernel holds: the duration (no line reads it), the IMUs (their names reach no
+#: line; their values reach the lines only as parameter slots, so EffectPlan.structure() stands for them) and the
+#: origin (parameters too; which of its ECEF terms are exactly 0 or 1 is in EffectPlan.structure()).
+PARAMETRIC = ("duration_s", "imus", "origin")
+#: Run-time parameters too (prm's t0, dt), but the phase constants of periodic motion (imu_emulator.motion.phases:
+#: sin, cos, tan of a phase linear in t, reduced exactly) are literals computed from them: keyed while the motion
+#: may have such (periodic_motion).
+TIMING = ("t0_s", "rate_hz")
+_TRIG = re.compile(r"sin|cos|tan")
+
+
+def periodic_motion(scene: Scene) -> bool:
+    """Whether the motion's source may hold phase constants: attitude angles as expressions (their cos and sin),
+    a trajectory expression with a trigonometric function or in geodetic keys (cos and sin of latitude and
+    longitude), an ECI frame or reference (the Earth's rotation angle). Decided from the texts, without sympy:
+    a false yes only keys t0 and rate (a recompile), a false no would run stale phases, so it errs to yes."""
+    if scene.frame == "ECI" or scene.attitude_reference == "ECI" or isinstance(scene.attitude, Expressions):
+        return True
+    trajectory = scene.trajectory
+    return isinstance(trajectory, Expressions) and (tuple(trajectory.keys) != ("x", "y", "z")
+                                                    or any(_TRIG.search(text) for text in trajectory.texts))
+
+
+def scene_key(scene: Scene, attitude: bool, truth: bool, increments: int = 0, plan: EffectPlan | None = None) -> str:
+    """The scene's structure (the validated scene less KEY_EXCLUDES and the fields whose numbers arrive at run
+    time, plus the effects' plan), the outputs and every generator module, hashed. `plan`: the scene's
+    EffectPlan when the caller has it (building one costs about a millisecond)."""
     outputs = [attitude, truth] + ([increments] if increments else [])
-    spec = {"scene": canonical(scene), "outputs": outputs, "code": _code_fingerprint(),
-            "python": list(sys.version_info[:2])}
+    described = canonical(scene)
+    for name in PARAMETRIC + (() if periodic_motion(scene) else TIMING):
+        described.pop(name)
+    spec = {"scene": described, "plan": (plan or EffectPlan(scene)).structure(), "outputs": outputs,
+            "code": _code_fingerprint(), "python": list(sys.version_info[:2])}
     return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:32]
 
 

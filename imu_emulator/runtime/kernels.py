@@ -128,12 +128,14 @@ def kernel_outputs(scene: Scene, attitude: bool, truth: bool) -> tuple[bool, boo
     return attitude or companions, truth or companions
 
 
-def compile_kernel(scene: Scene, attitude: bool = True, truth: bool = False, increments: int = 0):
+def compile_kernel(scene: Scene, attitude: bool = True, truth: bool = False, increments: int = 0, plan=None):
     """The kernel function for this scene's motion, effects and outputs (cached in memory and on disk).
     Loaded as machine code without numba when the entry holds it (imu_emulator.native.objects), else numba's.
-    UntrustedCache if the cache or the entry is not the running user's alone (imu_emulator.files.trust)."""
+    UntrustedCache if the cache or the entry is not the running user's alone (imu_emulator.files.trust).
+    Scenes of one structure (imu_emulator.runtime.cache.scene_key) share the kernel: the caller passes the
+    scene's numbers at run time (EffectPlan.param_values; `plan`: the scene's EffectPlan if the caller has it)."""
     attitude, truth = kernel_outputs(scene, attitude, truth)
-    key = scene_key(scene, attitude, truth, increments)
+    key = scene_key(scene, attitude, truth, increments, plan)
     if key in _loaded:
         return _loaded[key]
     root = kernels_dir()

@@ -39,6 +39,7 @@ class Simulation:
         #: which the kernel then outputs whether or not they were asked for; they carry state across blocks
         self._companions = any(imu.companions for imu in scene.imus)
         self._attitude_out, self._truth_out = kernel_outputs(scene, attitude, truth)
+        self._params = self._plan.param_values()     # the scene's numbers, the kernel's `prm`
         self._stateful = bool(self._plan.slots) or self._companions
         #: each IMU's temperature profile reaches the samples when the temperature effect is on
         self.temperature = "temperature" in scene.effects
@@ -48,7 +49,7 @@ class Simulation:
         self._position = self._series(scene.trajectory, 3 if scene.attitude_mode == "tangent" else 2, "trajectory")
         self._euler = self._series(scene.attitude, 2, "attitude")
         self.kernel = compile_kernel(scene, attitude=self._attitude_out, truth=self._truth_out,
-                                     increments=self.increments)
+                                     increments=self.increments, plan=self._plan)
         offsets = np.array([imu.time_offset_s for imu in scene.imus])
         self._time_offsets = offsets if offsets.any() else None     # SampleBlock.time_offset_s
         # Tangent attitude holds the last defined heading (cos, sin) and pitch (cos, sin) across blocks.
@@ -173,7 +174,8 @@ class Simulation:
     def _call(self, k0: int, n: int, s0: int, out: SampleBlock) -> None:
         mot = self._evaluate(self._position, k0, n, s0)
         att = self._evaluate(self._euler, k0, n, s0)
-        self.kernel(*arguments(k0, n, s0, mot, att, self._hold, self._keys, self._state, out.accel, out.gyro,
+        self.kernel(*arguments(k0, n, s0, mot, att, self._hold, self._keys, self._state, self._params,
+                               out.accel, out.gyro,
                                quat=out.quat if self._attitude_out else None,
                                truth=[out.truth[k] for k in TRUTH_KEYS] if self._truth_out else None,
                                bias=[out.truth[k] for k in BIAS_TRUTH_KEYS] if self._bias_out else None,

@@ -1,0 +1,137 @@
+"""Baked numbers against run-time parameters (issue 25), and what a --vary batch compiles.
+
+Part 1, the kernel: the same generated source twice, once as the cache builds it (the scene's numbers read from
+the array `prm` into locals prm_i once per call) and once "baked" (each `prm_i = prm[i]` replaced by the value's
+repr, so LLVM folds it as it folded the literals the generator used to write). Both are compiled here, outside
+the cache, and called on the same Simulation's arguments, interleaved A, B, A, B, ... (a shared 2-vCPU machine
+varies 2-3x between runs: only the ratio inside one run means something). Thread CPU time of the kernel call
+alone; min / median / max ns per sample, the ratio of medians.
+
+Part 2, a batch: `--runs N` realizations of a scene with --vary draws of sensor parameters, in this process
+(--workers 0) in a fresh cache: how many kernels were compiled (cache entries), the first load's time, the
+batch's wall and CPU time.
+
+    PYTHONPATH=. python tools/bench_parametric.py [--scene examples/drone_imu.toml] [--rounds 7] [--samples 200000]
+                                                  [--runs 100] [--skip-batch]
+"""
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import os
+import re
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+
+def machine() -> str:
+    model = "unknown CPU"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    load = os.getloadavg()
+    return f"{model}, {os.cpu_count()} CPUs, load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}"
+
+
+def _compile(source: str, directory: Path, name: str):
+    path = directory / f"{name}.py"
+    path.write_text(source)
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module.kernel
+
+
+def baked(source: str, values) -> str:
+    """The source with every scalar parameter a literal again."""
+    return re.sub(r"^(\s*)prm_(\d+) = prm\[\d+\]$", lambda m: f"{m[1]}prm_{m[2]} = {float(values[int(m[2])])!r}",
+                  source, flags=re.M)
+
+
+def bench_kernel(scene_path: str, rounds: int, samples: int) -> None:
+    from imu_emulator import load_scene
+    from imu_emulator.codegen.generate import generate_source
+    from imu_emulator.runtime import kernels
+    from imu_emulator.runtime.simulation import Simulation
+
+    scene = load_scene(scene_path)
+    sim = Simulation(scene, attitude=False)
+    source = generate_source(scene, attitude=False, truth=False)
+    values = sim._plan.param_values()
+    kernels._realize_runtime()
+    with tempfile.TemporaryDirectory() as tmp:
+        variants = {}
+        for name, text in (("parametric", source), ("baked", baked(source, values))):
+            start = time.process_time()
+            variants[name] = _compile(text, Path(tmp), f"bench_parametric_{name}")
+            sim.kernel = variants[name]
+            sim.block(0, 10)              # compiles
+            print(f"{name}: compiled in {time.process_time() - start:.1f} s CPU")
+        spent = {name: [] for name in variants}
+        n = min(samples, sim.n_samples)
+        for _ in range(rounds):
+            for name, kernel in variants.items():
+                timer = {}
+
+                def timed(*args, kernel=kernel, timer=timer):
+                    start = time.thread_time_ns()
+                    kernel(*args)
+                    timer["ns"] = timer.get("ns", 0) + time.thread_time_ns() - start
+                sim.kernel = timed
+                sim.block(0, n)
+                spent[name].append(timer["ns"] / n)
+        for name, values_ns in spent.items():
+            print(f"{name:>10}: {min(values_ns):6.1f} / {statistics.median(values_ns):6.1f} / "
+                  f"{max(values_ns):6.1f} ns per sample (min / median / max of {rounds}, {n} samples each)")
+        ratio = statistics.median(spent["parametric"]) / statistics.median(spent["baked"])
+        print(f"parametric / baked (medians): {ratio:.3f}")
+
+
+def bench_batch(scene_path: str, runs: int, vary: list[str]) -> None:
+    from imu_emulator.analysis import batch
+
+    with tempfile.TemporaryDirectory() as tmp:
+        os.environ["IMU_EMULATOR_CACHE"] = str(Path(tmp) / "cache")
+        wall, cpu = time.perf_counter(), time.process_time()
+        result = batch.run(scene_path, runs, 1, Path(tmp) / "out", executor=None, vary=vary)
+        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+        entries = [p for p in (Path(tmp) / "cache" / "kernels").iterdir() if not p.name.startswith(".")]
+        loads = [r["kernel_load_s"] for r in result.rows if r["kernel_load_s"] is not None]
+        print(f"batch of {runs} with --vary {' --vary '.join(vary)}: {len(entries)} kernel(s) compiled, "
+              f"{len(loads)} load(s) ({', '.join(f'{s:.1f} s' for s in loads)}), {len(result.failures)} failed; "
+              f"{wall:.1f} s wall, {cpu:.1f} s CPU ({cpu / runs:.2f} s CPU per realization)")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--scene", default=str(ROOT / "examples" / "drone_imu.toml"))
+    parser.add_argument("--rounds", type=int, default=7)
+    parser.add_argument("--samples", type=int, default=200_000)
+    parser.add_argument("--runs", type=int, default=100)
+    parser.add_argument("--vary", action="append", default=None)
+    parser.add_argument("--skip-batch", action="store_true")
+    args = parser.parse_args()
+    print(machine())
+    print(f"scene {args.scene}")
+    bench_kernel(args.scene, args.rounds, args.samples)
+    if not args.skip_batch:
+        from imu_emulator import load_scene
+        imu = load_scene(args.scene).imu_names[0]
+        vary = args.vary or [f"{imu}.gyro.noise_density=uniform(0.001,0.01)", f"{imu}.accel.bias=normal(0,0.05)"]
+        bench_batch(args.scene, args.runs, vary)
+    print(machine())
+
+
+if __name__ == "__main__":
+    main()
