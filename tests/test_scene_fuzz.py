@@ -206,8 +206,8 @@ def _assert_outcome(code, stderr: str, out_path, what: str):
     if code == 0:
         assert out_path.exists(), what
         with open(out_path) as f:
-            f.readline()
-            rows = [line.split(",") for line in f]
+            lines = [line for line in f if not line.startswith("#")]     # the # lines state frame and units
+            rows = [line.split(",") for line in lines[1:]]
         values = np.array([[float(v) for i, v in enumerate(row) if i != 1] for row in rows])
         assert np.isfinite(values).all(), f"non-finite value in the output of {what}"
     else:
