@@ -302,10 +302,12 @@ random_walk = true
     messages, bad = mavlink_parse(out.read_bytes())
     assert len(messages) == 250 and not bad
     reference = Simulation(load_scene(longer), attitude=False).run()
+    # The wire is forward-right-down: the ENU scene's forward-left-up y and z change sign (README conventions)
+    frd = np.array([1.0, -1.0, -1.0])
     got = np.array([[m.xgyro, m.ygyro, m.zgyro] for m in messages])
-    np.testing.assert_array_equal(got, reference.gyro[0].astype(np.float32))
+    np.testing.assert_array_equal(got, (reference.gyro[0] * frd).astype(np.float32))
     got = np.array([[m.xacc, m.yacc, m.zacc] for m in messages])
-    np.testing.assert_array_equal(got, reference.accel[0].astype(np.float32))
+    np.testing.assert_array_equal(got, (reference.accel[0] * frd).astype(np.float32))
 
 
 @pytest.mark.parametrize("table, key, value", [("gyro", "noise_density", "5 m/s"), ("accel", "bias", "3 deg/s"),
