@@ -104,6 +104,16 @@ class Device:
 _SAMPLE_FIELDS = tuple(f.name for f in dataclasses.fields(Samples) if f.name != "start_ns")   # the arrays
 
 
+def preset_settings(presets: dict, preset: str, fields_given: bool) -> dict:
+    """The settings of a named preset ({name: (settings, text)}), refusing an unknown name, or a preset given
+    together with explicit fields (they would contradict each other), with a one-line ValueError."""
+    if preset not in presets:
+        raise ValueError(f"preset: unknown {preset!r} (known: {', '.join(presets)})")
+    if fields_given:
+        raise ValueError("preset and fields: give one or the other")
+    return presets[preset][0]
+
+
 def single(samples: Samples, i: int) -> Samples:
     """Sample i as a block of one (views, no copies), for encoders that take blocks. The block's arrays are
     already contiguous float64 (Samples.__post_init__ saw to it), so their one-row slices are too and the

@@ -46,7 +46,7 @@ import copy
 import struct
 
 from firmware_protocols.base import Samples
-from firmware_protocols.devices.base import Device, SinceLastOutput, single
+from firmware_protocols.devices.base import Device, SinceLastOutput, preset_settings, single
 from firmware_protocols.wire_formats.microstrain import (DATA_SETS, DEFAULT_FIELDS, FILTER_SET, GNSS_RECEIVER_1,
                                                          GNSS_RECEIVER_2, GNSS_SET, GNSS_SETS, SENSOR_DATA_SET,
                                                          MipEncoder,
@@ -136,11 +136,7 @@ class MipDevice(Device):
         super().__init__(rate_hz)
         startup = {descriptor_set: [] for descriptor_set in DATA_SETS}
         if preset is not None:
-            if preset not in PRESETS:
-                raise ValueError(f"preset: unknown {preset!r} (known: {', '.join(PRESETS)})")
-            if fields is not DEFAULT_FIELDS:
-                raise ValueError("preset and fields: give one or the other")
-            settings = PRESETS[preset][0]
+            settings = preset_settings(PRESETS, preset, fields is not DEFAULT_FIELDS)
             model_name = model_name or settings["model_name"]          # what the user names wins
             model_number = model_number or settings["model_number"]
             filter_family = filter_family or settings["filter_family"]

@@ -55,7 +55,7 @@ import re
 
 from firmware_protocols import attitude
 from firmware_protocols.base import Samples
-from firmware_protocols.devices.base import Device, LinkRequest, SinceLastOutput, single
+from firmware_protocols.devices.base import Device, LinkRequest, SinceLastOutput, preset_settings, single
 from firmware_protocols.gnss_time import GPS_WEEK_OFFSET_RETIRED
 from firmware_protocols.registry import attach_device
 from firmware_protocols.vectornav_common import sentence, verify_line
@@ -156,11 +156,7 @@ class VectorNavDevice(Device):
         BinaryEncoder(DEFAULT_FIELDS, **self._encoding)      # bad values fail here, at start
         outputs = ((fields if fields is not None else DEFAULT_FIELDS, 1),) if ascii_type == 0 else ()
         if preset is not None:
-            if preset not in PRESETS:
-                raise ValueError(f"preset: unknown {preset!r} (known: {', '.join(PRESETS)})")
-            if fields is not None:
-                raise ValueError("preset and fields: give one or the other")
-            settings = PRESETS[preset][0]
+            settings = preset_settings(PRESETS, preset, fields is not None)
             outputs = settings["outputs"]
             base_rate_hz = settings.get("base_rate_hz", base_rate_hz) if base_rate_hz is None else base_rate_hz
         every = None if preset is not None else 1      # the plain stream: every scene sample

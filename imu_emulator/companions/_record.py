@@ -21,6 +21,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from imu_emulator.effects import Param
+from imu_emulator.errors import SceneError
 
 
 @dataclass(frozen=True)
@@ -106,12 +107,56 @@ def hold(new: np.ndarray, values: np.ndarray, last: np.ndarray) -> np.ndarray:
     return out
 
 
+class Held:
+    """The output of a sensor that updates at its own rate and holds its reading between updates (magnetometer,
+    barometer): update j at j / rate_hz on the run's clock, the last reading carried across blocks."""
+
+    def __init__(self, rate_hz: float, width: int):
+        self.rate_hz = rate_hz
+        self.last_j = -1                # the update index at the previous block's last sample
+        self.last = np.zeros(width)     # the previous block's last output
+
+    def block(self, truth: Truth, measure: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> np.ndarray:
+        """(n, width): `measure(at, j)` gives the readings (len(at), width) of the updates j that happen at this
+        block's samples `at` (called only when some do); each is held until the next."""
+        j = update_index(truth.s, truth.rate_hz, self.rate_hz)
+        new = changes(j, self.last_j)
+        at = np.flatnonzero(new)
+        values = np.zeros((len(j), len(self.last)))
+        if len(at):
+            values[at] = measure(at, j[at])
+        out = hold(new, values, self.last)
+        self.last_j, self.last = int(j[-1]), out[-1].copy()
+        return out
+
+
 def normals(seed: int, m: int, stream: str, first: int, n: int) -> np.ndarray:
     """n standard normals of IMU m's named stream, numbers first .. first + n - 1 (counter_rng)."""
     from imu_emulator.numerics.counter_rng import normals as draw, stream_key
     if n <= 0:
         return np.empty(0)
     return draw(stream_key(seed, m, stream), first, n)
+
+
+def update_normals(seed: int, m: int, stream: str, ids: np.ndarray) -> np.ndarray:
+    """The standard normals of IMU m's named stream at the non-decreasing update indices `ids` (one number per
+    update, so a reading's noise does not depend on the block it falls in)."""
+    first = int(ids[0])
+    return normals(seed, m, stream, first, int(ids[-1]) - first + 1)[ids - first]
+
+
+def param_maker(name: str, shape: str = "scalar") -> Callable[..., Param]:
+    """The Param constructor of companion `name`'s keys (table imu.<name>), `shape` unless one is given."""
+    def make(key, unit, description, shape=shape, default=0.0, datasheet=""):
+        return Param(key, f"imu.{name}", unit, description, shape, default=default, datasheet=datasheet)
+    return make
+
+
+def check_sigmas(values: dict, keys, where: str, name: str) -> None:
+    """Standard deviations (triples) of the keys are >= 0, else a SceneError naming the key."""
+    for key in keys:
+        if min(values[key]) < 0:
+            raise SceneError(f"{where}.{name}.{key}: standard deviations are >= 0")
 
 
 class Markov:

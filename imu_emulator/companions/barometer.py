@@ -19,8 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from imu_emulator.companions._record import Companion, Runner, changes, hold, normals, update_index
-from imu_emulator.effects import Param
+from imu_emulator.companions._record import Companion, Held, Runner, param_maker, update_normals
 from imu_emulator.errors import SceneError
 
 G0 = 9.80665
@@ -86,40 +85,32 @@ class _Barometer(Runner):
     def __init__(self, scene, m: int, values: dict):
         super().__init__()
         self.seed, self.m, self.v = scene.seed, m, values
-        self.last_j = -1
-        self.last = np.zeros(3)
+        self.held = Held(values["rate_hz"], 3)
 
     def block(self, truth) -> dict[str, np.ndarray]:
+        out = self.held.block(truth, lambda at, ids: self._measure(truth, at, ids))
+        return {"pressure_pa": out[:, 0], "baro_temperature_c": out[:, 1], "differential_pressure_pa": out[:, 2]}
+
+    def _measure(self, truth, at: np.ndarray, ids: np.ndarray) -> np.ndarray:
+        """(len(at), 3) pressure, temperature and differential pressure of the updates ids at samples at."""
         from imu_emulator.effects.temperature import profile
         v = self.v
-        j = update_index(truth.s, truth.rate_hz, v["rate_hz"])
-        new = changes(j, self.last_j)
-        at = np.flatnonzero(new)
-        values = np.zeros((len(j), 3))
-        if len(at):
-            h = truth.llh[at, 2]
-            outside = (geopotential(h) < _LAYERS[0][0]) | (geopotential(h) > TOP_M)
-            self.count("barometer.range", int(outside.sum()))
-            _, p, rho = isa(h)
-            temperature = np.broadcast_to(profile(truth.values, truth.t[at]), (len(at),))
-            p = (p + v["bias"] + v["drift"] * truth.t[at]
-                 + v["temperature_coefficient"] * (temperature - truth.values["imu.temperature_ref_c"]))
-            draws = slice(int(j[at[0]]), int(j[at[-1]]) + 1)
-
-            def noise(stream):
-                return normals(self.seed, self.m, stream, draws.start, draws.stop - draws.start)[j[at] - draws.start]
-            if v["noise"]:
-                p = p + v["noise"] * noise("barometer.noise")
-            if v["resolution"]:
-                p = np.round(p / v["resolution"]) * v["resolution"]
-            forward = np.einsum("ni,ni->n", truth.c_nb[at, :, 0], truth.v_ned[at])    # body x in NED . v
-            q = 0.5 * rho * forward * np.abs(forward)
-            if v["differential_noise"]:
-                q = q + v["differential_noise"] * noise("barometer.differential_noise")
-            values[at] = np.column_stack([p, temperature, q])
-        out = hold(new, values, self.last)
-        self.last_j, self.last = int(j[-1]), out[-1].copy()
-        return {"pressure_pa": out[:, 0], "baro_temperature_c": out[:, 1], "differential_pressure_pa": out[:, 2]}
+        h = truth.llh[at, 2]
+        outside = (geopotential(h) < _LAYERS[0][0]) | (geopotential(h) > TOP_M)
+        self.count("barometer.range", int(outside.sum()))
+        _, p, rho = isa(h)
+        temperature = np.broadcast_to(profile(truth.values, truth.t[at]), (len(at),))
+        p = (p + v["bias"] + v["drift"] * truth.t[at]
+             + v["temperature_coefficient"] * (temperature - truth.values["imu.temperature_ref_c"]))
+        if v["noise"]:
+            p = p + v["noise"] * update_normals(self.seed, self.m, "barometer.noise", ids)
+        if v["resolution"]:
+            p = np.round(p / v["resolution"]) * v["resolution"]
+        forward = np.einsum("ni,ni->n", truth.c_nb[at, :, 0], truth.v_ned[at])    # body x in NED . v
+        q = 0.5 * rho * forward * np.abs(forward)
+        if v["differential_noise"]:
+            q = q + v["differential_noise"] * update_normals(self.seed, self.m, "barometer.differential_noise", ids)
+        return np.column_stack([p, temperature, q])
 
 
 def validate(values: dict, where: str) -> None:
@@ -130,8 +121,11 @@ def validate(values: dict, where: str) -> None:
             raise SceneError(f"{where}.barometer.{key}: a value >= 0, got {values[key]!r}")
 
 
+_scalar = param_maker("barometer")
+
+
 def _param(key, unit, description, default=0.0, datasheet=""):
-    return Param(key, "imu.barometer", unit, description, "scalar", default=default, datasheet=datasheet)
+    return _scalar(key, unit, description, default=default, datasheet=datasheet)
 
 
 COMPANION = Companion(

@@ -25,8 +25,8 @@ import math
 
 import numpy as np
 
-from imu_emulator.companions._record import Companion, Markov, Runner, changes, hold, normals, update_index
-from imu_emulator.effects import Param
+from imu_emulator.companions._record import (Companion, Markov, Runner, changes, check_sigmas, hold, param_maker,
+                                             update_index, update_normals)
 from imu_emulator.errors import SceneError
 
 RATE_RANGE_HZ = (1.0, 20.0)
@@ -85,11 +85,10 @@ class _Receiver(Runner):
             return
         ids = j[at]
         llh, vel = antenna(truth, at, v["lever_arm_m"])
-        first, count = int(ids[0]), int(ids[-1] - ids[0] + 1)
 
         def white(stream, sigma):
             sigma = np.asarray(sigma, dtype=float)
-            return np.column_stack([sigma[a] * normals(self.seed, self.m, f"{stream}.{a}", first, count)[ids - first]
+            return np.column_stack([sigma[a] * update_normals(self.seed, self.m, f"{stream}.{a}", ids)
                                     if sigma[a] else np.zeros(len(ids)) for a in range(3)])
         d_pos = white("gnss.position_noise", v["position_noise"]) + self.position_markov.at(ids)
         d_vel = white("gnss.velocity_noise", v["velocity_noise"]) + self.velocity_markov.at(ids)
@@ -193,9 +192,7 @@ def validate(values: dict, where: str) -> None:
         raise SceneError(f"{where}.gnss.latency_s: 0 to {MAX_LATENCY_S:g} s, got {values['latency_s']!r}")
     if not values["markov_time_s"] > 0:
         raise SceneError(f"{where}.gnss.markov_time_s: a time constant > 0 s, got {values['markov_time_s']!r}")
-    for key in ("position_noise", "position_markov", "velocity_noise", "velocity_markov"):
-        if min(values[key]) < 0:
-            raise SceneError(f"{where}.gnss.{key}: standard deviations are >= 0")
+    check_sigmas(values, ("position_noise", "position_markov", "velocity_noise", "velocity_markov"), where, "gnss")
     if not (0 <= values["satellites"] <= 255 and float(values["satellites"]).is_integer()):
         raise SceneError(f"{where}.gnss.satellites: an integer 0..255, got {values['satellites']!r}")
     for key in ("hdop", "vdop"):
@@ -205,8 +202,7 @@ def validate(values: dict, where: str) -> None:
         raise SceneError(f"{where}.gnss.lever_arm_m: each |value| <= 1000 m")
 
 
-def _param(key, unit, description, shape="scalar", default=0.0, datasheet=""):
-    return Param(key, "imu.gnss", unit, description, shape, default=default, datasheet=datasheet)
+_param = param_maker("gnss")
 
 
 COMPANION = Companion(

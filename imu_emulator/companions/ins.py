@@ -18,9 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from imu_emulator.companions._record import Companion, Markov, Runner
+from imu_emulator.companions._record import Companion, Markov, Runner, check_sigmas, param_maker
 from imu_emulator.companions.gnss import offset_llh
-from imu_emulator.effects import Param
 from imu_emulator.errors import SceneError
 
 
@@ -61,17 +60,14 @@ class _Estimate(Runner):
 
 
 def validate(values: dict, where: str) -> None:
-    for key in ("attitude_error", "position_error", "velocity_error"):
-        if min(values[key]) < 0:
-            raise SceneError(f"{where}.ins.{key}: standard deviations are >= 0")
+    check_sigmas(values, ("attitude_error", "position_error", "velocity_error"), where, "ins")
     if not values["error_time_s"] > 0:
         raise SceneError(f"{where}.ins.error_time_s: a time constant > 0 s, got {values['error_time_s']!r}")
     if values["aligning_s"] < 0:
         raise SceneError(f"{where}.ins.aligning_s: a time >= 0 s, got {values['aligning_s']!r}")
 
 
-def _param(key, unit, description, shape="vector3", default=0.0, datasheet=""):
-    return Param(key, "imu.ins", unit, description, shape, default=default, datasheet=datasheet)
+_param = param_maker("ins", "vector3")
 
 
 COMPANION = Companion(

@@ -25,8 +25,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from imu_emulator.companions._record import Companion, Runner, changes, hold, normals, update_index
-from imu_emulator.effects import Param
+from imu_emulator.companions._record import Companion, Held, Runner, normals, param_maker, update_normals
 from imu_emulator.errors import SceneError
 
 CELL_DEG = 1e-4          # ~11 m of latitude
@@ -69,36 +68,29 @@ class _Magnetometer(Runner):
         self.soft = np.asarray(values["soft_iron"], dtype=float)
         self.offset = np.asarray(values["hard_iron"], dtype=float) + np.asarray(values["turn_on_bias"]) * self.frd * (
             np.array([normals(scene.seed, m, f"magnetometer.turn_on.{axis}", 0, 1)[0] for axis in range(3)]))
-        self.last_j = -1
-        self.last = np.zeros(3)
+        self.held = Held(values["rate_hz"], 3)
 
     def block(self, truth) -> dict[str, np.ndarray]:
+        return {"mag": self.held.block(truth, lambda at, ids: self._measure(truth, at, ids))}
+
+    def _measure(self, truth, at: np.ndarray, ids: np.ndarray) -> np.ndarray:
+        """(len(at), 3) the readings of the updates ids at samples at, sensor axes."""
         v = self.v
-        j = update_index(truth.s, truth.rate_hz, v["rate_hz"])
-        new = changes(j, self.last_j)
-        at = np.flatnonzero(new)
-        values = np.zeros((len(j), 3))
-        if len(at):
-            b_ned = field_ned(truth.llh[at], v["date_year"])
-            b_sensor = np.einsum("nji,nj->ni", truth.c_ns[at], b_ned)          # C_sn = C_ns^T
-            measured = b_sensor @ self.soft.T + self.offset
-            sigma = np.asarray(v["noise_density"]) * np.sqrt(v["rate_hz"])
-            for axis in range(3):
-                if sigma[axis]:
-                    draws = normals(self.seed, self.m, f"magnetometer.noise.{axis}", int(j[at[0]]),
-                                    int(j[at[-1]] - j[at[0]] + 1))[j[at] - j[at[0]]]
-                    measured[:, axis] += self.frd[axis] * sigma[axis] * draws
-            full_scale = np.asarray(v["range"])
-            if full_scale.any():
-                limit = np.where(full_scale > 0, full_scale, np.inf)
-                self.count("magnetometer.range", int((np.abs(measured) > limit).sum()))
-                measured = np.clip(measured, -limit, limit)
-            step = np.asarray(v["resolution"])
-            measured = np.where(step > 0, np.round(measured / np.where(step > 0, step, 1.0)) * step, measured)
-            values[at] = measured
-        out = hold(new, values, self.last)
-        self.last_j, self.last = int(j[-1]), out[-1].copy()
-        return {"mag": out}
+        b_ned = field_ned(truth.llh[at], v["date_year"])
+        b_sensor = np.einsum("nji,nj->ni", truth.c_ns[at], b_ned)          # C_sn = C_ns^T
+        measured = b_sensor @ self.soft.T + self.offset
+        sigma = np.asarray(v["noise_density"]) * np.sqrt(v["rate_hz"])
+        for axis in range(3):
+            if sigma[axis]:
+                draws = update_normals(self.seed, self.m, f"magnetometer.noise.{axis}", ids)
+                measured[:, axis] += self.frd[axis] * sigma[axis] * draws
+        full_scale = np.asarray(v["range"])
+        if full_scale.any():
+            limit = np.where(full_scale > 0, full_scale, np.inf)
+            self.count("magnetometer.range", int((np.abs(measured) > limit).sum()))
+            measured = np.clip(measured, -limit, limit)
+        step = np.asarray(v["resolution"])
+        return np.where(step > 0, np.round(measured / np.where(step > 0, step, 1.0)) * step, measured)
 
 
 def validate(values: dict, where: str) -> None:
@@ -112,8 +104,7 @@ def validate(values: dict, where: str) -> None:
             raise SceneError(f"{where}.magnetometer.{key}: values are >= 0")
 
 
-def _param(key, unit, description, shape="vector3", default=0.0, datasheet=""):
-    return Param(key, "imu.magnetometer", unit, description, shape, default=default, datasheet=datasheet)
+_param = param_maker("magnetometer", "vector3")
 
 
 COMPANION = Companion(
