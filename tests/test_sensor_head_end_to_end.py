@@ -33,9 +33,13 @@ STREAMS = (
     ("scaled_pressure", "mavlink-scaled-pressure", "{ baro_rate_hz = 50 }", "bin"),
     ("dronecan", "dronecan-gnss-compass-baro", "{ node_id = 42, mag_rate_hz = 100, baro_rate_hz = 50 }", "log"),
     ("mip_sensor", "microstrain-mip", "{ fields = 'mag,pressure' }", "bin"),
-    ("mip_gnss", "microstrain-mip", "{ descriptor_set = 0x91, fields = 'fix_info,position_llh,velocity_ned' }",
+    ("mip_gnss", "microstrain-mip", "{ descriptor_set = 0x91, fields = 'fix_info,position_llh,velocity_ned,dop' }",
      "bin"),
+    ("mip_filter", "microstrain-mip", "{ descriptor_set = 0x82, fields = 'position_llh,velocity_ned,quaternion,euler,"
+     "position_uncertainty,velocity_uncertainty,euler_uncertainty,status' }", "bin"),
     ("vectornav", "vectornav-binary", "{ fields = 'imu:pres,mag;gps:fix,poslla,velned' }", "bin"),
+    ("vectornav_ins", "vectornav-binary", "{ fields = 'common:yawpitchroll,quaternion,position,velocity,insstatus;"
+     "gps:numsats,posu,velu,dop;attitude:ypru;ins:posu,velu' }", "bin"),
     ("xsens", "xsens-mtdata2", "{ items = 'magnetic_field,baro_pressure,gnss_pvt_data' }", "bin"),
 )
 
@@ -82,6 +86,14 @@ def test_the_reference_file_states_each_companion_array_s_units(run):
     assert lines["gnss_llh"].startswith("gnss_llh: deg, m (GNSS antenna latitude")
     assert lines["gnss_velocity_ned"].startswith("gnss_velocity_ned: m/s (GNSS velocity north")
     assert lines["gnss_fix"].startswith("gnss_fix:  (fix type") and lines["gnss_new"].startswith("gnss_new:  (1 ")
+    assert lines["differential_pressure_pa"].startswith("differential_pressure_pa: Pa (pitot")
+    assert lines["gnss_satellites"].startswith("gnss_satellites:  (satellites used")
+    assert lines["gnss_horizontal_accuracy_m"].startswith("gnss_horizontal_accuracy_m: m (1-sigma horizontal")
+    assert lines["ins_quat"].startswith("ins_quat:  (estimated attitude quaternion")
+    assert lines["ins_euler"].startswith("ins_euler: rad (estimated roll")
+    assert lines["ins_llh"].startswith("ins_llh: deg, m (estimated latitude")
+    assert lines["ins_attitude_sigma_rad"].startswith("ins_attitude_sigma_rad: rad (stated 1-sigma roll")
+    assert lines["ins_mode"].startswith("ins_mode:  (filter mode")
 
 
 def new_solutions(ref) -> np.ndarray:
@@ -112,6 +124,7 @@ def test_mavlink_hil_sensor_mag_and_baro(run):
     assert np.array_equal(mag, f32(ref["mag"]))
     assert np.array_equal([m.abs_pressure for m in sensors], f32(ref["pressure_pa"] / 100))         # hPa
     assert np.array_equal([m.temperature for m in sensors], f32(ref["baro_temperature_c"]))
+    assert np.array_equal([m.diff_pressure for m in sensors], f32(ref["differential_pressure_pa"] / 100))    # hPa
     # fields_updated: the magnetometer's bits (6-8) exactly at its new readings (100 Hz), the barometer's (9, 11,
     # 12) at its own (50 Hz): where the reference column takes a new value (noise makes every reading differ)
     updated = np.array([m.fields_updated for m in sensors])
@@ -136,6 +149,13 @@ def test_mavlink_hil_gps_on_each_new_solution(run):
         assert (m.vn, m.ve, m.vd) == (round(vn * 100), round(ve * 100), round(vd * 100))       # cm/s
         assert m.vel == round(math.hypot(vn, ve) * 100)
         assert m.fix_type == (3 if ref["gnss_fix"][k] == 3 else 1)      # GPS_FIX_TYPE 3D_FIX, else NO_FIX
+        # cm, the 1-sigma accuracies as PX4 reads them (mavlink_nav's docstring); satellites used
+        assert (m.eph, m.epv) == (round(ref["gnss_horizontal_accuracy_m"][k] * 100),
+                                  round(ref["gnss_vertical_accuracy_m"][k] * 100))
+        assert m.satellites_visible == ref["gnss_satellites"][k]
+    # the columns carry the receiver's figures: with a fix the scene's, without one none
+    fixed = ref["gnss_fix"][new] == 3
+    assert (ref["gnss_satellites"][new][fixed] == 12).all() and (ref["gnss_satellites"][new][~fixed] == 0).all()
 
 
 def test_mavlink_scaled_pressure_at_the_barometer_rate(run):
@@ -196,6 +216,12 @@ def test_dronecan_node_compass_baro_and_fix2(run):
         assert list(msg.ned_velocity) == list(f32(ref["gnss_velocity_ned"][k]))
         # STATUS_3D_FIX 3 or STATUS_NO_FIX 0 (uavcan.equipment.gnss.Fix2)
         assert msg.status == (3 if ref["gnss_fix"][k] == 3 else 0)
+        assert msg.sats_used == ref["gnss_satellites"][k]
+        # float16 PDOP = hypot(HDOP, VDOP); covariance diag h^2, h^2, v^2, s^2 x 3 (dronecan_sensors' docstring)
+        assert msg.pdop == float(np.float16(math.hypot(ref["gnss_hdop"][k], ref["gnss_vdop"][k])))
+        h, v, s = (ref[key][k] for key in ("gnss_horizontal_accuracy_m", "gnss_vertical_accuracy_m",
+                                           "gnss_speed_accuracy_mps"))
+        assert list(msg.covariance) == [float(np.float16(x)) for x in (h * h, h * h, v * v, s * s, s * s, s * s)]
 
 
 def mip_packets(data: bytes, descriptor_set: int):
@@ -237,10 +263,93 @@ def test_microstrain_gnss_set_on_each_new_solution(run):
         assert (lat, lon, h_ell) == tuple(ref["gnss_llh"][k])
         vel = struct.unpack(">8fH", p[0x05])
         assert list(vel[:3]) == list(f32(ref["gnss_velocity_ned"][k]))
+        assert (h_acc, v_acc) == (np.float32(ref["gnss_horizontal_accuracy_m"][k]),
+                                  np.float32(ref["gnss_vertical_accuracy_m"][k]))
         fix_type, satellites, _flags, _valid = struct.unpack(">BBHH", p[0x0B])
         # mip_sdk data_gnss.h FixInfo: 0 3D, 3 none
         assert fix_type == (0 if ref["gnss_fix"][k] == 3 else 3)
+        assert satellites == ref["gnss_satellites"][k]
+        # data_gnss.h DopData: gdop, pdop, hdop, vdop, tdop, ndop, edop, valid flags
+        gdop, pdop, hdop, vdop, *_ = struct.unpack(">7fH", p[0x07])
+        assert (hdop, vdop) == (np.float32(ref["gnss_hdop"][k]), np.float32(ref["gnss_vdop"][k]))
+        assert pdop == np.float32(math.hypot(ref["gnss_hdop"][k], ref["gnss_vdop"][k]))
         assert (valid != 0) == (ref["gnss_fix"][k] == 3)
+
+
+def canonical(q) -> np.ndarray:
+    """q and -q are one attitude: the sign with w >= 0 (the columns' convention), to compare quaternions."""
+    q = np.asarray(q, dtype=float)
+    return q * (-1.0 if q[0] < 0 else 1.0)
+
+
+def test_microstrain_filter_set_carries_the_ins_estimate(run):
+    """Set 0x82 (mip_sdk data_filter.h): position LLH f64, velocity NED, quaternion (w, x, y, z, vehicle -> NED),
+    Euler roll, pitch, yaw (rad), their 1-sigma uncertainties (f32), each with a u16 valid flag; filter status
+    (GQ7 states: 1 init, 4 full nav) from ins_mode."""
+    out, ref = run
+    packets = mip_packets((out / "mip_filter.bin").read_bytes(), 0x82)
+    assert len(packets) == 600
+    for k, p in enumerate(packets):
+        mode = int(ref["ins_mode"][k])
+        *llh, valid = struct.unpack(">3dH", p[0x01])
+        assert tuple(llh) == tuple(ref["ins_llh"][k]) and valid == (mode == 2)
+        assert list(struct.unpack(">3fH", p[0x02])[:3]) == list(f32(ref["ins_velocity_ned"][k]))
+        quat = canonical(struct.unpack(">4fH", p[0x03])[:4])
+        np.testing.assert_allclose(quat, ref["ins_quat"][k], rtol=0, atol=6e-8)       # f32: half an ulp of 1
+        euler = struct.unpack(">3fH", p[0x05])[:3]
+        np.testing.assert_allclose(euler, ref["ins_euler"][k], rtol=1.2e-7, atol=1e-12)
+        for descriptor, key in ((0x08, "ins_position_sigma_m"), (0x09, "ins_velocity_sigma_mps"),
+                                (0x0A, "ins_attitude_sigma_rad")):
+            assert list(struct.unpack(">3fH", p[descriptor])[:3]) == list(f32(ref[key][k])), key
+        state, _dynamics, _flags = struct.unpack(">3H", p[0x10])
+        assert state == {1: 1, 2: 4}[mode]
+
+
+def test_vectornav_ins_attitude_and_gnss_quality(run):
+    """VectorNav ICD binary output: common YawPitchRoll (deg, f32), Quaternion (x, y, z, w), Position (f64 deg, deg,
+    m), Velocity (f32 NED), InsStatus (bits 0-1 mode, bit 2 GNSS fix); GPS NumSats, PosU (N, E, D m), VelU, Dop (g,
+    p, t, v, h, n, e); attitude YprU (deg, yaw, pitch, roll); INS PosU, VelU (root sum of squares of the sigmas)."""
+    out, ref = run
+    payloads = vectornav_packets((out / "vectornav_ins.bin").read_bytes(), {0: 0x10D8, 3: 0x0608 | 0x2000,
+                                                                            4: 0x0100, 5: 0x0600})
+    assert len(payloads) == 600
+    for k, payload in enumerate(payloads):
+        values = struct.unpack("<3f4f3d3fH" "B3ff7f" "3f" "2f", payload)
+        ypr, xyzw, lla, vel, status = values[0:3], values[3:7], values[7:10], values[10:13], values[13]
+        sats, gnss_pos_u, gnss_vel_u, dop = values[14], values[15:18], values[18], values[19:26]
+        ypr_u, pos_u, vel_u = values[26:29], values[29], values[30]
+        roll, pitch, yaw = ref["ins_euler"][k]
+        np.testing.assert_allclose(ypr, np.degrees([yaw, pitch, roll]), rtol=1.2e-7, atol=1e-9)
+        np.testing.assert_allclose(canonical(np.roll(xyzw, 1)), ref["ins_quat"][k], rtol=0, atol=6e-8)
+        assert lla == tuple(ref["ins_llh"][k]) and list(vel) == list(f32(ref["ins_velocity_ned"][k]))
+        fix = ref["gnss_fix"][k] == 3
+        assert status == int(ref["ins_mode"][k]) | (4 if fix else 0)
+        assert sats == ref["gnss_satellites"][k]
+        h, v = ref["gnss_horizontal_accuracy_m"][k], ref["gnss_vertical_accuracy_m"][k]
+        assert list(gnss_pos_u) == list(f32([h, h, v])) and gnss_vel_u == np.float32(ref["gnss_speed_accuracy_mps"][k])
+        assert (dop[3], dop[4]) == (np.float32(ref["gnss_vdop"][k]), np.float32(ref["gnss_hdop"][k]))
+        sigma = ref["ins_attitude_sigma_rad"][k]
+        assert list(ypr_u) == list(f32(np.degrees(sigma[::-1])))
+        assert pos_u == np.float32(np.linalg.norm(ref["ins_position_sigma_m"][k]))
+        assert vel_u == np.float32(np.linalg.norm(ref["ins_velocity_sigma_mps"][k]))
+
+
+def test_ins_columns_are_the_truth_turned_by_the_stated_errors(run):
+    """The INS columns against an independent path: the quaternion and angles agree with each other (scipy), the
+    estimate stays within a few of its stated sigmas of the GNSS-free truth (the attitude the kernel wrote, turned
+    into NED), and the stated sigmas are examples/companions.toml's."""
+    from scipy.spatial.transform import Rotation
+    _, ref = run
+    q = ref["ins_quat"]
+    assert (q[:, 0] >= 0).all() and np.allclose(np.linalg.norm(q, axis=1), 1.0, rtol=0, atol=1e-15)
+    angles = Rotation.from_quat(q[:, [1, 2, 3, 0]]).as_euler("ZYX")[:, ::-1]
+    np.testing.assert_allclose(angles, ref["ins_euler"], rtol=0, atol=1e-12)
+    # the sensor's true attitude (NED scene: the kernel's quat is sensor -> NED already, its axes FRD)
+    truth = Rotation.from_quat(ref["quat"][:, [1, 2, 3, 0]])
+    error = (Rotation.from_quat(q[:, [1, 2, 3, 0]]) * truth.inv()).as_rotvec()
+    sigma = ref["ins_attitude_sigma_rad"]
+    assert (np.abs(error) < 5 * sigma).all()             # 5 sigma of a Gauss-Markov error: P(out) < 1e-6 a value
+    assert np.allclose(sigma, np.radians([0.5, 0.5, 2.0]))
 
 
 def vectornav_packets(data: bytes, groups: dict):
@@ -297,6 +406,11 @@ def test_xsens_mag_baro_and_gnss_pvt(run):
         vel = ref["gnss_velocity_ned"][k]
         assert (pvt["velN"], pvt["velE"], pvt["velD"]) == tuple(round(v * 1e3) for v in vel)       # mm/s, NED
         assert pvt["fixType"] == int(ref["gnss_fix"][k])
+        assert pvt["numSv"] == ref["gnss_satellites"][k]
+        assert (pvt["hAcc"], pvt["vAcc"], pvt["sAcc"]) == tuple(
+            round(ref[key][k] * 1e3) for key in ("gnss_horizontal_accuracy_m", "gnss_vertical_accuracy_m",
+                                                 "gnss_speed_accuracy_mps"))                      # mm, mm/s
+        assert (pvt["hDop"], pvt["vDop"]) == (round(ref["gnss_hdop"][k] * 100), round(ref["gnss_vdop"][k] * 100))
 
 
 # --- ENU and NED: one motion, two habits, the same messages ---------------------------------------------------
@@ -452,8 +566,12 @@ def test_mavlink_device_carries_the_head_on_one_link(run):
     samples = Samples(START_NS + np.rint(ref["t"] * 1e9).astype(np.int64), ref["accel"], ref["gyro"], mag=ref["mag"],
                       start_ns=START_NS,
                       pressure_pa=ref["pressure_pa"], temperature_c=ref["baro_temperature_c"],
+                      differential_pressure_pa=ref["differential_pressure_pa"],
                       gnss_llh=ref["gnss_llh"], gnss_velocity_ned=ref["gnss_velocity_ned"], gnss_fix=ref["gnss_fix"],
-                      gnss_new=ref["gnss_new"], gnss_age_s=np.full(600, LATENCY_US / 1e6))   # at each new solution
+                      gnss_new=ref["gnss_new"], gnss_age_s=np.full(600, LATENCY_US / 1e6),   # at each new solution
+                      **{key: ref[key] for key in ("gnss_satellites", "gnss_hdop", "gnss_vdop",
+                                                   "gnss_horizontal_accuracy_m", "gnss_vertical_accuracy_m",
+                                                   "gnss_speed_accuracy_mps")})
     device = create_device("mavlink-hil-sensor", RATE, also="mavlink-hil-gps,mavlink-scaled-pressure",
                            mag_rate_hz=100.0, baro_rate_hz=50.0)
     messages = mavlink2.MAVLink(None).parse_buffer(b"".join(device.output(samples, k) for k in range(600)))
@@ -469,13 +587,5 @@ def test_mavlink_device_carries_the_head_on_one_link(run):
         got = [m.to_dict() for m in messages if m.get_type() == kind]
         assert len(got) == len(want), kind
         for k, (a, b) in enumerate(zip(got, want)):
-            # the NPZ has no column for the differential pressure (HIL_SENSOR bit 10) nor the receiver's DOPs and
-            # satellites (HIL_GPS eph, epv, satellites_visible): those are taken from the stream
-            if kind == "HIL_SENSOR":
-                a = {**a, "diff_pressure": b["diff_pressure"],
-                     "fields_updated": a["fields_updated"] & ~0x400 | b["fields_updated"] & 0x400}
-            if kind == "HIL_GPS":
-                a = {**a, **{key: b[key] for key in ("eph", "epv", "satellites_visible")}}
-            if kind == "SCALED_PRESSURE":
-                a = {**a, **{key: b[key] for key in ("press_diff", "temperature_press_diff")}}
+            # every field from the NPZ's columns, the differential pressure and the receiver's figures included
             assert a == b, (kind, k, {key: (a[key], b[key]) for key in a if a[key] != b[key]})

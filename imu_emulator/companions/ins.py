@@ -12,7 +12,8 @@ the run's start, then 2 (tracking), what a healthy unit reports.
 
 Outputs (Samples): position_llh, velocity_ned, attitude_sigma_rad, position_sigma_m, velocity_sigma_mps,
 ins_mode, and ins_attitude_error_rad (the rotation vector e, NED) that the stream applies to the attitude it
-sends (`estimate_quat`).
+sends (`estimate_quat`); for the files, ins_quat and ins_euler: that estimated attitude as the unit reports it
+(its forward-right-down axes -> local NED, whatever the scene's frame).
 """
 from __future__ import annotations
 
@@ -44,6 +45,8 @@ class _Estimate(Runner):
         self.errors = [Markov(scene.seed, m, f"ins.{key}", values[key], step, tau)
                        for key in ("attitude_error", "position_error", "velocity_error")]
         self.t0 = scene.t0_s
+        # the scene's sensor axes -> the part's forward-right-down ones (an ENU scene's are forward-left-up)
+        self.frd = np.diag([1.0, -1.0, -1.0]) if scene.frame == "ENU" else np.eye(3)
 
     def block(self, truth) -> dict[str, np.ndarray]:
         v = self.v
@@ -56,7 +59,16 @@ class _Estimate(Runner):
         return {"position_llh": offset_llh(truth.llh, position), "velocity_ned": truth.v_ned + velocity,
                 "ins_attitude_error_rad": attitude, "attitude_sigma_rad": sigma("attitude_error"),
                 "position_sigma_m": sigma("position_error"), "velocity_sigma_mps": sigma("velocity_error"),
-                "ins_mode": np.where(run_time < v["aligning_s"], 1.0, 2.0)}
+                "ins_mode": np.where(run_time < v["aligning_s"], 1.0, 2.0), **self.reported(truth, attitude)}
+
+    def reported(self, truth, error: np.ndarray) -> dict[str, np.ndarray]:
+        """The attitude the unit reports, Exp(e) C_n,frd: its forward-right-down axes -> local NED (the wire
+        formats' convention), as a quaternion (scalar first, w >= 0) and roll, pitch, yaw (z-y-x, rad)."""
+        from scipy.spatial.transform import Rotation
+        estimate = Rotation.from_rotvec(error) * Rotation.from_matrix(truth.c_ns @ self.frd)
+        xyzw = estimate.as_quat()
+        quat = xyzw[:, [3, 0, 1, 2]] * np.where(xyzw[:, 3:] < 0, -1.0, 1.0)
+        return {"ins_quat": quat, "ins_euler": estimate.as_euler("ZYX")[:, ::-1].copy()}
 
 
 def validate(values: dict, where: str) -> None:
@@ -75,7 +87,7 @@ COMPANION = Companion(
     description="the unit's own attitude, position and velocity estimate: truth plus Gauss-Markov errors, "
                 "stated sigmas, mode",
     fields={"position_llh": 3, "velocity_ned": 3, "ins_attitude_error_rad": 3, "attitude_sigma_rad": 3,
-            "position_sigma_m": 3, "velocity_sigma_mps": 3, "ins_mode": 0},
+            "position_sigma_m": 3, "velocity_sigma_mps": 3, "ins_mode": 0, "ins_quat": 4, "ins_euler": 3},
     start=_Estimate, validate=validate,
     params=(_param("attitude_error", "rad", "attitude error, 1 sigma roll, pitch, yaw (about N, E, D)",
                    datasheet='`["0.5 deg", "0.5 deg", "2 deg"]`'),

@@ -97,6 +97,8 @@ class Stream:
                                     **{**nav, **companion}, **increments, start_ns=self.start_ns), body, "FRD")
         if self.device is not None:     # a device may be asked for any field its format knows at any moment
             samples.euler = quat_to_euler(samples.quat)
+        else:      # the angles of the attitude sent: VectorNav YawPitchRoll and MIP Euler read euler, else zeros
+            samples.euler = attitude.to_euler(samples.quat)
         return samples
 
     def _attitude_change(self, block, quat: np.ndarray) -> np.ndarray:
@@ -219,6 +221,8 @@ def _companion_fields(block, i: int, quat, temperature):
         return quat, temperature, {}
     fields = dict(block.companion[i])
     error = fields.pop("ins_attitude_error_rad", None)
+    for name in ("ins_quat", "ins_euler"):     # the files' copy of the estimate's attitude: turned in below
+        fields.pop(name, None)
     if error is not None:
         from imu_emulator.companions.ins import estimate_quat
         quat = estimate_quat(quat, error)

@@ -5,8 +5,8 @@ A row is one IMU at one sample (sample k of every IMU before sample k + 1): the 
 scene's time base plus the IMU's [[imu]] time_offset_s; Parquet stores it as integer "t_ns"), the IMU's name
 "imu", then groups of float64 columns in a fixed order, each present when its option is on (`Layout`).
 A group is per IMU (each IMU's own values) or shared by the IMUs of a sample (the truth of the body). The
-companion sensors' groups (magnetometer, barometer, GNSS: imu_emulator.companions) are per IMU and present when
-any IMU of the scene carries the sensor; an IMU without it has NaN there.
+companion sensors' groups (magnetometer, barometer, GNSS, the unit's INS estimate: imu_emulator.companions) are
+per IMU and present when any IMU of the scene carries the sensor; an IMU without it has NaN there.
 
 The Earth truth's columns belong to imu_emulator.motion.earth_truth (KEYS, COLUMNS: what `--truth` adds on
 the Earth); they are read from there, and only when a scene is on the Earth (earth_truth imports the frames).
@@ -38,6 +38,9 @@ class Group:
     columns: tuple[Column, ...]
     in_companion: bool = False     # read from SampleBlock.companion (per IMU {field: values}), NaN where absent
     widths: tuple[int, ...] | None = None      # columns per key when the keys' widths differ (else an equal split)
+    #: the companion field each key reads where the file's key differs (INS position_llh -> ins_llh: NPZ's
+    #: arrays are named by key, and the Earth truth has a velocity_ned of its own)
+    sources: tuple[str, ...] | None = None
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -52,7 +55,7 @@ class Group:
     def arrays(self, block) -> list[np.ndarray]:
         """The group's values in a block: per IMU (n_imu, n, k), shared (n, k)."""
         if self.in_companion:
-            return [_companion_array(block, key) for key in self.keys]
+            return [_companion_array(block, source) for source in self.sources or self.keys]
         found = [block.truth[key] if self.in_truth else getattr(block, key) for key in self.keys]
         return [a[:, :, None] if self.per_imu and a.ndim == 2 else a for a in found]
 
@@ -101,19 +104,52 @@ BIAS = Group("bias_truth", True, True, ("accel_bias", "gyro_bias"),
 #: the companion sensors' outputs (imu_emulator.companions; the ROS 2 writer reads these names)
 MAGNETOMETER = Group("magnetometer", True, False, ("mag",),
                      _xyz("mag_", "gauss", "magnetic field measured in the sensor frame"), in_companion=True)
-BAROMETER = Group("barometer", True, False, ("pressure_pa", "baro_temperature_c"),
+BAROMETER = Group("barometer", True, False, ("pressure_pa", "baro_temperature_c", "differential_pressure_pa"),
                   (Column("pressure_pa", "Pa", "static pressure measured"),
-                   Column("baro_temperature_c", "degC", "the barometer's temperature")), in_companion=True)
-GNSS = Group("gnss", True, False, ("gnss_llh", "gnss_velocity_ned", "gnss_fix", "gnss_new"),
+                   Column("baro_temperature_c", "degC", "the barometer's temperature"),
+                   Column("differential_pressure_pa", "Pa", "pitot differential pressure measured (still air)")),
+                  in_companion=True)
+#: the receiver's solution and the quality figures it reports with it (imu_emulator.companions.gnss)
+GNSS = Group("gnss", True, False, ("gnss_llh", "gnss_velocity_ned", "gnss_fix", "gnss_new", "gnss_satellites",
+                                   "gnss_hdop", "gnss_vdop", "gnss_horizontal_accuracy_m", "gnss_vertical_accuracy_m",
+                                   "gnss_speed_accuracy_mps"),
              (Column("gnss_lat_deg", "deg", "GNSS antenna latitude, WGS-84, as last reported"),
               Column("gnss_lon_deg", "deg", "GNSS antenna longitude, WGS-84, as last reported"),
               Column("gnss_h_m", "m", "GNSS antenna height above the WGS-84 ellipsoid, as last reported"),
               Column("gnss_vn", "m/s", "GNSS velocity north"), Column("gnss_ve", "m/s", "GNSS velocity east"),
               Column("gnss_vd", "m/s", "GNSS velocity down"),
               Column("gnss_fix", "", "fix type: 0 none, 3 3D"),
-              Column("gnss_new", "", "1 where a new solution arrived at this sample")), in_companion=True,
-             widths=(3, 3, 1, 1))
-COMPANION_GROUPS = (MAGNETOMETER, BAROMETER, GNSS)
+              Column("gnss_new", "", "1 where a new solution arrived at this sample"),
+              Column("gnss_satellites", "", "satellites used (0 without a fix)"),
+              Column("gnss_hdop", "", "horizontal dilution of precision (99.99 without a fix)"),
+              Column("gnss_vdop", "", "vertical dilution of precision (99.99 without a fix)"),
+              Column("gnss_horizontal_accuracy_m", "m", "1-sigma horizontal position accuracy reported (0 without "
+                     "a fix)"),
+              Column("gnss_vertical_accuracy_m", "m", "1-sigma vertical position accuracy reported (0 without a fix)"),
+              Column("gnss_speed_accuracy_mps", "m/s", "1-sigma speed accuracy reported (0 without a fix)")),
+             in_companion=True, widths=(3, 3, 1, 1, 1, 1, 1, 1, 1, 1))
+#: the unit's own navigation estimate (imu_emulator.companions.ins) as the wire formats send it: attitude of the
+#: part's forward-right-down axes w.r.t. local NED whatever the scene's frame, position, velocity, stated sigmas
+INS = Group("ins", True, False, ("ins_quat", "ins_euler", "ins_llh", "ins_velocity_ned", "ins_attitude_sigma_rad",
+                                 "ins_position_sigma_m", "ins_velocity_sigma_mps", "ins_mode"),
+            tuple(Column(f"ins_q{c}", "", f"estimated attitude quaternion, {c}: the part's forward-right-down axes "
+                         "-> local NED, scalar first, w >= 0") for c in "wxyz")
+            + tuple(Column(f"ins_{angle}", "rad", f"estimated {angle} of the part's forward-right-down axes w.r.t. "
+                           "local NED, z-y-x") for angle in ("roll", "pitch", "yaw"))
+            + (Column("ins_lat_deg", "deg", "estimated latitude of S, WGS-84"),
+               Column("ins_lon_deg", "deg", "estimated longitude of S, WGS-84"),
+               Column("ins_h_m", "m", "estimated height of S above the WGS-84 ellipsoid"))
+            + _xyz("ins_v", "m/s", "estimated velocity of S", ("n", "e", "d"))
+            + tuple(Column(f"ins_{angle}_sigma_rad", "rad", f"stated 1-sigma {angle} uncertainty")
+                    for angle in ("roll", "pitch", "yaw"))
+            + _xyz("ins_pos_", "m", "stated 1-sigma position uncertainty", ("n_sigma_m", "e_sigma_m", "d_sigma_m"))
+            + _xyz("ins_vel_", "m/s", "stated 1-sigma velocity uncertainty", ("n_sigma_mps", "e_sigma_mps",
+                                                                         "d_sigma_mps"))
+            + (Column("ins_mode", "", "filter mode: 0 not tracking, 1 aligning, 2 tracking"),),
+            in_companion=True, widths=(4, 3, 3, 3, 3, 3, 3, 1),
+            sources=("ins_quat", "ins_euler", "position_llh", "velocity_ned", "attitude_sigma_rad", "position_sigma_m",
+                     "velocity_sigma_mps", "ins_mode"))
+COMPANION_GROUPS = (MAGNETOMETER, BAROMETER, GNSS, INS)
 
 
 @lru_cache(maxsize=1)
