@@ -36,6 +36,7 @@ class FormatInfo:
     # commands and decides what the link carries; None for formats whose real parts only talk.
     device: Callable | None = None
     device_options: dict = field(default_factory=dict)   # options only the device takes -> one-line help
+    device_class: type | None = None     # the device's class: its __init__ gives the device options' defaults
     # Named option sets for drivers that expect one exact packet: preset name -> (options, one-line help).
     presets: dict = field(default_factory=dict)
     # The device reports navigation (position, velocity, linear acceleration): the streamer then computes truth.
@@ -54,11 +55,12 @@ def register(info: FormatInfo) -> FormatInfo:
 
 
 def attach_device(name: str, device: Callable, device_options: dict | None = None, presets: dict | None = None,
-                  navigation: bool = False) -> None:
-    """Give the registered format `name` a device (and its device-only options and presets)."""
+                  navigation: bool = False, device_class: type | None = None) -> None:
+    """Give the registered format `name` a device (and its device-only options, presets, and the class `device`
+    builds, whose signature `formats --details` reads the options' defaults from)."""
     info = _REGISTRY[name]
     _REGISTRY[name] = replace(info, device=device, device_options=dict(device_options or {}),
-                              presets=dict(presets or {}), device_navigation=navigation)
+                              presets=dict(presets or {}), device_navigation=navigation, device_class=device_class)
 
 
 def _load_all() -> None:
@@ -101,9 +103,20 @@ def option_defaults(info: FormatInfo) -> dict:
     """Every keyword the format's encoder factory accepts, with its default, read from the signature (so a
     listing built from it cannot drift from the code). Follows `**options` into base classes' __init__;
     parameters bound by the registry (functools.partial, names starting with '_') are not options."""
+    return signature_defaults(info.encoder)
+
+
+def device_option_defaults(info: FormatInfo) -> dict:
+    """Every keyword the format's device class accepts, with its default (as option_defaults; {} without a
+    declared device class)."""
+    return {} if info.device_class is None else signature_defaults(info.device_class)
+
+
+def signature_defaults(factory) -> dict:
+    """The keywords `factory` (a class, function or functools.partial) accepts with their defaults."""
     import inspect
     defaults: dict = {}
-    target, bound_self = info.encoder, False
+    target, bound_self = factory, False
     while target is not None:
         parameters = list(inspect.signature(target).parameters.items())[int(bound_self):]
         follow = None

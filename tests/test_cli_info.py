@@ -7,9 +7,9 @@ from pathlib import Path
 import pytest
 
 import firmware_protocols as fp
-from firmware_protocols.registry import option_defaults
+from firmware_protocols.registry import device_option_defaults, option_defaults
 from imu_emulator.cli import main
-from imu_emulator.commands.formats import option_rows
+from imu_emulator.commands.formats import device_option_rows, option_rows
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -50,6 +50,26 @@ def test_details_command_prints_every_option(capsys):
         assert name in out
         for option, default, text in option_rows(info):
             assert f"    {option} " in out and default in out and text in out
+
+
+@pytest.mark.parametrize("name", [name for name, info in fp.formats().items() if info.device is not None])
+def test_details_list_the_device_options_the_device_takes(name, capsys):
+    """Every option only the device takes (its declaration's device_options) is listed under the format with the
+    default of the device class's signature; the device accepts it with that default, and refuses a name it does not
+    declare, so the listing is what `--option` on a stream with the device can give."""
+    info = fp.get(name)
+    accepted = device_option_defaults(info)
+    assert info.device_options and set(info.device_options) <= set(accepted)
+    assert main(["formats", "--details", name]) == 0
+    out = capsys.readouterr().out
+    assert "device options" in out
+    for option, default, text in device_option_rows(info):
+        assert default == repr(accepted[option])
+        assert any(line.split()[:3] == [option, "default", default.split()[0]] and line.rstrip().endswith(text)
+                   for line in out.splitlines()), option
+        info.device(200.0, **{option: accepted[option]})       # the printed default, given explicitly
+    with pytest.raises(TypeError):
+        info.device(200.0, no_such_option=1)
 
 
 def test_details_of_one_format_and_of_an_unknown_one(capsys):

@@ -120,8 +120,9 @@ _OPTIONS = {"node_name": "node name answered to GetNodeInfo (default org.imu_emu
             "unique_id": "32 hex digits (default: derived from node id and name)"}
 for _format in ("dronecan-rawimu", "dronecan-solution", "dronecan-mag2", "dronecan-static-pressure",
                 "dronecan-static-temperature"):
-    attach_device(_format, lambda rate_hz, _f=_format, **options: DroneCanNode(rate_hz, _f, **options), _OPTIONS)
+    attach_device(_format, lambda rate_hz, _f=_format, **options: DroneCanNode(rate_hz, _f, **options), _OPTIONS,
+                  device_class=DroneCanNode)
 # a GNSS receiver node: the streamer computes the navigation its fix falls back on
 for _format in ("dronecan-fix2", "dronecan-gnss-compass-baro"):
     attach_device(_format, lambda rate_hz, _f=_format, **options: DroneCanNode(rate_hz, _f, **options), _OPTIONS,
-                  navigation=True)
+                  navigation=True, device_class=DroneCanNode)

@@ -134,4 +134,4 @@ class J1939Device(Device):
 
 attach_device("j1939", lambda rate_hz, **options: J1939Device(rate_hz, **options),
               {"ecu_name": "the 64-bit J1939 NAME claimed with the source address (integer or 16 hex digits; "
-                           "default 0x1234)"})
+                           "default 0x1234)"}, device_class=J1939Device)

@@ -344,4 +344,5 @@ _DEVICE_OPTIONS["also"] = ("more messages on the link, comma-separated: " + ", "
 # A MAVLink device carries GNSS messages only when also= names them: their encoders say `uses_navigation`, and the
 # streamer computes the navigation their fix falls back on (live.config.reports_navigation) for those streams alone.
 for _name in (*MESSAGES, *NAV_MESSAGES):
-    attach_device(_name, lambda rate_hz, _m=_name, **options: MavlinkDevice(rate_hz, _m, **options), _DEVICE_OPTIONS)
+    attach_device(_name, lambda rate_hz, _m=_name, **options: MavlinkDevice(rate_hz, _m, **options), _DEVICE_OPTIONS,
+                  device_class=MavlinkDevice)

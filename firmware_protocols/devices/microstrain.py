@@ -383,4 +383,5 @@ attach_device("microstrain-mip", lambda rate_hz, **options: MipDevice(rate_hz, *
                "filter_state": "a constant filter state (0x82, 0x10) instead of the one ins_mode gives",
                "preset": "start-up streams a flight stack expects: " + "; ".join(
                    f"{name}: {text}" for name, (_, text) in PRESETS.items())},
-              {name: (settings, text) for name, (settings, text) in PRESETS.items()}, navigation=True)
+              {name: (settings, text) for name, (settings, text) in PRESETS.items()}, navigation=True,
+              device_class=MipDevice)

@@ -509,8 +509,9 @@ _OPTIONS = {
 }
 _PRESET_LIST = {name: (settings, text) for name, (settings, text) in PRESETS.items()}
 attach_device("vectornav-binary", lambda rate_hz, **options: VectorNavDevice(rate_hz, **options), _OPTIONS,
-              _PRESET_LIST, navigation=True)
+              _PRESET_LIST, navigation=True, device_class=VectorNavDevice)
 for _type, _name in ((14, "VNYMR"), (19, "VNIMU")):
     attach_device(f"vectornav-{_name.lower()}",
                   lambda rate_hz, _t=_type, **options: VectorNavDevice(rate_hz, ascii_type=_t, **options),
-                  {k: v for k, v in _OPTIONS.items() if k != "preset"}, navigation=True)
+                  {k: v for k, v in _OPTIONS.items() if k != "preset"}, navigation=True,
+                  device_class=VectorNavDevice)

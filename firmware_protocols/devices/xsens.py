@@ -280,4 +280,4 @@ attach_device("xsens-mtdata2", lambda rate_hz, **options: XsensDevice(rate_hz, *
                "num_sats": "GnssPvtData numSv (default 12)",
                "gnss_fix": "GnssPvtData fixType: 0 none ... 3 3D fix (default 3)",
                "leap_seconds": "GPS - UTC in seconds for GnssPvtData's iTOW (default 18)"},
-              navigation=True)
+              navigation=True, device_class=XsensDevice)

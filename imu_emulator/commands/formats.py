@@ -1,7 +1,7 @@
 """`imu-emulator formats`: the wire formats, with their size per sample, whether a device answers the driver
 ([device]) and the named presets (`--option preset=NAME`); `--details` adds each format's encoder options with the
-defaults read from the encoder's signature, and the body axes and reference frame the format declares (from its
-manual: firmware_protocols.axes)."""
+defaults read from the encoder's signature, its device's options (defaults from the device class's signature),
+and the body axes and reference frame the format declares (from its manual: firmware_protocols.axes)."""
 from __future__ import annotations
 
 
@@ -28,6 +28,15 @@ def option_rows(info) -> list[tuple[str, str, str]]:
     from firmware_protocols.registry import option_defaults
     defaults = option_defaults(info)
     return [(name, _show(defaults[name]), text) for name, text in info.options.items()]
+
+
+def device_option_rows(info) -> list[tuple[str, str, str]]:
+    """(option, default as the device class's signature has it, help) for each option only the device takes
+    (FormatInfo.device_options; `--option` on a stream with that device)."""
+    from firmware_protocols.registry import device_option_defaults
+    defaults = device_option_defaults(info)
+    return [(name, _show(defaults[name]) if name in defaults else "-", text)
+            for name, text in info.device_options.items()]
 
 
 def axes_row(info) -> str:
@@ -66,4 +75,9 @@ def cmd_formats(args) -> int:
             print(f"    {option:22} default {default:24} {text}")
         if not info.options:
             print("    (no options)")
+        rows = device_option_rows(info)
+        if rows:
+            print("    device options (the device answering the driver takes these too):")
+        for option, default, text in rows:
+            print(f"    {option:22} default {default:24} {text}")
     return 0
