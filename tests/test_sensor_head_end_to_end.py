@@ -461,6 +461,7 @@ def both_frames(tmp_path_factory):
                      f"options = {options}\n")
         (where / "scene.toml").write_text(text)
         cli("generate", where / "scene.toml", "-o", where / "bag.mcap", "--quiet")
+        cli("generate", where / "scene.toml", "-o", where / "run.npz", "--quiet")
         cli("stream", where / "scene.toml", "--speed", "0", "--quiet")
         out[frame] = where
     return out
@@ -512,6 +513,20 @@ def test_enu_and_ned_scenes_give_the_same_ros2_messages(both_frames):
                     assert np.array_equal(value, fb[key]), (topic, key)
                 else:
                     assert value == fb[key], (topic, key)
+
+
+def test_enu_and_ned_scenes_give_the_same_ins_and_gnss_columns(both_frames):
+    """The INS estimate's columns are the part's forward-right-down axes w.r.t. local NED whatever the scene's frame
+    (as the wires send it), the receiver's figures are frame-free: one motion written as an ENU and as a NED scene
+    gives the same columns (the kernels' attitudes differ in the last bits of a double: test_axes_at_the_wire)."""
+    with np.load(both_frames["ENU"] / "run.npz") as enu, np.load(both_frames["NED"] / "run.npz") as ned:
+        for key in ("ins_quat", "ins_euler"):
+            np.testing.assert_allclose(enu[key], ned[key], rtol=0, atol=1e-12, err_msg=key)
+        # the truth's position and velocity, turned into NED from each frame, agree to rounding
+        for key in ("ins_llh", "ins_velocity_ned", "differential_pressure_pa"):
+            np.testing.assert_allclose(enu[key], ned[key], rtol=1e-12, atol=1e-12, err_msg=key)
+        for key in ("ins_attitude_sigma_rad", "ins_mode", "gnss_satellites", "gnss_hdop", "gnss_horizontal_accuracy_m"):
+            assert np.array_equal(enu[key], ned[key]), key
 
 
 @pytest.mark.parametrize("name", [name for name, *_ in FRD_WIRES])
