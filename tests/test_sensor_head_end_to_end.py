@@ -41,6 +41,8 @@ STREAMS = (
     ("vectornav_ins", "vectornav-binary", "{ fields = 'common:yawpitchroll,quaternion,position,velocity,insstatus;"
      "gps:numsats,posu,velu,dop;attitude:ypru;ins:posu,velu' }", "bin"),
     ("xsens", "xsens-mtdata2", "{ items = 'magnetic_field,baro_pressure,gnss_pvt_data' }", "bin"),
+    ("xsens_ins", "xsens-mtdata2", "{ items = 'quaternion,euler_angles,lat_lon,altitude_ellipsoid,velocity_xyz', "
+     "precision = 'float64', frame = 'NED' }", "bin"),
 )
 
 
@@ -411,6 +413,40 @@ def test_xsens_mag_baro_and_gnss_pvt(run):
             round(ref[key][k] * 1e3) for key in ("gnss_horizontal_accuracy_m", "gnss_vertical_accuracy_m",
                                                  "gnss_speed_accuracy_mps"))                      # mm, mm/s
         assert (pvt["hDop"], pvt["vDop"]) == (round(ref["gnss_hdop"][k] * 100), round(ref["gnss_vdop"][k] * 100))
+
+
+def test_xsens_orientation_position_velocity_are_the_ins_estimate(run):
+    """MT Low-Level Communication Protocol MTData2: items of XDI (u16, low bits 0x3 precision: 3 = float64, 0xC
+    coordinate frame: 0x4 NED), size (u8), big-endian data. The MTi's sensor frame is forward-left-up: its
+    Quaternion (w, x, y, z) and EulerAngles (deg) are that frame w.r.t. NED, the estimate's attitude of the part's
+    FRD axes turned by the half turn about x; LatLon (deg), AltitudeEllipsoid (m), VelocityXYZ (NED, m/s)."""
+    from scipy.spatial.transform import Rotation
+    out, ref = run
+    data = (out / "xsens_ins.bin").read_bytes()
+    frames, pos = [], 0
+    while pos < len(data):
+        assert data[pos:pos + 3] == b"\xfa\xff\x36" and sum(data[pos + 1:pos + 5 + data[pos + 3]]) & 0xFF == 0
+        payload, items, k = data[pos + 4:pos + 4 + data[pos + 3]], {}, 0
+        while k < len(payload):
+            xdi, size = struct.unpack_from(">HB", payload, k)
+            assert xdi & 0x3 == 0x3                                              # float64
+            items[xdi & 0xFFF0] = (xdi & 0xC, struct.unpack_from(f">{size // 8}d", payload, k + 3))
+            k += 3 + size
+        frames.append(items)
+        pos += 5 + data[pos + 3]
+    assert len(frames) == 600
+    flu = Rotation.from_rotvec([np.pi, 0.0, 0.0])                 # FLU -> FRD
+    for k, items in enumerate(frames):
+        estimate = Rotation.from_quat(ref["ins_quat"][k][[1, 2, 3, 0]]) * flu
+        frame, (w, x, y, z) = items[0x2010]
+        assert frame == 0x4
+        np.testing.assert_allclose(canonical((w, x, y, z)), canonical(estimate.as_quat()[[3, 0, 1, 2]]), atol=1e-15)
+        frame, euler = items[0x2030]
+        assert frame == 0x4
+        np.testing.assert_allclose(euler, np.degrees(estimate.as_euler("ZYX")[::-1]), rtol=0, atol=1e-11)
+        assert items[0x5040][1] + items[0x5020][1] == tuple(ref["ins_llh"][k])
+        frame, velocity = items[0xD010]
+        assert frame == 0x4 and velocity == tuple(ref["ins_velocity_ned"][k])
 
 
 # --- ENU and NED: one motion, two habits, the same messages ---------------------------------------------------
