@@ -98,6 +98,26 @@ def wait_for(path: Path, seconds: float, proc: subprocess.Popen, what: str) -> N
         time.sleep(0.1)
 
 
+def connect(sitl: subprocess.Popen, work: Path, seconds: float = 90.0):
+    """SITL's MAVLink on TCP 5760 (SERIAL0), once it listens; a SITL that exits first is named with its log."""
+    from pymavlink import mavutil
+    end = time.monotonic() + seconds
+    while True:
+        if sitl.poll() is not None:
+            raise SystemExit(f"arducopter exited (code {sitl.returncode}) before its MAVLink port came up: "
+                             f"see {work / 'sitl.log'}")
+        try:
+            link = mavutil.mavlink_connection("tcp:127.0.0.1:5760", source_system=255, retries=0)
+            if link.wait_heartbeat(timeout=30) is not None:
+                return link
+        except OSError:
+            pass
+        if time.monotonic() > end:
+            raise SystemExit(f"no MAVLink heartbeat on tcp:127.0.0.1:5760 within {seconds:.0f} s: see "
+                             f"{work / 'sitl.log'}")
+        time.sleep(1.0)
+
+
 def run(args) -> dict:
     from pymavlink import mavutil
     work = Path(tempfile.mkdtemp(prefix=f"sitl-{args.device}-"))
@@ -117,12 +137,17 @@ def run(args) -> dict:
         if args.device != "json":
             wait_for(work / "device", 120, emu, "imu-emulator stream")
         sitl = subprocess.Popen(sitl_cmd, stdout=sitl_log, stderr=subprocess.STDOUT, cwd=work)
-        time.sleep(2.0)
-        link = mavutil.mavlink_connection("tcp:127.0.0.1:5760", source_system=255, retries=60)
-        link.wait_heartbeat(timeout=60)
+        link = connect(sitl, work)
         for msg_id, hz in ((30, 25), (33, 10), (193, 5), (1, 2)):   # ATTITUDE, GLOBAL_POSITION_INT, EKF_STATUS, SYS
             link.mav.command_long_send(link.target_system, link.target_component,
                                        mavutil.mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0, msg_id, 1e6 / hz, 0, 0, 0, 0, 0)
+        if args.device != "json":
+            # The unit's IMU is a new accelerometer to ArduPilot, never calibrated: ArduPilot's own test of these
+            # drivers (Tools/autotest/arduplane.py fly_external_AHRS) runs the simple accel cal (param5 = 4)
+            # 5 s after boot, before waiting for the pre-arm checks; so does this.
+            time.sleep(5.0)
+            link.mav.command_long_send(link.target_system, link.target_component,
+                                       mavutil.mavlink.MAV_CMD_PREFLIGHT_CALIBRATION, 0, 0, 0, 0, 0, 4, 0, 0)
         end = time.monotonic() + duration + 5
         last_arm_try = 0.0
         while time.monotonic() < end and emu.poll() is None and sitl.poll() is None:
