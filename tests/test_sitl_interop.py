@@ -101,6 +101,49 @@ def test_errors_of_a_known_offset_estimate_against_the_closed_form():
     assert horizontal[t < 5.0] == pytest.approx(100.0, abs=1e-6)
 
 
+def test_report_from_mavlink_messages_states_the_closed_form_errors(tmp_path):
+    """The whole report path from pymavlink's own message objects: the estimate is the truth moved 3 m north,
+    4 m east (5 m horizontally) and turned 2 deg in yaw once the EKF is healthy at 5 s; GLOBAL_POSITION_INT's
+    1e-7 deg integers round positions to about a centimetre."""
+    import argparse
+    from pymavlink.dialects.v20 import ardupilotmega as m
+    truth = _truth()
+    started = 1.7e9
+    rec = ardupilot_sitl_run.Recorder()
+    for t in np.arange(0.05, 19.9, 0.1):
+        boot_ms = int(round((t + 3.0) * 1000))     # the stack booted 3 s before the stream's first deadline
+        t = boot_ms / 1000 - 3.0
+        roll, pitch, yaw = 0.1, -0.05, math.remainder(math.radians(10.0 * t + (2.0 if t >= 5 else 0.0)), 2 * math.pi)
+        rec.add(m.MAVLink_attitude_message(boot_ms, roll, pitch, yaw, 0, 0, 0), started + t)
+        off = (3.0, 4.0, -1.0) if t >= 5 else (30.0, 40.0, 0.0)
+        lat, lon, alt = pymap3d.ned2geodetic(2.0 * t + off[0], 1.0 * t + off[1], -0.5 * t + off[2], *ORIGIN)
+        rec.add(m.MAVLink_global_position_int_message(boot_ms, round(lat * 1e7), round(lon * 1e7), round(alt * 1e3),
+                                                      0, 200, 100, -50, 0), started + t)
+        flags = sitl_report.EKF_HEALTHY_NEEDS if t >= 5 else m.EKF_ATTITUDE
+        rec.add(m.MAVLink_ekf_status_report_message(flags, 0, 0, 0, 0, 0), started + t)
+        health = m.MAV_SYS_STATUS_PREARM_CHECK if t >= 6 else 0
+        rec.add(m.MAVLink_sys_status_message(0, 0, health, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0), started + t)
+    rec.add(m.MAVLink_statustext_message(6, b"EAHRS: VectorNav VN-300-CR"), started + 1)
+    outcome = {"work": tmp_path, "rec": rec, "truth": truth, "armed_at": started + 7.0,
+               "stream": {"started_unix_ns": int(started * 1e9), "samples": 4000, "dropped": 0},
+               "commands": [["imu-emulator", "stream"], ["arducopter"]], "params": {"EAHRS_TYPE": 1}}
+    args = argparse.Namespace(device="vn300", scene=Path("examples/sitl_flight.toml"))
+    report = ardupilot_sitl_run.write_report(tmp_path / "out", args, outcome, "265753db8b")
+    text = report.read_text()
+    assert (tmp_path / "out" / "ardupilot-vn300.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+    def row(label):
+        cells = text.split(f"| {label} | ")[1].split("\n")[0].split(" | ")
+        return float(cells[0].split()[0]), float(cells[1].split()[0])
+    assert row("attitude error (rotation angle)") == pytest.approx((2.0, 2.0), abs=2e-3)
+    assert row("horizontal position error") == pytest.approx((5.0, 5.0), abs=0.02)
+    assert row("vertical position error (down)") == pytest.approx((1.0, 1.0), abs=0.002)
+    assert row("velocity error (3D)")[0] == pytest.approx(0.0, abs=1e-9)
+    assert "EKF healthy (attitude, velocity, absolute position flags; not constant-position mode): 5.0 s" in text
+    assert "pre-arm checks passed (SYS_STATUS pre-arm bit first set): 6.0 s" in text
+    assert "- armed: 7.0 s" in text and "EAHRS: VectorNav VN-300-CR" in text
+
+
 def test_attitude_error_is_the_rotation_angle_for_random_attitudes():
     rng = np.random.default_rng(26)
     truth = Rotation.random(50, random_state=7)

@@ -250,7 +250,7 @@ scene: the motion is scripted. Statistics count from the first healthy EKF_STATU
 
 ![errors]({name}.png)
 
-Commands (ArduPilot at {ardupilot_commit}, built per its BUILD.md: `./waf configure --board sitl`, `./waf copter`):
+Commands (ArduPilot at {ardupilot_commit}, its Copter SITL built per its own BUILD.md):
 
 ```sh
 {chr(10).join(shlex.join(str(a) for a in c) for c in outcome['commands'])}

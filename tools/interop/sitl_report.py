@@ -134,7 +134,7 @@ def compare(est: Estimates, truth: Truth) -> dict:
 
 ROWS = (("attitude_deg", "attitude error (rotation angle)", "deg"),
         ("horizontal_m", "horizontal position error", "m"),
-        ("vertical_m", "vertical position error", "m"),
+        ("vertical_m", "vertical position error (down)", "m"),
         ("velocity_mps", "velocity error (3D)", "m/s"))
 
 
