@@ -262,6 +262,25 @@ def test_sampled_motion_increments_follow_the_fitted_curve():
     assert np.abs(truth.dvel[0] - truth.accel[0] / 1000).max() > 10 * inc_error   # not the rate times dt
 
 
+def test_sampled_motion_starting_at_its_first_stamp_holds_it_over_the_first_interval():
+    """The first sample's interval (t_-1, t_0] lies before waypoints' first stamp: the body is held in that
+    stamp's state, so the first increments are that sample's rate and force times the interval (the integral of
+    a constant). Before, the evaluation outside the data span failed, and every stream whose device carries
+    increments (VectorNav, MIP) stopped at its start on such a scene."""
+    raw = {"scene": {"rate_hz": 400, "frame": "NED"},
+           "trajectory": {"shape": "waypoints", "positions_m": [[0, 0, 0], [3, 1, -2], [5, 4, -2]],
+                          "times_s": [0, 1.5, 3], "attitudes_deg": [[0, 0, 30], [4, -3, 50], [0, 0, 90]],
+                          "ends": "coast"},
+           "imu": [{"name": "imu0"}], "effects": {"gravity": True}}
+    block = Simulation(scene_from_dict(raw), increments=DEFAULT_NODES).block(0, 400)
+    dt = 1 / 400
+    np.testing.assert_allclose(block.dvel[0, 0], block.accel[0, 0] * dt, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(block.dtheta[0, 0], block.gyro[0, 0] * dt, rtol=0, atol=1e-15)
+    assert np.abs(block.gyro[0, 0]).max() > 1e-3       # moving ("coast" ends): a held state, not a zero
+    # the second interval lies inside the data: no longer the rate times dt
+    assert np.abs(block.dvel[0, 1] - block.accel[0, 1] * dt).max() > 1e-9
+
+
 @pytest.mark.parametrize("suffix", [".csv", ".npz"])
 def test_generate_writes_the_increments(tmp_path, analytic, suffix):
     import pyarrow.csv as pa_csv

@@ -69,6 +69,7 @@ class Streamer:
         self.effect_counts: dict = {}    # the simulation's counters (range saturation), apart from the wire's
         self._time_offset_ns = 0
         self._first_ns = 0
+        self._start_unix_ns = 0          # the wall clock at scene time t0's deadline (summary: started_unix_ns)
         self._last_ns = 0
         self.scheduling = None
         self.pacer = None
@@ -96,11 +97,14 @@ class Streamer:
                 print(f"{stream.config.imu} {stream.config.format} -> {stream.transport.describe()}", flush=True)
             paced = self.options.speed > 0
             start = time.monotonic_ns() + _LEAD_NS
+            # A program comparing what a consumer made of the samples with the scene's truth (tools/interop)
+            # needs the wall-clock instant of scene time t0: the first sample's deadline.
+            self._start_unix_ns = time.time_ns() + (start - time.monotonic_ns())
             # One time base for every wire (firmware_protocols.gnss_time): UTC Unix ns = the run's start + scene time.
             self._time_offset_ns = int(self.options.start_ns)
             if self.options.epoch_time:
                 # "now": sample k's time = the wall clock at its ideal deadline.
-                self._time_offset_ns = time.time_ns() + (start - time.monotonic_ns()) - int(round(self.t0_s * 1e9))
+                self._time_offset_ns = self._start_unix_ns - int(round(self.t0_s * 1e9))
             for stream in self.streams:     # formats whose wire time counts since start subtract it (Samples.start_ns)
                 stream.start_ns = self._time_offset_ns
             producer, blocks = Producer(self.sim, self.rate_hz, self.streams, self.total, self.options.loop,
@@ -314,6 +318,7 @@ class Streamer:
     def summary(self) -> dict:
         elapsed = ((self._last_ns or time.monotonic_ns()) - self._first_ns) / 1e9
         return {"samples": self.samples_done, "rate_hz": self.rate_hz, "speed": self.options.speed,
+                "started_unix_ns": self._start_unix_ns,
                 "achieved_hz": (self.samples_done - 1) / elapsed if self.samples_done > 1 and elapsed > 0 else 0.0,
                 "scheduling": self.scheduling.mode if self.scheduling else None,
                 # CPU the send loop used per second of streaming: what the scheduling mode costs.

@@ -211,6 +211,11 @@ class Simulation:
         if self.increments:   # the kernel reads node q of sample j at n + j * nodes + q
             from imu_emulator.codegen.increments import node_offsets
             nodes = tau[:, None] + node_offsets(self.increments, clk, clk_prev) / self.scene.rate_hz
+            # The first sample's interval (t_-1, t_0] starts before sampled motion's first stamp when the scene
+            # starts there (waypoints, tracks, logs): before it the body is held in its first stamp's state, so
+            # that interval integrates the first stamp's rate and force (a VectorNav or MIP device's increments
+            # made every such stream fail at its start).
+            nodes = np.maximum(nodes, min(0.0, float(tau[0])))
             tau = np.concatenate([tau + clk / self.scene.rate_hz, nodes.reshape(-1)])
         else:
             tau = tau + clk / self.scene.rate_hz

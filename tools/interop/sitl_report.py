@@ -1,0 +1,181 @@
+"""A flight stack's estimate against the scene's truth: the errors, their statistics after convergence, and the
+report (markdown table + matplotlib figure) tools/interop/ardupilot_sitl_run.py writes.
+
+What is compared with what: the stack's ATTITUDE (roll, pitch, yaw) and GLOBAL_POSITION_INT (lat, lon, alt, vx, vy,
+vz) against the scene's truth at the same scene time; attitude error = the angle of the rotation between the two
+attitudes, position error = north/east/down of the estimate w.r.t. the truth (pymap3d, about the scene's origin).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+# MAVLink ardupilotmega.xml EKF_STATUS_FLAGS (what EKF_STATUS_REPORT.flags carries)
+EKF_ATTITUDE, EKF_VELOCITY_HORIZ, EKF_VELOCITY_VERT = 1, 2, 4
+EKF_POS_HORIZ_ABS, EKF_POS_VERT_ABS = 16, 32
+EKF_CONST_POS_MODE, EKF_UNINITIALIZED = 128, 1024
+#: what "EKF healthy" means here: attitude, velocity and absolute position all valid, not in constant-position mode
+EKF_HEALTHY_NEEDS = EKF_ATTITUDE | EKF_VELOCITY_HORIZ | EKF_VELOCITY_VERT | EKF_POS_HORIZ_ABS | EKF_POS_VERT_ABS
+#: MAV_SYS_STATUS_SENSOR bit of SYS_STATUS: set in onboard_control_sensors_health when the pre-arm checks pass
+PREARM_CHECK = 0x10000000
+
+
+def ekf_healthy(flags) -> np.ndarray:
+    flags = np.asarray(flags, dtype=np.int64)
+    return ((flags & EKF_HEALTHY_NEEDS) == EKF_HEALTHY_NEEDS) & ((flags & (EKF_CONST_POS_MODE | EKF_UNINITIALIZED)) == 0)
+
+
+def first_time(t, condition) -> float | None:
+    """The first time stamp where `condition` holds (None: never)."""
+    hit = np.flatnonzero(np.asarray(condition, dtype=bool))
+    return float(np.asarray(t)[hit[0]]) if hit.size else None
+
+
+def wall_to_scene(boot_s, received_s, started_s, window_s: float = 10.0) -> np.ndarray:
+    """Scene time of messages stamped `boot_s` (the stack's time since boot) and received at wall time `received_s`.
+
+    The stack's clock is mapped to the wall clock by the lower envelope of (received - boot) over windows of
+    `window_s`: the quickest delivery in each window is the least delayed, and a stack that fell behind the wall
+    clock (a loaded machine) moves the envelope, window by window. Scene time = that wall time - `started_s` (the
+    stream's first sample deadline, the emulator's `started_unix_ns`)."""
+    boot_s, received_s = np.asarray(boot_s, float), np.asarray(received_s, float)
+    lag = received_s - boot_s
+    edges = np.arange(boot_s.min(), boot_s.max() + window_s, window_s)
+    centers, floors = [], []
+    for lo in edges:
+        inside = (boot_s >= lo) & (boot_s < lo + window_s)
+        if inside.any():
+            centers.append(float(np.mean(boot_s[inside])))
+            floors.append(float(lag[inside].min()))
+    return boot_s + np.interp(boot_s, centers, floors) - started_s
+
+
+@dataclass
+class Truth:
+    """The scene's truth sampled at `t` (s): NED position (m from the origin), NED velocity, roll/pitch/yaw (rad,
+    body FRD -> NED), and the origin (lat, lon deg, height m) the NED frame is tangent at."""
+    t: np.ndarray
+    position_ned: np.ndarray
+    velocity_ned: np.ndarray
+    euler: np.ndarray
+    origin: tuple
+
+    def at(self, t):
+        """Truth at times `t` inside the sampled span: positions and velocities linear, attitude slerped."""
+        from scipy.spatial.transform import Rotation, Slerp
+        t = np.asarray(t, float)
+        pos = np.stack([np.interp(t, self.t, self.position_ned[:, i]) for i in range(3)], axis=1)
+        vel = np.stack([np.interp(t, self.t, self.velocity_ned[:, i]) for i in range(3)], axis=1)
+        rot = Slerp(self.t, Rotation.from_euler("ZYX", self.euler[:, ::-1]))(np.clip(t, self.t[0], self.t[-1]))
+        return pos, vel, rot
+
+
+def attitude_error_deg(euler_est, truth_rot) -> np.ndarray:
+    """Angle (deg) of the rotation from the true attitude to the estimated one (roll, pitch, yaw in rad)."""
+    from scipy.spatial.transform import Rotation
+    est = Rotation.from_euler("ZYX", np.asarray(euler_est, float)[:, ::-1])
+    return np.degrees((truth_rot.inv() * est).magnitude())
+
+
+def position_error_ned(lat_deg, lon_deg, alt_m, truth_ned, origin) -> np.ndarray:
+    """Estimated minus true position, north/east/down metres, the estimate placed about the scene's origin."""
+    import pymap3d
+    n, e, d = pymap3d.geodetic2ned(np.asarray(lat_deg, float), np.asarray(lon_deg, float), np.asarray(alt_m, float),
+                                   *origin)
+    return np.stack([n, e, d], axis=1) - truth_ned
+
+
+def stats(t, values, t_from: float | None) -> dict:
+    """Max and RMS of `values` at t >= t_from (None: no convergence, nothing counted)."""
+    values = np.asarray(values, float)
+    if t_from is None:
+        return {"n": 0, "max": float("nan"), "rms": float("nan")}
+    keep = np.asarray(t) >= t_from
+    if not keep.any():
+        return {"n": 0, "max": float("nan"), "rms": float("nan")}
+    v = values[keep]
+    return {"n": int(v.size), "max": float(np.max(np.abs(v))), "rms": float(np.sqrt(np.mean(v * v)))}
+
+
+@dataclass
+class Estimates:
+    """The stack's messages, each series with its scene time stamps (s)."""
+    attitude_t: np.ndarray
+    euler: np.ndarray                       # (n, 3) rad
+    position_t: np.ndarray
+    lat_lon_alt: np.ndarray                 # (n, 3) deg, deg, m
+    velocity_ned: np.ndarray                # (n, 3) m/s
+    ekf_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    ekf_flags: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    prearm_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    prearm_ok: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+
+
+def compare(est: Estimates, truth: Truth) -> dict:
+    """Every error series and the summary the report prints. Convergence = the first EKF_STATUS_REPORT that is
+    healthy (ekf_healthy); the statistics count from there on, inside the scene's span."""
+    inside_a = (est.attitude_t >= truth.t[0]) & (est.attitude_t <= truth.t[-1])
+    inside_p = (est.position_t >= truth.t[0]) & (est.position_t <= truth.t[-1])
+    ta, tp = est.attitude_t[inside_a], est.position_t[inside_p]
+    _, _, rot = truth.at(ta)
+    att = attitude_error_deg(est.euler[inside_a], rot)
+    pos_true, vel_true, _ = truth.at(tp)
+    dpos = position_error_ned(*est.lat_lon_alt[inside_p].T, pos_true, truth.origin)
+    dvel = est.velocity_ned[inside_p] - vel_true
+    healthy_at = first_time(est.ekf_t, ekf_healthy(est.ekf_flags)) if len(est.ekf_t) else None
+    prearm_at = first_time(est.prearm_t, est.prearm_ok) if len(est.prearm_t) else None
+    series = {"attitude_deg": (ta, att), "horizontal_m": (tp, np.hypot(dpos[:, 0], dpos[:, 1])),
+              "vertical_m": (tp, dpos[:, 2]), "velocity_mps": (tp, np.linalg.norm(dvel, axis=1))}
+    return {"series": series, "ekf_healthy_s": healthy_at, "prearm_passed_s": prearm_at,
+            "stats": {k: stats(t, v, healthy_at) for k, (t, v) in series.items()},
+            "truth_position": pos_true, "estimate_position": pos_true + dpos, "position_t": tp}
+
+
+ROWS = (("attitude_deg", "attitude error (rotation angle)", "deg"),
+        ("horizontal_m", "horizontal position error", "m"),
+        ("vertical_m", "vertical position error (down)", "m"),
+        ("velocity_mps", "velocity error (3D)", "m/s"))
+
+
+def markdown_table(result: dict) -> str:
+    lines = ["| quantity | max | RMS | samples |", "|---|---|---|---|"]
+    for key, label, unit in ROWS:
+        s = result["stats"][key]
+        lines.append(f"| {label} | {s['max']:.3f} {unit} | {s['rms']:.3f} {unit} | {s['n']} |")
+    return "\n".join(lines)
+
+
+def plot(result: dict, title: str):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(3, 2, figsize=(12, 9), constrained_layout=True)
+    fig.suptitle(title)
+    for ax, (key, label, unit) in zip(axes.flat, ROWS):
+        t, v = result["series"][key]
+        ax.plot(t, v, lw=0.8)
+        ax.set_title(label)
+        ax.set_xlabel("scene time, s")
+        ax.set_ylabel(unit)
+        if result["ekf_healthy_s"] is not None:
+            ax.axvline(result["ekf_healthy_s"], color="g", ls="--", lw=0.8, label="EKF healthy")
+            ax.legend(loc="upper right", fontsize=8)
+    ax = axes.flat[4]
+    truth, est = result["truth_position"], result["estimate_position"]
+    ax.plot(truth[:, 1], truth[:, 0], "k", lw=1.0, label="truth")
+    ax.plot(est[:, 1], est[:, 0], "r", lw=0.6, label="estimate")
+    ax.set_xlabel("east, m")
+    ax.set_ylabel("north, m")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(fontsize=8)
+    ax.set_title("track")
+    ax = axes.flat[5]
+    t = result["position_t"]
+    ax.plot(t, -truth[:, 2], "k", lw=1.0, label="truth")
+    ax.plot(t, -est[:, 2], "r", lw=0.6, label="estimate")
+    ax.set_xlabel("scene time, s")
+    ax.set_ylabel("height above origin, m")
+    ax.legend(fontsize=8)
+    ax.set_title("height")
+    return fig
