@@ -1,0 +1,275 @@
+"""The producer's blocks to the sender through shared memory (issue 25). The producer writes a block's serial packets
+into a ring of bytes the two processes share and describes the block in a table there (first sample, length, where
+each stream's packets lie, the encoders' saturation counts), then counts it published. The sender sees a block is
+there by reading that count and takes it by reading its description: no system call, no unpickling. Before, the
+block crossed a pipe pickled: at 10 kHz reading and unpickling it cost the sender 120-300 us of CPU every 200
+samples (the code runs once per block, so its caches are cold: a 163-byte unpickle that takes 3 us in a loop took 45
+us there), more than a period, and the block's first deadline was missed.
+
+Blocks that are not all serial packets (CAN frames, a device's raw samples), one too large for the ring, one whose
+effect counters changed, the end and a failure still cross the pipe pickled, in order: their description says so.
+
+The ring is an anonymous shared mapping made before the producer is forked: it has no name, no file in /dev/shm,
+and only these two processes (and nothing they did not fork) can reach it; it goes with them however they end
+(killed, crashed), so nothing can be left behind.
+
+Who may write where: the sender holds at most two blocks at a time (the one it sends and the next, taken early while
+there is slack), so when it takes block t, blocks up to t - 2 are done with; it stores that count, and the producer
+reuses their bytes and table slots only then. A producer with no room sleeps in short steps (it never wakes the
+sender: that costs the sender CPU) and gives up when its parent has gone. A sender with no block sets a flag and
+waits on a doorbell pipe the producer writes a byte to when the flag is set; the flag and the count are plain
+stores, which x86 may see out of order, so the sender's waits also end every _WAIT_S to look again.
+"""
+from __future__ import annotations
+
+import ctypes
+import mmap
+import os
+import platform
+import select
+import time
+
+# Bytes of packets the producer may run ahead by, and blocks: a pipe's buffer (64 KiB) bounded it before, a few
+# blocks at 10 kHz; a mapping's pages are only taken when first written.
+RING_BYTES = 1 << 21
+MAX_BLOCKS = 64
+MAX_STREAMS = 8             # more streams than this: blocks go through the pipe
+_HEAD = 8                   # a block's description: j0, n, via pipe, streams, then per stream _PER of int64
+_PER = 4                    # position, samples, bytes, saturation total
+_SLOT = _HEAD + _PER * MAX_STREAMS      # int64s per table slot
+_HEADER = 64                # done, published, waiting (int64 each), on a cache line of their own
+_TABLE = _SLOT * 8 * MAX_BLOCKS
+_FULL_SLEEP_S = 0.002       # a full ring is looked at again after this (a block at 10 kHz holds 20 ms)
+_WAIT_S = 0.001             # a waiting sender looks at the count at least this often
+_ALIGN = 8
+# The count is published by a plain store after the block's: only a CPU that keeps stores in order (x86's TSO) makes
+# the block visible before the count without a barrier Python cannot issue. Elsewhere (ARM) blocks go down the pipe.
+SHARED_RING = platform.machine().lower() in ("x86_64", "amd64", "i386", "i686")
+
+
+class Packets:
+    """One block's serial packets as one buffer and their offsets, as the producer makes them: written into the
+    ring (or, when they do not fit, pickled as one bytes object: a fraction of what a list of small ones costs)."""
+
+    __slots__ = ("data", "offsets")
+
+    def __init__(self, data: bytes, offsets: list):
+        self.data, self.offsets = data, offsets
+
+    def __len__(self) -> int:
+        return len(self.offsets) - 1
+
+    def __getitem__(self, j: int) -> bytes:
+        return self.data[self.offsets[j]:self.offsets[j + 1]]
+
+    def __getstate__(self):
+        return self.data, self.offsets
+
+    def __setstate__(self, state):
+        self.data, self.offsets = state
+
+
+class RingPackets:
+    """One stream's packets of one block read in place from the ring: n + 1 int64 offsets, then the bytes. A
+    sample's packet is copied out (bytes) when it is sent, so no view is used past the block."""
+    __slots__ = ("offsets", "data", "n")
+
+    def __init__(self, view: memoryview, pos: int, n: int, nbytes: int):
+        table = (n + 1) * 8
+        self.offsets = view[pos:pos + table].cast("q")
+        self.data = view[pos + table:pos + table + nbytes]
+        self.n = n
+
+    def __len__(self) -> int:
+        return self.n
+
+    def __getitem__(self, j: int) -> bytes:
+        offsets = self.offsets
+        return bytes(self.data[offsets[j]:offsets[j + 1]])
+
+
+class RingBlock:
+    """A block taken from the ring, as the send loop reads it (the producer's _Block without the bytes)."""
+    __slots__ = ("j0", "n", "items", "saturated", "counts")
+
+    def __init__(self, j0, n, items, saturated, counts):
+        self.j0, self.n, self.items, self.saturated, self.counts = j0, n, items, saturated, counts
+
+    def __len__(self) -> int:
+        return self.n
+
+
+class Ring:
+    """The shared mapping and the doorbell pipe, made before the fork; the producer calls put, the sender uses a
+    BlockReceiver."""
+
+    def __init__(self, capacity: int | None = None, max_blocks: int | None = None):
+        self.capacity = capacity = RING_BYTES if capacity is None else capacity
+        self.max_blocks = max_blocks = MAX_BLOCKS if max_blocks is None else max_blocks
+        size = _HEADER + _SLOT * 8 * max_blocks + capacity
+        self.map = mmap.mmap(-1, size, flags=mmap.MAP_SHARED | mmap.MAP_ANONYMOUS)
+        header = (ctypes.c_int64 * 3).from_buffer(self.map)
+        self.header = header                    # done (sender), published (producer), waiting (sender)
+        table_end = _HEADER + _SLOT * 8 * max_blocks
+        self.table = memoryview(self.map)[_HEADER:table_end].cast("q")
+        self.data = memoryview(self.map)[table_end:]
+        self.owner = os.getpid()                # the sender, whose child the producer is
+        self.bell_r, self.bell_w = os.pipe()
+        os.set_blocking(self.bell_r, False)
+        os.set_blocking(self.bell_w, False)
+        # The producer's side only (after the fork): blocks published, and where the bytes of those the sender may
+        # still read lie.
+        self._published = 0
+        self._live = []             # (block number, start, end)
+        self._head = 0
+        self._counts = {}           # the counters as the sender knows them (last sent through the pipe)
+
+    # - producer -
+    def put(self, block, pipe) -> None:
+        """Publish one block (the producer's _Block, or None at the end, or a ProducerFailure): its serial packets
+        into the ring when it can, else the whole of it down `pipe`. Waits for room while the sender is behind."""
+        items = getattr(block, "items", None)
+        size = sum(_record_size(item) for item in items) if items else 0
+        ring = (items is not None and 0 < len(items) <= MAX_STREAMS and block.counts == self._counts
+                and all(type(item) is Packets for item in items)
+                and size <= self.capacity // 4)     # with the sender holding two blocks, a third always finds room
+        seq = self._published
+        pos = self._room(size if ring else 0)
+        slot = (seq % self.max_blocks) * _SLOT
+        table = self.table
+        if ring:
+            table[slot:slot + 4] = _int64s((block.j0, block.n, 0, len(items)))
+            for s, (item, saturated) in enumerate(zip(items, block.saturated)):
+                offsets = _int64s(item.offsets).cast("B")
+                self.data[pos:pos + len(offsets)] = offsets
+                self.data[pos + len(offsets):pos + len(offsets) + len(item.data)] = item.data
+                at = slot + _HEAD + _PER * s
+                table[at:at + _PER] = _int64s((pos, len(item), len(item.data), saturated))
+                pos += _record_size(item)
+            self._publish(seq)
+        else:
+            table[slot + 2] = 1
+            if items is not None:
+                self._counts = block.counts
+            self._publish(seq)      # before sending: a block larger than the pipe's buffer needs the sender reading
+            pipe.send(block)
+
+    def _publish(self, seq: int) -> None:
+        self._published = seq + 1
+        self.header[1] = seq + 1
+        if self.header[2]:
+            try:
+                os.write(self.bell_w, b"\0")
+            except BlockingIOError:     # the doorbell is full of rings already
+                pass
+
+    def _room(self, size: int) -> int:
+        """Where a record of `size` bytes goes (after the last one, or at the start when it does not fit before
+        the end), once a table slot is free and no block the sender may still read lies there."""
+        pos = self._head if self._head + size <= self.capacity else 0
+        while True:
+            done = self.header[0]
+            self._live = [b for b in self._live if b[0] >= done]
+            if len(self._live) < self.max_blocks and not any(start < pos + size and pos < end
+                                                             for _, start, end in self._live):
+                break
+            if os.getpid() != self.owner and os.getppid() != self.owner:    # the sender is gone: nobody will read
+                raise BrokenPipeError("the sender has gone")
+            time.sleep(_FULL_SLEEP_S)
+        self._live.append((self._published, pos, pos + size))
+        self._head = pos + size
+        return pos
+
+
+class BlockReceiver:
+    """The sender's end. poll(0): whether the next block is there (a read of shared memory); recv(): take it
+    (waiting if not); fileno(): a descriptor that becomes readable when a block comes while the sender waits for
+    one (after poll(0) said no)."""
+
+    def __init__(self, ring: Ring, connection):
+        self.ring = ring
+        self.connection = connection
+        self.header = ring.header
+        self.taken = 0
+        self.counts = {}
+        self._armed = False
+
+    def fileno(self) -> int:
+        return self.ring.bell_r
+
+    def poll(self, timeout=0) -> bool:
+        header = self.header
+        if header[1] > self.taken:
+            if self._armed:
+                self._disarm()
+            return True
+        if not self._armed:
+            self._armed = True
+            header[2] = 1
+        if timeout:
+            select.select((self.ring.bell_r,), (), (), timeout)
+        return header[1] > self.taken
+
+    def _disarm(self) -> None:
+        self._armed = False
+        self.header[2] = 0
+        try:
+            os.read(self.ring.bell_r, 4096)
+        except BlockingIOError:
+            pass
+
+    def recv(self):
+        while not self.poll(0):
+            self.poll(_WAIT_S)
+        ring = self.ring
+        table = ring.table
+        slot = (self.taken % ring.max_blocks) * _SLOT
+        # Taking block t: the sender holds at most t - 1 besides (see the module's docstring).
+        self.taken += 1
+        if self.taken >= 2:
+            self.header[0] = self.taken - 2
+        if table[slot + 2]:
+            block = self.connection.recv()
+            if getattr(block, "items", None) is not None:
+                self.counts = block.counts
+            return block
+        view = ring.data
+        items, saturated = [], []
+        for at in range(slot + _HEAD, slot + _HEAD + _PER * table[slot + 3], _PER):
+            items.append(RingPackets(view, table[at], table[at + 1], table[at + 2]))
+            saturated.append(table[at + 3])
+        return RingBlock(table[slot], table[slot + 1], items, saturated, self.counts)
+
+    def close(self) -> None:
+        self.connection.close()
+        os.close(self.ring.bell_r)
+        os.close(self.ring.bell_w)
+
+
+class PipeReceiver:
+    """The sender's end where there is no ring (see SHARED_RING): the pipe alone, with BlockReceiver's methods."""
+
+    def __init__(self, connection):
+        self.connection = connection
+
+    def fileno(self) -> int:
+        return self.connection.fileno()
+
+    def poll(self, timeout=0) -> bool:
+        # select() on the descriptor, not Connection.poll: that builds a selector per call (14 us against 0.75 us).
+        return bool(select.select((self.connection.fileno(),), (), (), timeout)[0])
+
+    def recv(self):
+        return self.connection.recv()
+
+    def close(self) -> None:
+        self.connection.close()
+
+
+def _record_size(item) -> int:
+    size = len(item.offsets) * 8 + len(item.data) if type(item) is Packets else 0
+    return -(-size // _ALIGN) * _ALIGN
+
+
+def _int64s(values) -> memoryview:
+    return memoryview((ctypes.c_int64 * len(values))(*values)).cast("B").cast("q")
