@@ -16,7 +16,7 @@ from imu_emulator.live.realtime import drop_realtime
 from imu_emulator.live.ring import SHARED_RING, BlockReceiver, PipeReceiver, Ring
 
 # Blocks hold about this much time: few pipe messages per second, and the sender's per-block work
-# (one small unpickle, the packets read in place from the ring) stays far below a sample period.
+# (reading the block's description in the ring, ring.py) stays far below a sample period.
 _BLOCK_SECONDS = 0.02
 _MAX_BLOCK = 500
 

@@ -276,9 +276,9 @@ MISS_CAUSES = {
     "preempted": "preempted: the kernel ran another thread on this CPU since the previous deadline "
                  "(involuntary context switch)",
     "catching_up": "still behind after the previous deadline's miss",
-    "block_handover": "taking the producer's next block from the pipe (it was there: reading and unpickling it) "
-                      "ended after the deadline of its first sample",
-    "previous_work": "the previous sample's work (send, status, a block's unpickling) ended after this deadline",
+    "block_handover": "taking the producer's next block at the current one's end (it was there, but had not been "
+                      "taken early, in slack) ended after the deadline of its first sample",
+    "previous_work": "the previous sample's work (send, status, taking the next block) ended after this deadline",
     "woke_late": "woke late with nothing above seen: the host took the vCPU, or the timer (the floor's kind)",
 }
 
