@@ -39,7 +39,7 @@ _PER = 4                    # position, samples, bytes, saturation total
 _SLOT = _HEAD + _PER * MAX_STREAMS      # int64s per table slot
 _HEADER = 64                # done, published, waiting (int64 each), on a cache line of their own
 _TABLE = _SLOT * 8 * MAX_BLOCKS
-_FULL_SLEEP_S = 0.002       # a full ring is looked at again after this (a block at 10 kHz holds 20 ms)
+_FULL_SLEEP_S = 0.05        # a full ring is looked at again after this: its producer wakes rarely (module docstring)
 _WAIT_S = 0.001             # a waiting sender looks at the count at least this often
 _ALIGN = 8
 # The count is published by a plain store after the block's: only a CPU that keeps stores in order (x86's TSO) makes

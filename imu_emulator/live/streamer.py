@@ -249,6 +249,7 @@ class Streamer:
                 # next deadline: its handover is then never in a deadline's way (issue 25; at the block's end it
                 # still is when the producer was late).
                 take_from = len(current) // 2 if pacer else len(current)
+                taken_at = -2       # the sample after which the next block was taken
                 for i in range(len(current)):
                     j = j0 + i
                     if pacer:
@@ -273,7 +274,7 @@ class Streamer:
                         if late > period:
                             classify(miss_cause(i == 0 and waited and block_at > deadline, inputs.served_ns > deadline,
                                                 seen != switches, missed_before, pacer.arrived_ns > deadline,
-                                                i == 0 and block_at > deadline))
+                                                (i == 0 or i == taken_at + 1) and block_at > deadline))
                             missed_before = True
                         else:
                             missed_before = False
@@ -294,6 +295,7 @@ class Streamer:
                             and blocks.poll(0)):
                         block = blocks.recv()
                         block_at = time.monotonic_ns()
+                        taken_at = i
                     done += 1
                     if done == 1:
                         self._first_ns = time.monotonic_ns()
@@ -359,8 +361,8 @@ def miss_cause(block_late: bool, serving: bool, preempted: bool, missed_before: 
     """Why a deadline was missed: the first of realtime.MISS_CAUSES that applies. block_late: the producer's block
     came after the deadline; serving: input was served past it; preempted: involuntary context switches since the
     previous deadline; missed_before: the previous deadline was missed too; arrived_late: the loop came to wait
-    for this deadline after it had passed; handover_late: this deadline, a block's first, passed while the block
-    was taken from the pipe."""
+    for this deadline after it had passed; handover_late: this deadline, a block's first or the one after the next
+    block was taken early, passed while that block was being taken."""
     if block_late:
         return "producer"
     if serving:
