@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from firmware_protocols.base import _FIELD_WIDTHS, Samples
 from imu_emulator.live import producer as producer_module
 from imu_emulator.live import ring as ring_module
 from imu_emulator.live.producer import ProducerFailure, _Block
@@ -25,8 +26,8 @@ pytestmark = pytest.mark.skipif(not ring_module.SHARED_RING, reason="the ring is
 
 
 def _blocks(rng, count: int) -> list:
-    """Blocks of 1-3 streams of random packets; some must go down the pipe: a list item (as CAN frames), changed
-    effect counters, more bytes than a quarter of the 4 KiB ring."""
+    """Blocks of 1-3 streams of random packets, some with a device's random samples; some must go down the pipe:
+    a list item (as CAN frames), changed effect counters, more bytes than a quarter of the 4 KiB ring."""
     blocks, j0 = [], 0
     counts = {}
     for b in range(count):
@@ -36,6 +37,12 @@ def _blocks(rng, count: int) -> list:
             lengths = rng.integers(1, 60 if b % 7 else 200, n)     # every 7th block: too large for the ring
             data = rng.integers(0, 256, int(lengths.sum()), dtype=np.uint8).tobytes()
             items.append(Packets(data, [0, *np.cumsum(lengths).tolist()]))
+        if b % 3 == 1:          # a device's raw samples: a few fields present, a start
+            fields = {name: rng.normal(size=(n, width) if width else n) for name, width in _FIELD_WIDTHS.items()
+                      if rng.random() < 0.3}
+            items.append(Samples(np.arange(n, dtype=np.int64) + b * 10**9, rng.normal(size=(n, 3)),
+                                 rng.normal(size=(n, 3)), **{k: v for k, v in fields.items()
+                                                             if k not in ("accel", "gyro")}, start_ns=b))
         if b % 11 == 5:
             items.append([bytes([b, k]) for k in range(n)])
         if b % 13 == 12:
@@ -46,7 +53,14 @@ def _blocks(rng, count: int) -> list:
 
 
 def _payloads(block) -> list:
-    return [[bytes(item[i]) for i in range(len(block))] for item in block.items]
+    out = []
+    for item in block.items:
+        if isinstance(item, Samples):
+            out.append({name: None if value is None else np.asarray(value).tolist()
+                        for name, value in vars(item).items()})
+        else:
+            out.append([bytes(item[i]) for i in range(len(block))])
+    return out
 
 
 def test_blocks_cross_whole_and_in_order_through_wrap_back_pressure_and_the_pipe():
@@ -102,6 +116,52 @@ def test_a_stream_sends_the_same_bytes_through_the_ring_as_through_the_pipe(tmp_
     assert not bad and len(messages) == 1200
     first = check_highres_against_scene(messages[:1000], scene, accel, gyro)
     assert list(first) == list(range(1000))
+
+
+def _stream_udp(tmp_path: Path, monkeypatch, ring: bool) -> list[bytes]:
+    """A device stream (MAVLink answers its driver over UDP, so the producer hands it raw samples), received here."""
+    import socket
+
+    from imu_emulator.cli import main
+    monkeypatch.setattr(producer_module, "SHARED_RING", ring)
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    sock.settimeout(0.5)
+    got = []
+
+    def receive():
+        while True:
+            try:
+                got.append(sock.recv(4096))
+            except TimeoutError:
+                if not streaming.is_alive():
+                    return
+
+    scene = write_scene(tmp_path, rate=1000, duration=1.0)
+    streaming = threading.Thread(target=main, args=(["stream", str(scene), "--format", "mavlink-highres", "--to",
+                                                       f"udp:127.0.0.1:{sock.getsockname()[1]}", "--loop",
+                                                       "--duration", "1.2", "--quiet"],))
+    receiver = threading.Thread(target=receive)
+    streaming.start()
+    receiver.start()
+    streaming.join(60)
+    receiver.join(60)
+    sock.close()
+    return got
+
+
+def test_a_device_stream_sends_the_same_bytes_through_the_ring_as_through_the_pipe(tmp_path, monkeypatch):
+    through_pipe = _stream_udp(tmp_path, monkeypatch, ring=False)
+    read = []
+    samples = ring_module._samples
+    monkeypatch.setattr(ring_module, "_samples", lambda *args: read.append(1) or samples(*args))
+    through_ring = _stream_udp(tmp_path, monkeypatch, ring=True)
+    assert len(read) >= 50          # the samples came through the ring (60 blocks of 20)
+    assert through_ring == through_pipe
+    scene, _, accel, gyro = reference(tmp_path / "scene.toml")
+    messages, bad = mavlink_parse(b"".join(through_ring))
+    assert not bad and len(messages) == 1200
+    assert list(check_highres_against_scene(messages[:1000], scene, accel, gyro)) == list(range(1000))
 
 
 def _anonymous_shared_maps() -> int:

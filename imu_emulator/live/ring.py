@@ -29,13 +29,22 @@ import platform
 import select
 import time
 
+import numpy as np
+
+from firmware_protocols.base import _FIELD_WIDTHS, Samples
+
 # Bytes of packets the producer may run ahead by, and blocks: a pipe's buffer (64 KiB) bounded it before, a few
 # blocks at 10 kHz; a mapping's pages are only taken when first written.
 RING_BYTES = 1 << 21
 MAX_BLOCKS = 64
 MAX_STREAMS = 8             # more streams than this: blocks go through the pipe
 _HEAD = 8                   # a block's description: j0, n, via pipe, streams, then per stream _PER of int64
-_PER = 4                    # position, samples, bytes, saturation total
+_PER = 6                    # kind, position, samples, saturation total, then packets: bytes; samples: fields, start_ns
+_PACKETS, _SAMPLES = 1, 2
+# A device's raw samples (firmware_protocols.Samples): time_ns, then each field present (float64, n x width), in
+# this order; which are present is a bit mask.
+_SAMPLE_FIELDS = tuple(_FIELD_WIDTHS.items())
+_NO_FIELDS = dict.fromkeys(_FIELD_WIDTHS)
 _SLOT = _HEAD + _PER * MAX_STREAMS      # int64s per table slot
 _HEADER = 64                # done, published, waiting (int64 each), on a cache line of their own
 _TABLE = _SLOT * 8 * MAX_BLOCKS
@@ -128,24 +137,35 @@ class Ring:
         """Publish one block (the producer's _Block, or None at the end, or a ProducerFailure): its serial packets
         into the ring when it can, else the whole of it down `pipe`. Waits for room while the sender is behind."""
         items = getattr(block, "items", None)
-        size = sum(_record_size(item) for item in items) if items else 0
-        ring = (items is not None and 0 < len(items) <= MAX_STREAMS and block.counts == self._counts
-                and all(type(item) is Packets for item in items)
-                and size <= self.capacity // 4)     # with the sender holding two blocks, a third always finds room
+        sizes = [_record_size(item) for item in items] if items else [None]
+        ring = (0 < len(sizes) <= MAX_STREAMS and None not in sizes and block.counts == self._counts
+                and sum(sizes) <= self.capacity // 4)   # with the sender holding two blocks, a third always has room
+        size = sum(sizes) if ring else 0
         seq = self._published
         pos = self._room(size if ring else 0)
         slot = (seq % self.max_blocks) * _SLOT
         table = self.table
         if ring:
             table[slot:slot + 4] = _int64s((block.j0, block.n, 0, len(items)))
-            for s, (item, saturated) in enumerate(zip(items, block.saturated)):
-                start = pos + len(item.offsets) * 8
-                offsets = _int64s([start + offset for offset in item.offsets]).cast("B")
-                self.data[pos:start] = offsets
-                self.data[start:start + len(item.data)] = item.data
+            for s, (item, saturated, item_size) in enumerate(zip(items, block.saturated, sizes)):
                 at = slot + _HEAD + _PER * s
-                table[at:at + _PER] = _int64s((pos, len(item), len(item.data), saturated))
-                pos += _record_size(item)
+                if type(item) is Packets:
+                    start = pos + len(item.offsets) * 8
+                    self.data[pos:start] = _int64s([start + offset for offset in item.offsets]).cast("B")
+                    self.data[start:start + len(item.data)] = item.data
+                    table[at:at + _PER] = _int64s((_PACKETS, pos, len(item), saturated, len(item.data), 0))
+                else:
+                    n, mask, at_byte = len(item), 0, pos + len(item) * 8
+                    self.data[pos:at_byte] = np.ascontiguousarray(item.time_ns).view(np.uint8)
+                    for bit, (name, _) in enumerate(_SAMPLE_FIELDS):
+                        value = getattr(item, name)
+                        if value is not None:
+                            mask |= 1 << bit
+                            self.data[at_byte:at_byte + value.nbytes] = np.ascontiguousarray(value).reshape(-1).view(
+                                np.uint8)
+                            at_byte += value.nbytes
+                    table[at:at + _PER] = _int64s((_SAMPLES, pos, n, saturated, mask, item.start_ns))
+                pos += item_size
             self._publish(seq)
         else:
             table[slot + 2] = 1
@@ -235,13 +255,16 @@ class BlockReceiver:
                 self.counts = block.counts
             return block
         words, data = self.words, ring.data
-        if table[slot + 3] == 1:        # one stream: no loop
+        if table[slot + 3] == 1 and table[slot + _HEAD] == _PACKETS:      # one stream of packets: the usual case
             at = slot + _HEAD
-            return RingBlock(table[slot], table[slot + 1], [RingPackets(words, data, table[at], table[at + 1])],
+            return RingBlock(table[slot], table[slot + 1], [RingPackets(words, data, table[at + 1], table[at + 2])],
                              [table[at + 3]], self.counts)
         items, saturated = [], []
         for at in range(slot + _HEAD, slot + _HEAD + _PER * table[slot + 3], _PER):
-            items.append(RingPackets(words, data, table[at], table[at + 1]))
+            if table[at] == _PACKETS:
+                items.append(RingPackets(words, data, table[at + 1], table[at + 2]))
+            else:
+                items.append(_samples(data, table[at + 1], table[at + 2], table[at + 4], table[at + 5]))
             saturated.append(table[at + 3])
         return RingBlock(table[slot], table[slot + 1], items, saturated, self.counts)
 
@@ -271,9 +294,53 @@ class PipeReceiver:
         self.connection.close()
 
 
-def _record_size(item) -> int:
-    size = len(item.offsets) * 8 + len(item.data) if type(item) is Packets else 0
+def _samples(data: memoryview, pos: int, n: int, mask: int, start_ns: int) -> Samples:
+    """A device's samples read from the ring, copied out (a device may keep them past the block). Built without
+    Samples' checks: the producer's Samples had passed them, and the fields are as it had them."""
+    samples = object.__new__(Samples)
+    fields = samples.__dict__
+    fields.update(_NO_FIELDS)
+    fields["time_ns"] = np.frombuffer(data, np.int64, n, pos).copy()
+    fields["start_ns"] = start_ns
+    at = pos + n * 8
+    for bit, (name, width) in enumerate(_SAMPLE_FIELDS):
+        if mask >> bit & 1:
+            count = n * (width or 1)
+            value = np.frombuffer(data, np.float64, count, at)
+            fields[name] = (value.reshape(n, width) if width else value).copy()
+            at += count * 8
+    return samples
+
+
+def _record_size(item) -> int | None:
+    """Bytes an item takes in the ring (a multiple of _ALIGN); None: it crosses the pipe (a list of CAN frames;
+    samples with attributes of their own)."""
+    if type(item) is Packets:
+        size = len(item.offsets) * 8 + len(item.data)
+    elif type(item) is Samples and _plain(item):
+        size = item.time_ns.nbytes + sum(getattr(item, name).nbytes for name in _FIELD_WIDTHS
+                                         if getattr(item, name) is not None)
+    else:
+        return None
     return -(-size // _ALIGN) * _ALIGN
+
+
+_SAMPLE_KEYS = {"time_ns", "start_ns", *_FIELD_WIDTHS}
+
+
+def _plain(samples: Samples) -> bool:
+    """Samples the ring carries: its fields only, each of the dtype and shape Samples' checks give it (a field set
+    later might not have them; one that is a view, as quat, is copied into the ring in order)."""
+    n = len(samples.time_ns)
+    if samples.__dict__.keys() != _SAMPLE_KEYS or type(samples.start_ns) is not int:
+        return False
+    if samples.time_ns.dtype != np.int64 or samples.time_ns.ndim != 1:
+        return False
+    for name, width in _SAMPLE_FIELDS:
+        value = getattr(samples, name)
+        if value is not None and (value.dtype != np.float64 or value.shape != ((n, width) if width else (n,))):
+            return False
+    return True
 
 
 def _int64s(values) -> memoryview:
