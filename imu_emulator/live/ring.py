@@ -1,12 +1,12 @@
 """The producer's blocks to the sender through shared memory (issue 25). The producer writes a block's serial packets
-into a ring of bytes the two processes share and describes the block in a table there (first sample, length, where
-each stream's packets lie, the encoders' saturation counts), then counts it published. The sender sees a block is
+(or a device's raw samples) into a ring of bytes the two processes share and describes the block in a table there
+(first sample, length, where each stream's items lie, the encoders' saturation counts), then counts it published. The sender sees a block is
 there by reading that count and takes it by reading its description: no system call, no unpickling. Before, the
 block crossed a pipe pickled: at 10 kHz reading and unpickling it cost the sender 120-300 us of CPU every 200
 samples (the code runs once per block, so its caches are cold: a 163-byte unpickle that takes 3 us in a loop took 45
 us there), more than a period, and the block's first deadline was missed.
 
-Blocks that are not all serial packets (CAN frames, a device's raw samples), one too large for the ring, one whose
+Blocks with other items (CAN frames, samples with attributes of their own), one too large for the ring, one whose
 effect counters changed, the end and a failure still cross the pipe pickled, in order: their description says so.
 
 The ring is an anonymous shared mapping made before the producer is forked: it has no name, no file in /dev/shm,
@@ -15,8 +15,9 @@ and only these two processes (and nothing they did not fork) can reach it; it go
 
 Who may write where: the sender holds at most two blocks at a time (the one it sends and the next, taken early while
 there is slack), so when it takes block t, blocks up to t - 2 are done with; it stores that count, and the producer
-reuses their bytes and table slots only then. A producer with no room sleeps in short steps (it never wakes the
-sender: that costs the sender CPU) and gives up when its parent has gone. A sender with no block sets a flag and
+reuses their bytes and table slots only then. A producer with no room sleeps _FULL_SLEEP_S at a time (it never wakes
+the sender: that costs the sender CPU; the ring holds about a second, so it wakes rarely and still stays well
+ahead) and gives up when its parent has gone. A sender with no block sets a flag and
 waits on a doorbell pipe the producer writes a byte to when the flag is set; the flag and the count are plain
 stores, which x86 may see out of order, so the sender's waits also end every _WAIT_S to look again.
 """
@@ -48,7 +49,7 @@ _NO_FIELDS = dict.fromkeys(_FIELD_WIDTHS)
 _SLOT = _HEAD + _PER * MAX_STREAMS      # int64s per table slot
 _HEADER = 64                # done, published, waiting (int64 each), on a cache line of their own
 _TABLE = _SLOT * 8 * MAX_BLOCKS
-_FULL_SLEEP_S = 0.05        # a full ring is looked at again after this: its producer wakes rarely (module docstring)
+_FULL_SLEEP_S = 0.05        # a full ring is looked at again after this (module docstring)
 _WAIT_S = 0.001             # a waiting sender looks at the count at least this often
 _ALIGN = 8
 # The count is published by a plain store after the block's: only a CPU that keeps stores in order (x86's TSO) makes
