@@ -91,9 +91,13 @@ def read_until_exit(proc, fd, on_data=None):
     return first
 
 
+# Extra options of every lateness run (--device off).
+STREAM_OPTIONS: list = []
+
+
 def lateness(directory: Path, rate: float, seconds: float, repo: Path = REPO) -> dict:
     stats = directory / "stats.json"
-    proc, fd, _ = launch(directory, rate, seconds, stats, repo=repo)
+    proc, fd, _ = launch(directory, rate, seconds, stats, extra=tuple(STREAM_OPTIONS), repo=repo)
     read_until_exit(proc, fd)
     return json.loads(stats.read_text())
 
@@ -192,7 +196,11 @@ def main() -> int:
     parser.add_argument("--drift-seconds", type=float, default=600.0, help="duration of the drift run (0 = skip)")
     parser.add_argument("--baseline", type=Path, help="another checkout to compare with, interleaved (e.g. /work/main)")
     parser.add_argument("--pairs", type=int, default=3, help="rounds of (floor, baseline, this tree) with --baseline")
+    parser.add_argument("--device", choices=("on", "off"), default="on",
+                        help="the stream's --device: on (default) answers a driver, and its samples cross from the "
+                             "producer pickled; off sends packets encoded ahead, through shared memory")
     args = parser.parse_args()
+    STREAM_OPTIONS[:] = ["--device", args.device]
     print(f"{_cpu_model()}, {os.cpu_count()} CPUs; load average at start {_load()}", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         directory = Path(tmp)

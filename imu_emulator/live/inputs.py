@@ -10,7 +10,8 @@ if TYPE_CHECKING:
     from imu_emulator.live.stream import Stream
 
 
-# Links without a descriptor (polled) are looked at this often while the sender waits for the producer.
+# Links without a descriptor (polled) and the producer's blocks are looked at this often while the sender waits
+# for the producer.
 _UNWATCHED_POLL_S = 0.001
 
 
@@ -58,17 +59,18 @@ class Inputs:
         not there yet: a driver's command never waits for the simulation (at start-up, or when the producer falls
         behind under load), so it is answered within the period it arrived in (issue 23 item 7: replies later
         than a driver's timeout turn into wrong values in VectorNav's library)."""
-        pipe = blocks.fileno()
-        # Whether the block was not there yet (the miss classification reads it). select() on the descriptor, not
-        # Connection.poll: that builds a selector per call, 14 us here against 0.75 us, once per block.
-        self.block_waited = waited = not select.select((pipe,), (), (), 0)[0]
+        # Whether the block was not there yet (the miss classification reads it): a read of shared memory
+        # (ring.BlockReceiver) or one select() on the pipe, once per block.
+        self.block_waited = waited = not blocks.poll(0)
         if not waited or not (self.fds or self.unwatched):
             return blocks.recv()
-        watched = [pipe] + self.fds
+        bell = blocks.fileno()
+        watched = [bell] + self.fds
         while not blocks.poll(0):
-            ready, _, _ = select.select(watched, (), (), _UNWATCHED_POLL_S if self.unwatched else None)
+            # A timeout even with nothing polled: the ring's doorbell may be missed (see ring.py).
+            ready, _, _ = select.select(watched, (), (), _UNWATCHED_POLL_S)
             for fd in ready:
-                if fd != pipe and not self.ready([fd]):
+                if fd != bell and not self.ready([fd]):
                     # Readable with nothing to read: a hang-up (a pty nobody has open). Not watched until the block.
                     watched.remove(fd)
             self.poll_unwatched()

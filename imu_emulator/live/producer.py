@@ -1,5 +1,5 @@
-"""The producer process: it computes and encodes blocks ahead of the sender into a pipe, bounded by the pipe's
-buffer, so the send loop's per-sample work is only waiting and handing prepared payloads to the transports."""
+"""The producer process: it computes and encodes blocks ahead of the sender into shared memory and a pipe
+(ring.py), bounded by the ring's size, so the send loop's per-sample work is only waiting and handing prepared payloads to the transports."""
 from __future__ import annotations
 
 import gc
@@ -13,9 +13,10 @@ from firmware_protocols.base import EncodeError
 from imu_emulator.errors import ImuEmulatorError
 from imu_emulator.live.config import StreamError
 from imu_emulator.live.realtime import drop_realtime
+from imu_emulator.live.ring import SHARED_RING, BlockReceiver, PipeReceiver, Ring
 
 # Blocks hold about this much time: few pipe messages per second, and the sender's per-block work
-# (one unpickle) stays far below a sample period.
+# (reading the block's description in the ring, ring.py) stays far below a sample period.
 _BLOCK_SECONDS = 0.02
 _MAX_BLOCK = 500
 
@@ -86,13 +87,16 @@ class Producer:
             j += n
 
     def start(self):
-        """Fork a process that computes and encodes ahead into a pipe. A process, not a thread: a
-        thread holding the GIL while descheduled by other load would stall the real-time sender for
-        tens of milliseconds. The pipe's buffer bounds how far ahead it runs."""
+        """Fork a process that computes and encodes ahead into shared memory and a pipe (ring.py). A process, not
+        a thread: a thread holding the GIL while descheduled by other load would stall the real-time sender for
+        tens of milliseconds. The ring's size bounds how far ahead it runs. Returns its pid and the sender's end
+        (ring.BlockReceiver)."""
+        ring = Ring() if SHARED_RING else None
         receiver, sender = multiprocessing.Pipe(duplex=False)
         pid = os.fork()
         if pid == 0:   # child: never returns
             code = 0
+            put = sender.send if ring is None else (lambda item: ring.put(item, sender))
             try:
                 receiver.close()
                 # A collection walking the whole inherited heap would also copy every page on write.
@@ -102,19 +106,19 @@ class Producer:
                 signal.signal(signal.SIGTERM, signal.SIG_DFL)
                 drop_realtime()
                 for item in self.blocks():
-                    sender.send(item)
-                sender.send(None)
+                    put(item)
+                put(None)
             except (BrokenPipeError, ConnectionResetError):
                 pass
             except BaseException as exc:
                 try:
-                    sender.send(ProducerFailure.from_exception(exc))
+                    put(ProducerFailure.from_exception(exc))
                 except Exception:
                     code = 1
             finally:
                 os._exit(code)
         sender.close()
-        return pid, receiver
+        return pid, PipeReceiver(receiver) if ring is None else BlockReceiver(ring, receiver)
 
 
 def reap(pid: int) -> None:

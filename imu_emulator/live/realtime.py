@@ -276,9 +276,9 @@ MISS_CAUSES = {
     "preempted": "preempted: the kernel ran another thread on this CPU since the previous deadline "
                  "(involuntary context switch)",
     "catching_up": "still behind after the previous deadline's miss",
-    "block_handover": "taking the producer's next block from the pipe (it was there: reading and unpickling it) "
-                      "ended after the deadline of its first sample",
-    "previous_work": "the previous sample's work (send, status, a block's unpickling) ended after this deadline",
+    "block_handover": "taking the producer's next block (early, after a send that left slack, or at the current "
+                      "block's end; it was there) ended after the deadline that followed",
+    "previous_work": "the previous sample's work (send, status, taking the next block) ended after this deadline",
     "woke_late": "woke late with nothing above seen: the host took the vCPU, or the timer (the floor's kind)",
 }
 

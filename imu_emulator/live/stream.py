@@ -10,6 +10,7 @@ import firmware_protocols
 from firmware_protocols import attitude
 from imu_emulator.geo.geodesy import device_navigation
 from imu_emulator.live.config import StreamConfig, StreamError
+from imu_emulator.live.ring import Packets
 from imu_emulator.live.transport import TARGET_KINDS, check_carries, link_capacity, open_target, parse_target
 
 
@@ -123,7 +124,7 @@ class Stream:
             return self.samples(block, time_ns), 0
         encoded = self.encoder.encode(self.samples(block, time_ns))
         if self.info.kind == "serial":
-            items = _Packets(bytes(encoded.data), encoded.offsets.tolist())
+            items = Packets(bytes(encoded.data), encoded.offsets.tolist())
         else:
             prepare = self.transport.prepare
             bounds = np.searchsorted(encoded["sample"], np.arange(len(time_ns) + 1)).tolist()
@@ -245,25 +246,3 @@ def build_streams(configs: list[StreamConfig], imu_names, rate_hz: float) -> lis
             raise StreamError(exc.args[0]) from None
         streams.append(Stream(config, list(imu_names).index(config.imu), info, rate_hz))
     return streams
-
-
-class _Packets:
-    """One block's serial packets as one buffer: crossing the pipe as a single bytes object costs the
-    sender a fraction of what a list of small ones would, and slicing happens only when sending."""
-
-    __slots__ = ("data", "offsets")
-
-    def __init__(self, data: bytes, offsets: list):
-        self.data, self.offsets = data, offsets
-
-    def __len__(self) -> int:
-        return len(self.offsets) - 1
-
-    def __getitem__(self, j: int) -> bytes:
-        return self.data[self.offsets[j]:self.offsets[j + 1]]
-
-    def __getstate__(self):
-        return self.data, self.offsets
-
-    def __setstate__(self, state):
-        self.data, self.offsets = state

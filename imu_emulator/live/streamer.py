@@ -44,12 +44,18 @@ _LEAD_NS = 30_000_000
 _STATUS_INTERVAL_NS = 500_000_000
 # With a pacer, links are looked at after a send when the waits have had no room to (high rates).
 _INPUT_STARVED_NS = 1_000_000
+# The next block is taken early only after a send that leaves this long before the next deadline (the ring's
+# handover costs the sender 10-20 us of CPU with its caches cold; ring.py).
+_HANDOVER_SLACK_NS = 50_000
 # Without a pacer (--speed 0) the links are looked at every this many samples.
 _UNPACED_POLL_EVERY = 64
 
 
 class _Stop(Exception):
     pass
+
+
+_NOT_TAKEN = object()
 
 
 class Streamer:
@@ -227,18 +233,28 @@ class Streamer:
         if pacer:
             spin_ns, sleep_until, wait_until = pacer.spin_ns, pacer.sleep_until, pacer.wait_until
         fds, ready, unwatched = inputs.fds, inputs.ready, inputs.unwatched
+        block = _NOT_TAKEN          # the next block (or the end, or a failure) when taken early, in slack
         try:
             while True:
-                block = inputs.next_block(blocks)
-                block_at = time.monotonic_ns()
-                waited = inputs.block_waited         # the producer's block was not there yet
+                if block is _NOT_TAKEN:
+                    block = inputs.next_block(blocks)
+                    block_at = time.monotonic_ns()
+                    waited = inputs.block_waited         # the producer's block was not there yet
+                else:
+                    waited = False
                 if block is None:
                     break
                 if isinstance(block, ProducerFailure):
                     block.raise_()
                 items = block.items
                 j0 = block.j0
-                for i in range(len(block)):
+                current, block = block, _NOT_TAKEN
+                # The next block is taken in the second half of this one, after a send that leaves slack before the
+                # next deadline: its handover is then never in a deadline's way (issue 25; at the block's end it
+                # still is when the producer was late).
+                take_from = len(current) // 2 if pacer else len(current)
+                taken_at = -2       # the sample after which the next block was taken
+                for i in range(len(current)):
                     j = j0 + i
                     if pacer:
                         deadline = start + int(j * period)
@@ -262,7 +278,7 @@ class Streamer:
                         if late > period:
                             classify(miss_cause(i == 0 and waited and block_at > deadline, inputs.served_ns > deadline,
                                                 seen != switches, missed_before, pacer.arrived_ns > deadline,
-                                                i == 0 and block_at > deadline))
+                                                (i == 0 or i == taken_at + 1) and block_at > deadline))
                             missed_before = True
                         else:
                             missed_before = False
@@ -278,6 +294,12 @@ class Streamer:
                         # No slack left to watch the links while waiting (high rates): look right after the send.
                         inputs.poll_all()
                         pacer.watched_ns = deadline
+                    if (block is _NOT_TAKEN and i >= take_from
+                            and start + int((j + 1) * period) - time.monotonic_ns() > _HANDOVER_SLACK_NS
+                            and blocks.poll(0)):
+                        block = blocks.recv()
+                        block_at = time.monotonic_ns()
+                        taken_at = i
                     done += 1
                     if done == 1:
                         self._first_ns = time.monotonic_ns()
@@ -291,9 +313,9 @@ class Streamer:
                             if show_status:
                                 text, end = status_line(self._status_text("streaming"), sys.stderr.isatty())
                                 print(text, end=end, file=sys.stderr, flush=True)
-                for stream, saturated in zip(streams, block.saturated):
+                for stream, saturated in zip(streams, current.saturated):
                     stream.saturated = saturated if stream.device is None else stream.device.saturated
-                self.effect_counts = block.counts
+                self.effect_counts = current.counts
                 self.samples_done = done
                 self._last_ns = time.monotonic_ns()
         finally:
@@ -344,8 +366,8 @@ def miss_cause(block_late: bool, serving: bool, preempted: bool, missed_before: 
     """Why a deadline was missed: the first of realtime.MISS_CAUSES that applies. block_late: the producer's block
     came after the deadline; serving: input was served past it; preempted: involuntary context switches since the
     previous deadline; missed_before: the previous deadline was missed too; arrived_late: the loop came to wait
-    for this deadline after it had passed; handover_late: this deadline, a block's first, passed while the block
-    was taken from the pipe."""
+    for this deadline after it had passed; handover_late: this deadline, a block's first or the one after the next
+    block was taken early, passed while that block was being taken."""
     if block_late:
         return "producer"
     if serving:
