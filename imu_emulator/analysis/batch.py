@@ -181,13 +181,14 @@ def summarize(path: Path) -> dict:
 
 
 # --- on the driver -----------------------------------------------------------------------------------------
+
 #: Dask settings of the local cluster (issue 25: a one-worker batch cost 2.1x the CPU of --workers 0). Idle, a
-#: default one-worker cluster spent about 20 ms CPU per second in the driver and 25 in the worker, these settings
-#: about 6 and 3 (tools/bench_batch_workers.py --idle): the statistical profiler samples every thread every 10 ms
-#: and the system monitor runs twice a second, for a dashboard a batch does not read; the event-loop health tick
-#: (20 ms) only feeds "unresponsive" warnings; the memory monitor (100 ms) guards pause/spill/terminate
-#: thresholds that a realization, which streams its samples to its file in blocks, stays far below. Set only
-#: while the local cluster starts (its workers copy them); a cluster given with --scheduler keeps its own.
+#: one-worker cluster with Dask's defaults spent about 33 ms CPU per second in the driver and 32-39 in the worker,
+#: with these about 6 and 3 (tools/bench_batch_workers.py --idle): the statistical profiler samples every thread
+#: every 10 ms and the system monitor runs twice a second, for a dashboard a batch does not read; the event-loop
+#: health tick (20 ms) only feeds "unresponsive" warnings; the memory monitor (100 ms) guards pause/spill/
+#: terminate thresholds that a realization, which streams its samples to its file in blocks, stays far below. Set
+#: only while the local cluster starts (its workers copy them); a cluster given with --scheduler keeps its own.
 LOCAL_DASK_CONFIG = {
     "distributed.worker.profile.enabled": False,
     "distributed.admin.system-monitor.interval": "5s",
@@ -225,8 +226,11 @@ class LocalBatchCluster:
             if self.warm is not None:
                 self.preload_s = preload(self.warm)
         with dask.config.set(settings):
+            # without the dashboard the scheduler still serves its health routes: on a free local port, not
+            # on 8787 with a warning when another cluster has that
+            quiet = {} if self.dashboard else {"dashboard": False, "dashboard_address": "127.0.0.1:0"}
             self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                        dashboard_address=":8787" if self.dashboard else None,
+                                        dashboard_address=":8787", scheduler_kwargs=quiet,
                                         silence_logs=logging.ERROR)
             try:
                 self.client = Client(self.cluster)
