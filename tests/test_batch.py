@@ -131,6 +131,18 @@ def test_local_workers_fork_with_the_kernel_and_give_the_serial_files(tmp_path, 
         assert _same_file(tmp_path / "one" / name, tmp_path / "serial" / name), name
 
 
+def test_preload_leaves_a_refused_draw_to_its_realization(tmp_path):
+    """The load before the workers fork uses realization 0's own draws; when the scene refuses them (a noise
+    density below zero: the scene's own check) nothing is loaded and the batch goes on, that realization
+    failing alone as it does on any worker."""
+    vary = ["imu0.gyro.noise_density=normal(0,1) deg/s/sqrt(Hz)"]
+    tasks = batch.tasks_for(_scene(tmp_path), 16, ROOT_SEED, tmp_path / "out", vary=vary)
+    refused = next(t for t in tasks if t.drawn()["imu0.gyro.noise_density"] < 0)
+    with pytest.raises(batch.ImuEmulatorError, match="noise density is >= 0"):
+        refused.build()
+    assert batch.preload(refused) is None
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
