@@ -101,6 +101,48 @@ def test_serial_and_two_worker_cluster_give_identical_files(tmp_path, cache):
     assert summary[7]["imu0.gx.std"] == pytest.approx(gx.std(ddof=1), rel=1e-12)
 
 
+@pytest.mark.skipif(not batch.fork_workers(), reason="local workers fork only on Linux")
+def test_local_workers_fork_with_the_kernel_and_give_the_serial_files(tmp_path, cache, capsys):
+    """The CLI's local cluster (LocalBatchCluster): worker processes forked from this one after it loaded the
+    kernel, so none loads it again (counted: kernel_load_s, and a load asked of each worker finds it there), with
+    the profiler off; their files are those of --workers 0, with one worker and with two."""
+    import dask
+    scene = _scene(tmp_path)
+    vary = ["imu0.gyro.noise_density=uniform(0.005,0.02) deg/s/sqrt(Hz)"]
+    serial = batch.run(scene, 8, ROOT_SEED, tmp_path / "serial", vary=vary)
+    assert serial.ok
+    tasks = batch.tasks_for(scene, 8, ROOT_SEED, tmp_path / "two", vary=vary)
+    with batch.LocalBatchCluster(2, warm=tasks[0]) as client:
+        client.wait_for_workers(2)
+        assert set(client.run(os.getppid).values()) == {os.getpid()}
+        assert list(client.run(batch.preload, tasks[5]).values()) == [None, None]     # loaded: nothing to do
+        assert set(client.run(dask.config.get, "distributed.worker.profile.enabled").values()) == {False}
+        two = batch.run(scene, 8, ROOT_SEED, tmp_path / "two", executor=client, vary=vary)
+    assert two.ok and len({row["worker"] for row in two.rows}) == 2
+    assert [row["kernel_load_s"] for row in two.rows] == [None] * 8
+    assert main(["batch", str(scene), "--runs", "8", "--seed", str(ROOT_SEED), "-o", str(tmp_path / "one"),
+                 "--workers", "1", "--vary", vary[0]]) == 0
+    assert "dask dashboard" not in capsys.readouterr().err           # no dashboard unless --dashboard
+    one = pq.read_table(tmp_path / "one" / "summary.parquet").to_pylist()
+    assert [r["status"] for r in one] == ["done"] * 8 and len({r["worker"] for r in one}) == 1
+    for i in range(8):
+        name = batch.run_file(Path("."), i).name
+        assert _same_file(tmp_path / "two" / name, tmp_path / "serial" / name), name
+        assert _same_file(tmp_path / "one" / name, tmp_path / "serial" / name), name
+
+
+def test_preload_leaves_a_refused_draw_to_its_realization(tmp_path):
+    """The load before the workers fork uses realization 0's own draws; when the scene refuses them (a noise
+    density below zero: the scene's own check) nothing is loaded and the batch goes on, that realization
+    failing alone as it does on any worker."""
+    vary = ["imu0.gyro.noise_density=normal(0,1) deg/s/sqrt(Hz)"]
+    tasks = batch.tasks_for(_scene(tmp_path), 16, ROOT_SEED, tmp_path / "out", vary=vary)
+    refused = next(t for t in tasks if t.drawn()["imu0.gyro.noise_density"] < 0)
+    with pytest.raises(batch.ImuEmulatorError, match="noise density is >= 0"):
+        refused.build()
+    assert batch.preload(refused) is None
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

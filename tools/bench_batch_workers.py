@@ -1,17 +1,25 @@
-"""What scale-out costs (issue 25): one batch run with --workers 0 (this process), on one local Dask worker
-process and on two, in a warm kernel cache; CPU time of everything (this process, the scheduler in it, and the
-worker and nanny processes, counted when they are reaped: resource.getrusage(RUSAGE_CHILDREN)), wall time, and
-each worker's first kernel load (the summary's kernel_load_s). The variants alternate (0, 1, 2, 0, 1, 2, ...):
-on a shared machine only ratios inside one run mean something.
+"""What scale-out costs (issue 25): the `batch` command run with --workers 0 (in its own process), 1 and 2 (a
+local Dask cluster), each a fresh process as a user runs it, in a warm kernel cache. CPU is the whole process
+tree's (the command, the scheduler and client in it, its worker processes, reaped before it exits: os.wait4's
+rusage), so imports, cluster start-up, event loops and kernel loads all count. Each worker's first kernel load
+comes from the summary's kernel_load_s, the load done once in the command before its workers fork from its
+final line. With --base DIR (another checkout, e.g. `git worktree add /tmp/base c83e86f`) both trees run,
+interleaved (base 0, 1, 2, this 0, 1, 2, base 0, ...): on a shared machine only ratios inside one run mean
+something. --idle instead prints what an idle one-worker cluster costs per second, Dask's defaults against
+analysis.batch.LOCAL_DASK_CONFIG.
 
-    PYTHONPATH=. python tools/bench_batch_workers.py [--scene examples/drone_imu.toml] [--runs 32] [--rounds 2]
+    PYTHONPATH=. python tools/bench_batch_workers.py [--scene examples/drone_imu.toml] [--runs 96] [--rounds 3]
+        [--duration S] [--base DIR] [--idle]
 """
 from __future__ import annotations
 
 import argparse
+import csv
 import os
+import re
 import resource
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -20,64 +28,122 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+WORKERS = (0, 1, 2)
 
-def _children_cpu() -> float:
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+
+def one(tree: Path, scene: Path, runs: int, workers: int, out: Path, vary: list[str]) -> dict:
+    """One `batch` command in a child process: its tree's CPU and wall seconds, kernel loads."""
+    command = [sys.executable, "-m", "imu_emulator", "batch", str(scene), "--runs", str(runs), "-o", str(out),
+               "--workers", str(workers), "--seed", "1"]
+    for v in vary:
+        command += ["--vary", v]
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    wall = time.perf_counter()
+    proc = subprocess.Popen(command, env=env, cwd=tree, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True)
+    stderr = proc.stderr.read()
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - wall
+    if status != 0:
+        raise SystemExit(f"{tree}: batch --workers {workers} failed ({status}):\n{stderr}")
+    with open(out / "summary.csv", newline="") as file:
+        rows = list(csv.DictReader(file))
+    shared = re.search(r"kernel loaded in ([0-9.]+) s before the workers forked", stderr)
+    return {"cpu": usage.ru_utime + usage.ru_stime, "wall": wall,
+            "loads": [float(r["kernel_load_s"]) for r in rows if r["kernel_load_s"] not in ("", None)],
+            "shared": float(shared.group(1)) if shared else None,
+            "workers": len({r["worker"] for r in rows}), "failed": sum(r["status"] == "failed" for r in rows)}
+
+
+def _spread(values) -> str:
+    return f"{min(values):5.2f}/{statistics.median(values):5.2f}/{max(values):5.2f}"
+
+
+def compare(args, scene: Path, vary: list[str], tmp: Path) -> None:
+    trees = ([("base", Path(args.base).resolve())] if args.base else []) + [("this", ROOT)]
+    for name, tree in trees:      # compile into the shared cache (a tree whose kernel source differs compiles its own)
+        one(tree, scene, 1, 0, tmp / f"warm-{name}", vary)
+    found: dict[tuple[str, int], list[dict]] = {(name, w): [] for name, _ in trees for w in WORKERS}
+    for r in range(args.rounds):
+        for name, tree in trees:
+            for w in WORKERS:
+                found[name, w].append(one(tree, scene, args.runs, w, tmp / f"out-{name}-{r}-{w}", vary))
+    print("tree  workers  CPU s min/med/max     wall s min/med/max   kernel loads per worker (s)  "
+          "load before fork (s)")
+    for (name, w), results in found.items():
+        loads = [f"{s:.2f}" for x in results for s in x["loads"]]
+        shared = [f"{x['shared']:.2f}" for x in results if x["shared"] is not None]
+        print(f"{name:5} {w:7}  {_spread([x['cpu'] for x in results])}  {_spread([x['wall'] for x in results])}  "
+              f"{' '.join(loads) or '-':28} {' '.join(shared) or '-'}"
+              + (f"  FAILED {sum(x['failed'] for x in results)}" if any(x["failed"] for x in results) else ""))
+
+    def med(name, w, what):
+        return statistics.median(x[what] for x in found[name, w])
+    for name, _ in trees:
+        print(f"{name}: CPU 1 worker / --workers 0 = {med(name, 1, 'cpu') / med(name, 0, 'cpu'):.2f} (goal <= 1.15), "
+              f"2 workers / --workers 0 = {med(name, 2, 'cpu') / med(name, 0, 'cpu'):.2f}; "
+              f"wall 2 workers / 1 = {med(name, 2, 'wall') / med(name, 1, 'wall'):.2f}")
+    if args.base:
+        print("CPU this / base: " + ", ".join(f"--workers {w} {med('this', w, 'cpu') / med('base', w, 'cpu'):.2f}"
+                                              for w in WORKERS))
+
+
+def _cpu_self() -> float:
+    usage = resource.getrusage(resource.RUSAGE_SELF)
     return usage.ru_utime + usage.ru_stime
 
 
-def one(scene: str, runs: int, workers: int, out: Path, vary: list[str]) -> dict:
+def idle(seconds: float, rounds: int) -> None:
+    """CPU per second of an idle one-worker cluster, Dask's defaults (spawned worker) against ours."""
     from imu_emulator.analysis import batch
-    batch.KERNEL_LOADS.clear()
-    cpu, children, wall = time.process_time(), _children_cpu(), time.perf_counter()
-    if workers == 0:     # as a fresh worker would: the kernel loaded from the cache, not kept from a round before
-        from imu_emulator.runtime import kernels
-        kernels._loaded.clear()
-        result = batch.run(scene, runs, 1, out, executor=None, vary=vary)
-    else:
-        from distributed import Client, LocalCluster
-        with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
-                Client(cluster) as client:
-            client.wait_for_workers(workers)
-            result = batch.run(scene, runs, 1, out, executor=client, vary=vary)
-    wall = time.perf_counter() - wall
-    cpu = (time.process_time() - cpu) + (_children_cpu() - children)
-    loads = [r["kernel_load_s"] for r in result.rows if r["kernel_load_s"] is not None]
-    return {"wall": wall, "cpu": cpu, "loads": loads, "failed": len(result.failures),
-            "workers": len({r["worker"] for r in result.rows})}
+    ours = dict(batch.LOCAL_DASK_CONFIG)
+    for _ in range(rounds):
+        for label, settings in (("Dask defaults", {}), ("LOCAL_DASK_CONFIG", ours)):
+            batch.LOCAL_DASK_CONFIG.clear()
+            batch.LOCAL_DASK_CONFIG.update(settings)
+            with batch.LocalBatchCluster(1) as client:
+                client.wait_for_workers(1)
+                time.sleep(1.0)      # past start-up
+                driver, worker = _cpu_self(), client.run(time.process_time)
+                time.sleep(seconds)
+                driver, worker = _cpu_self() - driver, [b - a for a, b in zip(worker.values(),
+                                                                               client.run(time.process_time).values())]
+            print(f"idle {label:17}: driver {driver / seconds * 1e3:5.1f} ms CPU/s, worker "
+                  f"{worker[0] / seconds * 1e3:5.1f} ms CPU/s")
+    batch.LOCAL_DASK_CONFIG.clear()
+    batch.LOCAL_DASK_CONFIG.update(ours)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--scene", default=str(ROOT / "examples" / "drone_imu.toml"))
-    parser.add_argument("--runs", type=int, default=32)
-    parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument("--runs", type=int, default=96)
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--duration", type=float, default=None, help="each realization's seconds (default: the "
+                        "scene's)")
+    parser.add_argument("--base", default=None, help="another checkout to compare with, interleaved")
+    parser.add_argument("--idle", action="store_true", help="only the idle cluster's CPU per second")
     args = parser.parse_args()
-    from tools.bench_parametric import machine
     from imu_emulator import load_scene
+    from tools.bench_parametric import machine
+    print(machine())
+    if args.idle:
+        idle(5.0, args.rounds)
+        print(machine())
+        return
     imu = load_scene(args.scene).imu_names[0]
     vary = [f"{imu}.gyro.noise_density=uniform(0.001,0.01)", f"{imu}.accel.bias=normal(0,0.05)"]
-    print(machine())
-    print(f"scene {args.scene}, {args.runs} realizations, --vary {' --vary '.join(vary)}")
     with tempfile.TemporaryDirectory() as tmp:
-        os.environ["IMU_EMULATOR_CACHE"] = str(Path(tmp) / "cache")
-        warm = one(args.scene, 1, 0, Path(tmp) / "warm", vary)     # compiles into the cache
-        print(f"warm-up (compile): {warm['wall']:.1f} s wall")
-        found: dict[int, list[dict]] = {0: [], 1: [], 2: []}
-        for r in range(args.rounds):
-            for workers in found:
-                found[workers].append(one(args.scene, args.runs, workers, Path(tmp) / f"out-{r}-{workers}", vary))
-        for workers, results in found.items():
-            cpu = statistics.median(x["cpu"] for x in results)
-            wall = statistics.median(x["wall"] for x in results)
-            loads = [s for x in results for s in x["loads"]]
-            print(f"--workers {workers}: {wall:6.1f} s wall, {cpu:6.1f} s CPU (medians of {len(results)}); "
-                  f"kernel loads per run {[len(x['loads']) for x in results]}, load s "
-                  f"{', '.join(f'{s:.2f}' for s in loads) or '-'}; failed {sum(x['failed'] for x in results)}")
-        base_cpu = statistics.median(x["cpu"] for x in found[0])
-        print(f"CPU: 1 Dask worker / --workers 0 = {statistics.median(x['cpu'] for x in found[1]) / base_cpu:.2f}; "
-              f"wall: 2 workers / 1 worker = "
-              f"{statistics.median(x['wall'] for x in found[2]) / statistics.median(x['wall'] for x in found[1]):.2f}")
+        tmp = Path(tmp)
+        scene = Path(args.scene).resolve()
+        if args.duration is not None:     # a copy (a scene with relative data paths: use it as it is)
+            text = re.sub(r"(?m)^duration_s\s*=.*$", f"duration_s = {args.duration!r}", scene.read_text())
+            scene = tmp / scene.name
+            scene.write_text(text)
+        os.environ["IMU_EMULATOR_CACHE"] = str(tmp / "cache")
+        print(f"scene {args.scene}{'' if args.duration is None else f' ({args.duration:g} s)'}, {args.runs} "
+              f"realizations, --vary {' --vary '.join(vary)}; CPU of the whole process tree")
+        compare(args, scene, vary, tmp)
     print(machine())
 
 

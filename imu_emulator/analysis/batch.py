@@ -109,20 +109,38 @@ def realize(task: Task) -> dict:
     return row
 
 
-def _write(task: Task, path: Path, identity: dict) -> float | None:
-    from imu_emulator.output.formats import open_writer
-    from imu_emulator.output.formats.parquet import run_metadata
+def _simulation(scene, truth: bool):
+    """The Simulation of `scene`, and the seconds its kernel's first load in this process took (None when this
+    process had the kernel: one load per structure and process, counted in KERNEL_LOADS)."""
     from imu_emulator.runtime.cache import scene_key
     from imu_emulator.runtime.kernels import is_loaded
     from imu_emulator.runtime.simulation import Simulation
-    scene = task.build()
-    key = scene_key(scene, attitude=False, truth=task.truth)
-    loaded_before = is_loaded(scene, attitude=False, truth=task.truth)
+    key = scene_key(scene, attitude=False, truth=truth)
+    loaded_before = is_loaded(scene, attitude=False, truth=truth)
     start = time.perf_counter()
-    sim = Simulation(scene, attitude=False, truth=task.truth)
+    sim = Simulation(scene, attitude=False, truth=truth)
     load_s = None
     if not loaded_before:
         load_s = KERNEL_LOADS[key] = time.perf_counter() - start
+    return sim, load_s
+
+
+def preload(task: Task) -> float | None:
+    """Load the kernel of `task`'s structure (with its own draws: a distribution's middle value may be the zero
+    that turns an effect off, another structure) in this process: the driver, before a local cluster forks its
+    workers, which then inherit it instead of each loading it. The seconds the load took, None if it was here. A
+    scene that fails here fails in its realization."""
+    try:
+        return _simulation(task.build(), task.truth)[1]
+    except ImuEmulatorError:
+        return None
+
+
+def _write(task: Task, path: Path, identity: dict) -> float | None:
+    from imu_emulator.output.formats import open_writer
+    from imu_emulator.output.formats.parquet import run_metadata
+    scene = task.build()
+    sim, load_s = _simulation(scene, task.truth)
     from imu_emulator.motion import earth_truth
     from imu_emulator.scene.earth import model_on
     conventions = earth_truth.conventions(scene) if task.truth and model_on(scene) else None   # Earth columns
@@ -163,6 +181,69 @@ def summarize(path: Path) -> dict:
 
 
 # --- on the driver -----------------------------------------------------------------------------------------
+
+#: Dask settings of the local cluster (issue 25: a one-worker batch cost 2.1x the CPU of --workers 0). Idle, a
+#: one-worker cluster with Dask's defaults spent about 33 ms CPU per second in the driver and 32-39 in the worker,
+#: with these about 6 and 3 (tools/bench_batch_workers.py --idle): the statistical profiler samples every thread
+#: every 10 ms and the system monitor runs twice a second, for a dashboard a batch does not read; the event-loop
+#: health tick (20 ms) only feeds "unresponsive" warnings; the memory monitor (100 ms) guards pause/spill/
+#: terminate thresholds that a realization, which streams its samples to its file in blocks, stays far below. Set
+#: only while the local cluster starts (its workers copy them); a cluster given with --scheduler keeps its own.
+LOCAL_DASK_CONFIG = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.system-monitor.interval": "5s",
+    "distributed.admin.tick.interval": "1s",
+    "distributed.worker.memory.monitor-interval": "1s",
+}
+
+
+def fork_workers() -> bool:
+    """Whether local workers are forked from the driver (Linux): they inherit its imports (numba, the runtime,
+    pyarrow, distributed) and its loaded kernel instead of importing and loading them again, which is most of
+    what a spawned worker costs. Elsewhere fork is unsafe (macOS) or absent (Windows): Dask's default, spawn."""
+    return sys.platform.startswith("linux")
+
+
+class LocalBatchCluster:
+    """A Dask LocalCluster for a batch, as a context manager giving its Client: `workers` single-threaded worker
+    processes (the kernel is single-threaded; numba's compile is not something to run twice in one process at
+    once), no dashboard unless asked (it imports bokeh and serves a page nobody may open), LOCAL_DASK_CONFIG,
+    and on Linux workers forked after `warm` (a Task) has its kernel loaded here, so they share one load.
+    `preload_s`: the seconds that load took (None: none was needed or the kernel was here)."""
+
+    def __init__(self, workers: int, dashboard: bool = False, warm: Task | None = None):
+        self.workers, self.dashboard, self.warm = workers, dashboard, warm
+        self.cluster = self.client = self.preload_s = None
+
+    def __enter__(self):
+        import logging
+
+        import dask
+        from distributed import Client, LocalCluster
+        settings = dict(LOCAL_DASK_CONFIG)
+        if fork_workers():
+            settings["distributed.worker.multiprocessing-method"] = "fork"
+            if self.warm is not None:
+                self.preload_s = preload(self.warm)
+        with dask.config.set(settings):
+            # without the dashboard the scheduler still serves its health routes: on a free local port, not
+            # on 8787 with a warning when another cluster has that
+            quiet = {} if self.dashboard else {"dashboard": False, "dashboard_address": "127.0.0.1:0"}
+            self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                                        dashboard_address=":8787", scheduler_kwargs=quiet,
+                                        silence_logs=logging.ERROR)
+            try:
+                self.client = Client(self.cluster)
+            except BaseException:
+                self.cluster.close()
+                raise
+        return self.client
+
+    def __exit__(self, *exc):
+        self.client.close()
+        self.cluster.close()
+
+
 
 @dataclass
 class BatchResult:

@@ -32,6 +32,8 @@ def register(subparsers) -> None:
                        help="an existing Dask scheduler (default: $DASK_SCHEDULER_ADDRESS, else a local cluster)")
     where.add_argument("--workers", type=number(0, 4096, integer=True), default=None,
                        help="local cluster's worker processes (default: the machine's cores); 0 runs in this process")
+    p.add_argument("--dashboard", action="store_true", help="serve the local cluster's Dask dashboard (bokeh) and "
+                   "print its link")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     p.set_defaults(func=cmd_batch)
 
@@ -44,7 +46,8 @@ def cmd_batch(args) -> int:
     scene = load_scene_with_warnings(args.scene)
     seed = scene.seed if args.seed is None else args.seed
     # the tasks are made (and a --vary checked) before any cluster starts
-    batch.tasks_for(args.scene, args.runs, seed, args.output, vary=args.vary, truth=args.truth, indices=args.only)
+    tasks = batch.tasks_for(args.scene, args.runs, seed, args.output, vary=args.vary, truth=args.truth,
+                            indices=args.only)
     show = not args.quiet and sys.stderr.isatty()
     start = time.monotonic()
 
@@ -54,15 +57,18 @@ def cmd_batch(args) -> int:
                              + (f", {failed} failed" if failed else "") + "\x1b[K")
             sys.stderr.flush()
 
-    with _executor(args) as executor:
+    context = _executor(args, tasks[0] if tasks else None)
+    with context as executor:
         result = batch.run(args.scene, args.runs, seed, args.output, executor=executor, vary=args.vary,
                            truth=args.truth, indices=args.only, progress=progress)
     if show:
         sys.stderr.write("\n")
     found = sum(row["skipped"] for row in result.rows)
     if not args.quiet:
+        preload = context.local.preload_s if context.local is not None else None
+        shared = "" if preload is None else f"; kernel loaded in {preload:.2f} s before the workers forked"
         print(f"{len(result.rows) - found} realization(s) computed, {found} found complete, "
-              f"{len(result.failures)} failed; summary: {result.summary}", file=sys.stderr)
+              f"{len(result.failures)} failed; summary: {result.summary}{shared}", file=sys.stderr)
     batch.report(result)
     return 0 if result.ok else 1
 
@@ -70,9 +76,10 @@ def cmd_batch(args) -> int:
 class _executor:
     """The Dask client for the batch (and its local cluster), or None for --workers 0; closed on exit."""
 
-    def __init__(self, args):
+    def __init__(self, args, warm):
         self.args = args
-        self.client = self.cluster = None
+        self.warm = warm           # a task whose kernel local workers inherit (analysis.batch.LocalBatchCluster)
+        self.client = self.local = None
 
     def __enter__(self):
         address = self.args.scheduler or (None if self.args.workers is not None
@@ -80,7 +87,7 @@ class _executor:
         if self.args.workers == 0:
             return None
         try:
-            from distributed import Client, LocalCluster
+            from distributed import Client
         except ImportError:
             from imu_emulator.errors import ImuEmulatorError
             raise ImuEmulatorError("batch: Dask is not installed (pip install 'imu-emulator[batch]'), or run "
@@ -88,18 +95,16 @@ class _executor:
         if address:
             self.client = Client(address)
         else:
-            # one thread per worker process: the kernel is single-threaded, and numba's compile is not
-            # something to run twice in one process at once
-            import logging
-            self.cluster = LocalCluster(n_workers=self.args.workers or os.cpu_count() or 1, threads_per_worker=1,
-                                        processes=True, silence_logs=logging.ERROR)
-            self.client = Client(self.cluster)
-        if not self.args.quiet:
+            from imu_emulator.analysis.batch import LocalBatchCluster
+            self.local = LocalBatchCluster(self.args.workers or os.cpu_count() or 1, dashboard=self.args.dashboard,
+                                           warm=self.warm)
+            self.client = self.local.__enter__()
+        if not self.args.quiet and (address or self.args.dashboard):
             print(f"dask dashboard: {self.client.dashboard_link}", file=sys.stderr, flush=True)
         return self.client
 
     def __exit__(self, *exc):
-        if self.client is not None:
+        if self.local is not None:
+            self.local.__exit__(*exc)
+        elif self.client is not None:
             self.client.close()
-        if self.cluster is not None:
-            self.cluster.close()
