@@ -34,9 +34,9 @@ MAV_RESULT ACCEPTED 0 / DENIED 2 / UNSUPPORTED 3).
 - `also`: more messages of the sensor head on the same link (comma-separated format names, e.g.
   "mavlink-hil-gps,mavlink-scaled-pressure,mavlink-attitude"; wire_formats.mavlink_nav), sharing the sequence
   numbers and the signing link. Each goes out at the samples its encoder sends it (GNSS fixes on new solutions,
-  SCALED_PRESSURE at `baro_rate_hz`, attitude every sample), thinned by its own divider that
+  SCALED_PRESSURE on new barometer readings (Samples.baro_new), attitude every sample), thinned by its own divider that
   SET_MESSAGE_INTERVAL sets and GET_MESSAGE_INTERVAL reports like the IMU message's; REQUEST_MESSAGE sends one
-  with the next sample (a GNSS message then repeats the solution held). Also any nav format streamed alone.
+  with the next sample (a GNSS or pressure message then repeats the solution or reading held). Also any nav format streamed alone.
 Incoming frames may be MAVLink 1 or 2; replies are MAVLink 2.
 """
 from __future__ import annotations
@@ -172,8 +172,6 @@ class MavlinkDevice(Device):
         self.extra = {}
         for name in names:
             options = dict(shared, sysid=self.sysid, compid=self.compid, signing_link=self.link)
-            if NAV_MESSAGES[name].source == "baro" and encoder_options.get("baro_rate_hz") is not None:
-                options["baro_rate_hz"] = encoder_options["baro_rate_hz"]
             encoder = MavlinkNavEncoder(name, **options)
             self.extra[encoder.spec.msgid] = (encoder, Divider(1))
         self._stream_ts: dict = {}       # (link id, sysid, compid) -> last signing timestamp accepted
@@ -223,8 +221,10 @@ class MavlinkDevice(Device):
     @staticmethod
     def _encode(encoder, samples: Samples, i: int, requested: bool) -> bytes:
         one = single(samples, i)
-        if requested and one.gnss_new is not None:
-            one.gnss_new = np.ones(1)          # asked for: the solution held goes out even between fixes
+        if requested:      # asked for: the solution or reading held goes out even between new ones
+            for flag in ("gnss_new", "baro_new", "mag_new"):
+                if getattr(one, flag) is not None:
+                    setattr(one, flag, np.ones(1))
         return encoder.encode(one).data
 
     # - input -
@@ -340,7 +340,7 @@ _DEVICE_OPTIONS = {
                            "controller); 0 (generic) makes MAVSDK's first_autopilot() return this system",
 }
 _DEVICE_OPTIONS["also"] = ("more messages on the link, comma-separated: " + ", ".join(NAV_MESSAGES)
-                           + " (GNSS on new fixes, SCALED_PRESSURE at baro_rate_hz)")
+                           + " (GNSS on new fixes, SCALED_PRESSURE on new barometer readings)")
 # A MAVLink device carries GNSS messages only when also= names them: their encoders say `uses_navigation`, and the
 # streamer computes the navigation their fix falls back on (live.config.reports_navigation) for those streams alone.
 for _name in (*MESSAGES, *NAV_MESSAGES):

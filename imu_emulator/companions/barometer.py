@@ -119,7 +119,8 @@ class _Barometer(Runner):
             values[at] = np.column_stack([p, temperature, q])
         out = hold(new, values, self.last)
         self.last_j, self.last = int(j[-1]), out[-1].copy()
-        return {"pressure_pa": out[:, 0], "baro_temperature_c": out[:, 1], "differential_pressure_pa": out[:, 2]}
+        return {"pressure_pa": out[:, 0], "baro_temperature_c": out[:, 1], "differential_pressure_pa": out[:, 2],
+                "baro_new": new.astype(float)}      # 1 where a reading arrives (Samples.baro_new)
 
 
 def validate(values: dict, where: str) -> None:
@@ -138,7 +139,7 @@ COMPANION = Companion(
     name="barometer",
     description="static pressure of the ICAO standard atmosphere at the true height, with its errors; pitot "
                 "differential pressure",
-    fields={"pressure_pa": 0, "baro_temperature_c": 0, "differential_pressure_pa": 0},
+    fields={"pressure_pa": 0, "baro_temperature_c": 0, "differential_pressure_pa": 0, "baro_new": 0},
     start=_Barometer, validate=validate,
     params=(_param("rate_hz", "Hz", "output data rate; held between updates", 50.0, "`50 Hz`"),
             _param("noise", "Pa", "white noise, 1 sigma per update (the datasheet's RMS noise)", 0.0,

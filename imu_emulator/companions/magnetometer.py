@@ -98,7 +98,7 @@ class _Magnetometer(Runner):
             values[at] = measured
         out = hold(new, values, self.last)
         self.last_j, self.last = int(j[-1]), out[-1].copy()
-        return {"mag": out}
+        return {"mag": out, "mag_new": new.astype(float)}     # 1 where a reading arrives (Samples.mag_new)
 
 
 def validate(values: dict, where: str) -> None:
@@ -119,7 +119,7 @@ def _param(key, unit, description, shape="vector3", default=0.0, datasheet=""):
 COMPANION = Companion(
     name="magnetometer",
     description="the Earth's field (WMM2025) in the sensor's axes, with hard and soft iron, noise, resolution, range",
-    fields={"mag": 3},
+    fields={"mag": 3, "mag_new": 0},
     start=_Magnetometer, validate=validate,
     params=(_param("rate_hz", "Hz", "output data rate; held between updates", "scalar", 100.0, "`100 Hz`"),
             _param("date_year", "1", "decimal year the field model is evaluated at (WMM2025: 2025-2030)", "scalar",
