@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink2
 
-from firmware_protocols.base import Samples
+from firmware_protocols.base import EncodeError, Samples
 from firmware_protocols.wire_formats.mavlink import MavlinkEncoder
 
 # PX4's SensorSource, as transcribed above
@@ -92,6 +92,18 @@ def test_mag_and_baro_flagged_only_where_the_samples_say_new():
     for m in messages:
         assert m.fields_updated & MAG in (0, MAG)
         assert m.fields_updated & BARO in (0, BARO)
+
+
+def test_a_non_finite_flag_is_named_in_a_block_and_alone():
+    from firmware_protocols.devices.base import single
+    block = sensor_head_block(n=4)
+    block.mag_new, block.baro_new = np.ones(4), np.array([1.0, 0.0, np.nan, 1.0])
+    with pytest.raises(EncodeError, match="'baro_new' at sample 2"):
+        MavlinkEncoder("mavlink-hil-sensor").encode(block)
+    with pytest.raises(EncodeError, match="'baro_new' at sample 0"):       # a device's block of one
+        MavlinkEncoder("mavlink-hil-sensor").encode(single(block, 2))
+    (alone,) = decode(MavlinkEncoder("mavlink-hil-sensor").encode(single(block, 1)).data)
+    assert alone.fields_updated & (MAG | BARO) == MAG                     # the one sample's flags, not the block's
 
 
 def test_without_flags_every_sample_carries_the_readings():

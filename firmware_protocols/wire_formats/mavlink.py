@@ -68,6 +68,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import io
+import math
 import re
 import struct
 import time
@@ -484,6 +485,7 @@ class MavlinkEncoder:
                 raise ValueError(f"{name}: must be finite, got {value}")
         refuse_retired(mag_rate_hz=mag_rate_hz, baro_rate_hz=baro_rate_hz)
         self._flags_updates = spec.has_source(S_FIELDS_UPDATED)
+        self._one_bits = np.empty(1, dtype=np.int64)       # the bits of a block of one, reused
         if sign_time not in ("wall", "sample"):
             raise ValueError(f"sign_time: 'wall' or 'sample', got {sign_time!r}")
         if signing_link is None and signing_key is not None:
@@ -519,10 +521,22 @@ class MavlinkEncoder:
         differential pressure, pressure altitude, temperature: PX4's SensorSource BARO and DIFF_PRESS) only
         where that sensor has a new reading (Samples.mag_new, baro_new); no limit (_NO_BITS) when the samples
         carry neither flag or the message has no fields_updated."""
-        if not self._flags_updates or (samples.mag_new is None and samples.baro_new is None):
+        mag_new, baro_new = samples.mag_new, samples.baro_new
+        if not self._flags_updates or (mag_new is None and baro_new is None):
             return _NO_BITS
-        samples.require_finite(("mag_new", "baro_new"))
         n = len(samples)
+        if n == 1:      # a device's one sample: Python scalars, no numpy temporaries (half the per-sample cost)
+            bits = 0xFFFFFFFF
+            for name, flags, mask in (("mag_new", mag_new, _MAG_BITS), ("baro_new", baro_new, _BARO_BITS)):
+                if flags is not None:
+                    value = float(flags[0])
+                    if not math.isfinite(value):
+                        samples.require_finite((name,))        # raises, naming the field and sample
+                    if value == 0:
+                        bits &= ~mask
+            self._one_bits[0] = bits
+            return self._one_bits
+        samples.require_finite(("mag_new", "baro_new"))
         allowed = np.full(n, 0xFFFFFFFF, dtype=np.int64)
         allowed[~new_readings(samples.mag_new, n)] &= ~_MAG_BITS
         allowed[~new_readings(samples.baro_new, n)] &= ~_BARO_BITS

@@ -250,6 +250,8 @@ class MavlinkNavEncoder:
         n = len(samples)
         samples.require_finite(("gnss_new", "baro_new"))
         due = np.flatnonzero(self._due(samples))
+        if not len(due):        # between readings (most samples of a device): nothing to pack or check
+            return SerialBatch(b"", np.zeros(n + 1, dtype=np.int64))
         # only what is sent is checked (a GNSS message between fixes or a pressure between readings is not)
         samples.require_finite(_INPUTS[self.spec.source] + ("gyro",), None if len(due) == n else due)
         picked = samples if len(due) == n else samples.rows(due)
