@@ -79,6 +79,22 @@ def test_rate_commands_reach_the_extra_messages():
     assert parse(reply)[0].result == 2
 
 
+def test_a_thinned_hil_sensor_flags_the_readings_of_the_samples_it_skipped():
+    """SET_MESSAGE_INTERVAL HIL_SENSOR (107) to 30 ms: every 3rd sample of 100 Hz. The 10 Hz barometer's readings
+    (every 10th sample) fall on skipped samples two times in three; each still goes out once, flagged in the first
+    message at or after it, so PX4 sees all 10 a second."""
+    device = make()
+    block = head_block()
+    mav = gcs()
+    (reply,) = device.receive(mav.command_long_encode(1, 1, 511, 0, 107, 30_000, 0, 0, 0, 0, 0).pack(mav))
+    assert parse(reply)[0].result == 0
+    sensors = [m for m in parse(run(device, block, 0, 300)) if m.get_type() == "HIL_SENSOR"]
+    assert len(sensors) == 100                                 # message j is sample 3j
+    baro_bits = 0b1101000000000
+    flagged = [j for j, m in enumerate(sensors) if m.fields_updated & baro_bits == baro_bits]
+    assert flagged == [-(-k // 3) for k in range(0, 300, 10)]      # ceil(k / 3): 30 readings, 30 flags
+
+
 def test_unknown_extra_message_is_a_one_line_error():
     with pytest.raises(ValueError, match="also: 'mavlink-gps' is not one of mavlink-hil-gps"):
         registry.get("mavlink-hil-sensor").device(RATE, also="mavlink-gps")
