@@ -31,7 +31,8 @@ GNSS_NEW = closed_form_new(GNSS_HZ, LATENCY_SAMPLES)
 pytestmark = pytest.mark.slow
 
 STREAMS = (("hil_sensor", "mavlink-hil-sensor", "bin"), ("scaled_pressure", "mavlink-scaled-pressure", "bin"),
-           ("hil_gps", "mavlink-hil-gps", "bin"), ("dronecan", "dronecan-gnss-compass-baro", "log"))
+           ("hil_gps", "mavlink-hil-gps", "bin"), ("dronecan", "dronecan-gnss-compass-baro", "log"),
+           ("mag2", "dronecan-mag2", "log"), ("static_pressure", "dronecan-static-pressure", "log"))
 
 
 @pytest.fixture(scope="module")
@@ -105,3 +106,10 @@ def test_dronecan_node_message_counts_equal_the_rates(run):
     assert {kind: per_second(samples) for kind, samples in by_kind.items()} == {
         eq + "ahrs.MagneticFieldStrength2": [MAG_HZ] * SECONDS, eq + "air_data.StaticPressure": [BARO_HZ] * SECONDS,
         eq + "air_data.StaticTemperature": [BARO_HZ] * SECONDS, eq + "gnss.Fix2": [GNSS_HZ] * SECONDS}
+
+
+@pytest.mark.parametrize("name, column, rate", [("mag2", "mag_new", MAG_HZ), ("static_pressure", "baro_new", BARO_HZ)])
+def test_dronecan_formats_streamed_alone_follow_the_sensor(run, name, column, rate):
+    out, ref = run
+    samples = [round((stamp - START_NS / 1e9) * RATE) for stamp, _ in candump_transfers(out / f"{name}.log")]
+    assert samples == np.flatnonzero(ref[column]).tolist() and per_second(samples) == [rate] * SECONDS

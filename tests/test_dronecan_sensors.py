@@ -203,6 +203,27 @@ def test_fix2_without_a_fix_and_out_of_range_values():
     assert encoder.saturated.counts == {"sats_used": 1, "ned_velocity": 1, "height_ellipsoid_mm": 1}
 
 
+@pytest.mark.parametrize("name, flag", [("dronecan-mag2", "mag_new"), ("dronecan-static-pressure", "baro_new"),
+                                        ("dronecan-static-temperature", "baro_new")])
+def test_standalone_compass_and_baro_messages_only_on_new_readings(name, flag):
+    """Streamed alone, a compass or baro message goes out at its sensor's new readings (a 25 Hz sensor on 100 Hz
+    samples: every 4th), one transfer each with consecutive transfer ids, carrying that sample's value."""
+    block = head()
+    setattr(block, flag, (np.arange(len(block)) % 4 == 0).astype(float))
+    frames = registry.create_encoder(name).encode(block)
+    got = transfers(frames)
+    assert [k for k, _ in got] == list(range(0, 100, 4))
+    assert [t.transfer_id for _, t in got] == [k % 32 for k in range(25)]
+    for k, t in got:
+        msg = t.payload
+        if flag == "mag_new":
+            assert list(msg.magnetic_field_ga) == list(np.asarray(block.mag[k], np.float16).astype(float))
+        elif name.endswith("pressure"):
+            assert msg.static_pressure == float(np.float32(block.pressure_pa[k]))
+        else:
+            assert msg.static_temperature == float(np.float16(block.temperature_c[k] + 273.15))
+
+
 @pytest.mark.parametrize("make, needle", [
     (lambda: StaticPressureEncoder(pressure_variance_pa2=-1.0), "pressure_variance_pa2: a number 0..65504"),
     (lambda: GnssCompassBaroEncoder(baro_rate_hz=5.0), r"baro_rate_hz: retired; .*\[imu.barometer\] rate_hz"),

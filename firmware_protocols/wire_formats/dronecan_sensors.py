@@ -1,6 +1,8 @@
 """DroneCAN air data and GNSS, and the GNSS/compass/baro node they make together.
 
-Messages (DSDL as shipped with pydronecan, dronecan/dsdl_specs/uavcan/equipment/):
+Messages (DSDL as shipped with pydronecan, dronecan/dsdl_specs/uavcan/equipment/; StaticPressure and
+StaticTemperature, like ahrs.MagneticFieldStrength2, go out only where Samples.baro_new / mag_new mark a new
+reading, every sample without the flags):
 
 - 1028 air_data.StaticPressure, signature 0xCDC7C43412BDC89A: float32 static_pressure (Pa) |
   float16 static_pressure_variance (Pa^2, the `pressure_variance_pa2` option, default 0) = 6 bytes, one frame.
@@ -84,7 +86,9 @@ STATIC_TEMPERATURE = _Message("uavcan.equipment.air_data.StaticTemperature", STA
 
 
 class StaticPressureEncoder(_DroneCanEncoder):
-    """Static pressure in Pa from Samples.pressure_pa (101325 Pa when absent)."""
+    """Static pressure in Pa from Samples.pressure_pa (101325 Pa when absent), on the barometer's new readings (Samples.baro_new)."""
+    new_flag = "baro_new"
+    frames_vary = True
 
     message = STATIC_PRESSURE
 
@@ -98,7 +102,9 @@ class StaticPressureEncoder(_DroneCanEncoder):
 
 
 class StaticTemperatureEncoder(_DroneCanEncoder):
-    """Static temperature in K from Samples.temperature_c (25 degC when absent)."""
+    """Static temperature in K from Samples.temperature_c (25 degC when absent), on the barometer's new readings (Samples.baro_new)."""
+    new_flag = "baro_new"
+    frames_vary = True
 
     message = STATIC_TEMPERATURE
 
