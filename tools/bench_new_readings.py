@@ -2,7 +2,8 @@
 
     .venv/bin/python tools/bench_new_readings.py [--rounds 7] [--per-round 1000] [--block 100000]
 
-For mavlink-hil-sensor (fields_updated bits), mavlink-scaled-pressure and dronecan-gnss-compass-baro (messages only
+For mavlink-hil-sensor (fields_updated bits), mavlink-scaled-pressure, dronecan-gnss-compass-baro and
+dronecan-static-pressure (messages only
 on new readings): the same samples encoded without flags (every sample new, the behaviour without a companion)
 and with a 100 Hz magnetometer's and a 50 Hz barometer's flags on a 400 Hz IMU, interleaved round by round in
 one process. One sample at a time as devices encode (firmware_protocols.devices.base.single), and a whole block
@@ -24,7 +25,7 @@ import firmware_protocols as fp  # noqa: E402
 from firmware_protocols.devices.base import single  # noqa: E402
 from tools.bench_encode import make_samples  # noqa: E402
 
-FORMATS = ("mavlink-hil-sensor", "mavlink-scaled-pressure", "dronecan-gnss-compass-baro")
+FORMATS = ("mavlink-hil-sensor", "mavlink-scaled-pressure", "dronecan-gnss-compass-baro", "dronecan-static-pressure")
 
 
 def flagged(block: fp.Samples) -> fp.Samples:

@@ -283,9 +283,10 @@ class GnssCompassBaroEncoder:
         parts = []
         samples.require_finite(("mag_new", "baro_new"))
         mag_due, baro_due = new_readings(samples.mag_new, len(samples)), new_readings(samples.baro_new, len(samples))
-        if samples.mag is not None:
+        # between readings (a device's sample, mostly) a message is left out before building anything for it
+        if samples.mag is not None and mag_due.any():
             parts.append(self._at(self.mag, samples, mag_due))
-        if samples.pressure_pa is not None:
+        if samples.pressure_pa is not None and baro_due.any():
             parts.append(self._at(self.pressure, samples, baro_due))
             if samples.temperature_c is not None:     # ArduPilot takes temperature only from a registered baro
                 parts.append(self._at(self.temperature, samples, baro_due))
