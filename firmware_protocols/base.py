@@ -58,6 +58,9 @@ class Samples:
     gnss_horizontal_accuracy_m, gnss_vertical_accuracy_m, gnss_speed_accuracy_mps: (n,) 1-sigma   (optional)
     gnss_new:       (n,) 1 where a new solution became available at this sample, else 0   (optional)
     gnss_age_s:     (n,) time since the solution's time of validity (latency + hold), s   (optional)
+    mag_new, baro_new: (n,) 1 where the magnetometer's / barometer's reading is new at this sample (its own rate;
+                    mag, pressure_pa, differential_pressure_pa and the barometer's temperature hold between them),
+                    else 0; None: every sample is new (firmware_protocols.update_rate)   (optional)
     Vectors (accel, gyro, mag, delta_theta, delta_velocity) are in the part's own body axes forward-right-down
     (FRD) as it sits upright facing forward; quat/euler rotate FRD -> NED. A format whose manual declares
     other axes converts at its edge.
@@ -96,6 +99,8 @@ class Samples:
     gnss_speed_accuracy_mps: np.ndarray | None = None
     gnss_new: np.ndarray | None = None
     gnss_age_s: np.ndarray | None = None
+    mag_new: np.ndarray | None = None
+    baro_new: np.ndarray | None = None
     start_ns: int = 0
 
     def __post_init__(self):
@@ -166,7 +171,7 @@ _FIELD_WIDTHS = {
     "differential_pressure_pa": 0,
     "gnss_llh": 3, "gnss_velocity_ned": 3, "gnss_fix": 0, "gnss_satellites": 0, "gnss_hdop": 0, "gnss_vdop": 0,
     "gnss_horizontal_accuracy_m": 0, "gnss_vertical_accuracy_m": 0, "gnss_speed_accuracy_mps": 0, "gnss_new": 0,
-    "gnss_age_s": 0,
+    "gnss_age_s": 0, "mag_new": 0, "baro_new": 0,
 }
 
 

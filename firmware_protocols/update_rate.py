@@ -1,37 +1,40 @@
 """When a slower sensor (magnetometer, barometer) has a new reading among the IMU's samples.
 
-Samples carry every sensor at the IMU's rate (the slower ones held between their own readings). A format that
-marks new readings (MAVLink HIL_SENSOR's fields_updated bits) or sends a message only when one exists (a
-DroneCAN node's StaticPressure) asks an `UpdateTicks` per sensor: a reading is new at the first sample of each
-period of 1/rate on the sample clock, i.e. where floor(time_ns / period_ns) changes. The count continues across
-blocks, so a stream cut into blocks flags the same samples as one block would.
+Samples carry every sensor at the IMU's rate, the slower ones held between their own readings, and say where
+a reading is new: `Samples.mag_new` and `Samples.baro_new` (1 at the sample where the sensor's reading arrives,
+as `gnss_new` for the GNSS receiver), which `stream` takes from the scene's companions ([imu.magnetometer]
+rate_hz, [imu.barometer] rate_hz). A format that marks new readings (MAVLink HIL_SENSOR's fields_updated bits)
+or sends a message only when one exists (SCALED_PRESSURE, a DroneCAN node's StaticPressure) reads them through
+`new_readings`; without the flags every sample is new (a sensor running at the sample rate).
+
+The encoder options `mag_rate_hz` and `baro_rate_hz` that once set these rates are retired: a second rate at the
+encoder could only disagree with the readings the samples hold (a flag where the value did not change, or a new
+value without its flag). Given, they are refused in one line naming the scene key instead.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
+#: retired encoder option -> where the rate comes from now
+RETIRED_RATES = {"mag_rate_hz": ("[imu.magnetometer] rate_hz", "mag_new"),
+                 "baro_rate_hz": ("[imu.barometer] rate_hz", "baro_new")}
 
-class UpdateTicks:
-    """rate_hz None: every sample is new (the sensor runs at the sample rate)."""
 
-    def __init__(self, rate_hz: float | None, name: str = "rate_hz"):
-        if rate_hz is not None and not (isinstance(rate_hz, (int, float)) and math.isfinite(rate_hz) and rate_hz > 0):
-            raise ValueError(f"{name}: a positive number of Hz, got {rate_hz!r}")
-        self.rate_hz = rate_hz
-        self.period_ns = None if rate_hz is None else max(1, round(1e9 / rate_hz))
-        self._last: int | None = None      # the period index of the previous sample
+def refuse_retired(**given) -> None:
+    """ValueError naming the first retired rate option given a value (None: not given)."""
+    for name, value in given.items():
+        if value is not None:
+            key, flag = RETIRED_RATES[name]
+            raise ValueError(f"{name}: retired; the sensor's rate is the scene's {key} (readings are new where "
+                             f"Samples.{flag} is 1)")
 
-    def due(self, time_ns: np.ndarray) -> np.ndarray:
-        """(n,) bool: sample i begins a new period (the first sample of a stream always does)."""
-        n = len(time_ns)
-        if self.period_ns is None:
-            return np.ones(n, dtype=bool)
-        ticks = np.floor_divide(np.asarray(time_ns, dtype=np.int64), self.period_ns)
-        previous = np.empty(n, dtype=np.int64)
-        if n:
-            previous[0] = ticks[0] - 1 if self._last is None else self._last
-            previous[1:] = ticks[:-1]
-            self._last = int(ticks[-1])
-        return ticks != previous
+
+def retired_help(name: str) -> str:
+    """The option listing's line for a retired rate option."""
+    key, _ = RETIRED_RATES[name]
+    return f"retired: set the scene's {key} (refused here)"
+
+
+def new_readings(flags: np.ndarray | None, n: int) -> np.ndarray:
+    """(n,) bool: where the sensor has a new reading (every sample when the samples carry no flags)."""
+    return np.ones(n, dtype=bool) if flags is None else np.asarray(flags) != 0

@@ -17,14 +17,14 @@ def gcs():
 
 
 def head_block(n=300):
-    """3 s at 100 Hz, a GNSS receiver at 5 Hz (new solution every 20th sample)."""
+    """3 s at 100 Hz, a GNSS receiver at 5 Hz (new solution every 20th sample), a 10 Hz barometer (every 10th)."""
     rng = np.random.default_rng(1)
     t = (np.arange(n) * 1e9 / RATE).astype(np.int64)
     q = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
     return Samples(t, rng.normal(0, 1, (n, 3)), rng.normal(0, 0.1, (n, 3)), mag=rng.normal(0, 0.3, (n, 3)),
                    pressure_pa=np.full(n, 96000.0), temperature_c=np.full(n, 18.0), quat=q,
                    gnss_llh=np.tile([47.0, 8.0, 400.0], (n, 1)), gnss_velocity_ned=np.zeros((n, 3)),
-                   gnss_new=(np.arange(n) % 20 == 0).astype(float))
+                   gnss_new=(np.arange(n) % 20 == 0).astype(float), baro_new=(np.arange(n) % 10 == 0).astype(float))
 
 
 def run(device, block, lo, hi):
@@ -37,8 +37,7 @@ def parse(data):
 
 def make(**options):
     info = registry.get("mavlink-hil-sensor")
-    return info.device(RATE, also="mavlink-hil-gps, mavlink-scaled-pressure,mavlink-attitude", baro_rate_hz=10.0,
-                       **options)
+    return info.device(RATE, also="mavlink-hil-gps, mavlink-scaled-pressure,mavlink-attitude", **options)
 
 
 def test_each_message_at_its_own_rate_with_one_sequence():
@@ -48,7 +47,7 @@ def test_each_message_at_its_own_rate_with_one_sequence():
     kinds = [m.get_type() for m in messages]
     assert kinds.count("HEARTBEAT") == 3 and kinds.count("HIL_SENSOR") == 300 and kinds.count("ATTITUDE") == 300
     assert kinds.count("HIL_GPS") == 15                # 3 s of 5 Hz fixes
-    assert kinds.count("SCALED_PRESSURE") == 30        # 3 s at baro_rate_hz = 10
+    assert kinds.count("SCALED_PRESSURE") == 30        # 3 s of 10 Hz barometer readings
     seqs = [m.get_seq() for m in messages]
     assert all((b - a) % 256 == 1 for a, b in zip(seqs, seqs[1:]))     # no gaps, no repeats: one sender
     sensors = [m for m in messages if m.get_type() == "HIL_SENSOR"]
@@ -78,6 +77,22 @@ def test_rate_commands_reach_the_extra_messages():
     # a message the device cannot send is still denied
     (reply,) = device.receive(mav.command_long_encode(1, 1, 511, 0, 24, 10_000, 0, 0, 0, 0, 0).pack(mav))
     assert parse(reply)[0].result == 2
+
+
+def test_a_thinned_hil_sensor_flags_the_readings_of_the_samples_it_skipped():
+    """SET_MESSAGE_INTERVAL HIL_SENSOR (107) to 30 ms: every 3rd sample of 100 Hz. The 10 Hz barometer's readings
+    (every 10th sample) fall on skipped samples two times in three; each still goes out once, flagged in the first
+    message at or after it, so PX4 sees all 10 a second."""
+    device = make()
+    block = head_block()
+    mav = gcs()
+    (reply,) = device.receive(mav.command_long_encode(1, 1, 511, 0, 107, 30_000, 0, 0, 0, 0, 0).pack(mav))
+    assert parse(reply)[0].result == 0
+    sensors = [m for m in parse(run(device, block, 0, 300)) if m.get_type() == "HIL_SENSOR"]
+    assert len(sensors) == 100                                 # message j is sample 3j
+    baro_bits = 0b1101000000000
+    flagged = [j for j, m in enumerate(sensors) if m.fields_updated & baro_bits == baro_bits]
+    assert flagged == [-(-k // 3) for k in range(0, 300, 10)]      # ceil(k / 3): 30 readings, 30 flags
 
 
 def test_unknown_extra_message_is_a_one_line_error():

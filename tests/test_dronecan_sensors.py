@@ -120,7 +120,10 @@ def test_fix2_byte_for_byte_on_new_solutions_only(fd, per_fix):
 
 def test_ardupilot_reads_the_node_as_compass_baro_and_gps_equal_to_the_samples():
     block = head()
-    frames = GnssCompassBaroEncoder(node_id=55, mag_rate_hz=50.0, baro_rate_hz=20.0).encode(block)
+    k = np.arange(len(block))
+    # a 50 Hz magnetometer and a 20 Hz barometer on the 100 Hz samples: new readings every 2nd and 5th sample
+    block.mag_new, block.baro_new = (k % 2 == 0).astype(float), (k % 5 == 0).astype(float)
+    frames = GnssCompassBaroEncoder(node_id=55).encode(block)
     baro_nodes, compass, baro, gps = set(), [], [], []
     for sample, t in transfers(frames):
         msg = t.payload
@@ -200,9 +203,31 @@ def test_fix2_without_a_fix_and_out_of_range_values():
     assert encoder.saturated.counts == {"sats_used": 1, "ned_velocity": 1, "height_ellipsoid_mm": 1}
 
 
+@pytest.mark.parametrize("name, flag", [("dronecan-mag2", "mag_new"), ("dronecan-static-pressure", "baro_new"),
+                                        ("dronecan-static-temperature", "baro_new")])
+def test_standalone_compass_and_baro_messages_only_on_new_readings(name, flag):
+    """Streamed alone, a compass or baro message goes out at its sensor's new readings (a 25 Hz sensor on 100 Hz
+    samples: every 4th), one transfer each with consecutive transfer ids, carrying that sample's value."""
+    block = head()
+    setattr(block, flag, (np.arange(len(block)) % 4 == 0).astype(float))
+    frames = registry.create_encoder(name).encode(block)
+    got = transfers(frames)
+    assert [k for k, _ in got] == list(range(0, 100, 4))
+    assert [t.transfer_id for _, t in got] == [k % 32 for k in range(25)]
+    for k, t in got:
+        msg = t.payload
+        if flag == "mag_new":
+            assert list(msg.magnetic_field_ga) == list(np.asarray(block.mag[k], np.float16).astype(float))
+        elif name.endswith("pressure"):
+            assert msg.static_pressure == float(np.float32(block.pressure_pa[k]))
+        else:
+            assert msg.static_temperature == float(np.float16(block.temperature_c[k] + 273.15))
+
+
 @pytest.mark.parametrize("make, needle", [
     (lambda: StaticPressureEncoder(pressure_variance_pa2=-1.0), "pressure_variance_pa2: a number 0..65504"),
-    (lambda: GnssCompassBaroEncoder(baro_rate_hz=-5.0), "baro_rate_hz: a positive number of Hz"),
+    (lambda: GnssCompassBaroEncoder(baro_rate_hz=5.0), r"baro_rate_hz: retired; .*\[imu.barometer\] rate_hz"),
+    (lambda: GnssCompassBaroEncoder(mag_rate_hz=5.0), r"mag_rate_hz: retired; .*\[imu.magnetometer\] rate_hz"),
     (lambda: GnssCompassBaroEncoder(node_id=0), "node_id must be 1..127"),
 ])
 def test_bad_options_are_one_line_errors(make, needle):
@@ -218,8 +243,9 @@ def test_non_finite_fix_is_named():
 
 
 def test_node_device_announces_itself_and_publishes_at_each_sensor_rate():
-    device = registry.get("dronecan-gnss-compass-baro").device(100.0, node_id=60, baro_rate_hz=10.0)
+    device = registry.get("dronecan-gnss-compass-baro").device(100.0, node_id=60)
     block = head()
+    block.baro_new = (np.arange(len(block)) % 10 == 0).astype(float)      # a 10 Hz barometer
     frames = np.concatenate([device.output(block, i) for i in range(100)])
     kinds = [t.payload._type.full_name for _, t in transfers(frames)]
     assert kinds.count("uavcan.protocol.NodeStatus") == 1

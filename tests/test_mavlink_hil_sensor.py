@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink2
 
-from firmware_protocols.base import Samples
+from firmware_protocols.base import EncodeError, Samples
 from firmware_protocols.wire_formats.mavlink import MavlinkEncoder
 
 # PX4's SensorSource, as transcribed above
@@ -67,17 +67,19 @@ def test_px4_reads_every_sensor_head_field_equal_to_the_samples():
         assert message.pressure_alt == pytest.approx(isa, abs=1e-3)
 
 
-def test_mag_and_baro_flagged_only_at_their_own_rates():
+def test_mag_and_baro_flagged_only_where_the_samples_say_new():
     rate, mag_hz, baro_hz = 200.0, 50.0, 20.0
     block = sensor_head_block(n=400, rate_hz=rate, t0_ns=0)
-    encoder = MavlinkEncoder("mavlink-hil-sensor", mag_rate_hz=mag_hz, baro_rate_hz=baro_hz)
-    # cut into uneven blocks: the flags continue across encode calls
+    t = block.time_ns
+    # a reading every 1/rate from t = 0 (closed form, floor arithmetic): new where floor(t * rate) changes
+    mag_new = np.r_[True, np.diff(t // round(1e9 / mag_hz)) != 0]
+    baro_new = np.r_[True, np.diff(t // round(1e9 / baro_hz)) != 0]
+    block.mag_new, block.baro_new = mag_new.astype(float), baro_new.astype(float)
+    encoder = MavlinkEncoder("mavlink-hil-sensor")
+    # cut into uneven blocks: each sample's flags travel with it
     data = b"".join(encoder.encode(block.slice(a, b)).data for a, b in ((0, 7), (7, 133), (133, 400)))
     messages = decode(data)
     assert len(messages) == 400
-    t = block.time_ns
-    mag_new = np.r_[True, np.diff(t // round(1e9 / mag_hz)) != 0]
-    baro_new = np.r_[True, np.diff(t // round(1e9 / baro_hz)) != 0]
     seen_mag = np.array([m.fields_updated & MAG == MAG for m in messages])
     seen_baro = np.array([m.fields_updated & BARO == BARO for m in messages])
     seen_diff = np.array([m.fields_updated & DIFF_PRESS == DIFF_PRESS for m in messages])
@@ -90,6 +92,25 @@ def test_mag_and_baro_flagged_only_at_their_own_rates():
     for m in messages:
         assert m.fields_updated & MAG in (0, MAG)
         assert m.fields_updated & BARO in (0, BARO)
+
+
+def test_a_non_finite_flag_is_named_in_a_block_and_alone():
+    from firmware_protocols.devices.base import single
+    block = sensor_head_block(n=4)
+    block.mag_new, block.baro_new = np.ones(4), np.array([1.0, 0.0, np.nan, 1.0])
+    with pytest.raises(EncodeError, match="'baro_new' at sample 2"):
+        MavlinkEncoder("mavlink-hil-sensor").encode(block)
+    with pytest.raises(EncodeError, match="'baro_new' at sample 0"):       # a device's block of one
+        MavlinkEncoder("mavlink-hil-sensor").encode(single(block, 2))
+    (alone,) = decode(MavlinkEncoder("mavlink-hil-sensor").encode(single(block, 1)).data)
+    assert alone.fields_updated & (MAG | BARO) == MAG                     # the one sample's flags, not the block's
+
+
+def test_without_flags_every_sample_carries_the_readings():
+    """Samples without mag_new / baro_new (no scene companion): every provided field flagged, as before."""
+    block = sensor_head_block(n=5)
+    messages = decode(MavlinkEncoder("mavlink-hil-sensor").encode(block).data)
+    assert all(m.fields_updated & (MAG | BARO) == MAG | BARO for m in messages)
 
 
 def test_absent_fields_keep_their_bits_clear():
@@ -108,14 +129,14 @@ def test_constant_diff_pressure_option_wins_over_the_samples():
 
 
 @pytest.mark.parametrize("options, needle", [
-    (dict(message="mavlink-scaled-imu", mag_rate_hz=50.0), "mag_rate_hz: SCALED_IMU has no fields_updated"),
-    (dict(baro_rate_hz=0.0), "baro_rate_hz: a positive number of Hz, got 0.0"),
-    (dict(mag_rate_hz=float("nan")), "mag_rate_hz: a positive number of Hz"),
+    (dict(message="mavlink-scaled-imu", mag_rate_hz=50.0), r"mag_rate_hz: retired; .*\[imu.magnetometer\] rate_hz"),
+    (dict(baro_rate_hz=20.0), r"baro_rate_hz: retired; .*\[imu.barometer\] rate_hz"),
 ])
-def test_bad_rates_are_refused_with_one_line(options, needle):
+def test_retired_rate_options_name_the_scene_key(options, needle):
     options.setdefault("message", "mavlink-hil-sensor")
-    with pytest.raises(ValueError, match=needle):
+    with pytest.raises(ValueError, match=needle) as error:
         MavlinkEncoder(**options)
+    assert "\n" not in str(error.value)
 
 
 def test_non_finite_differential_pressure_is_named():

@@ -137,10 +137,12 @@ def test_scaled_pressure_at_the_barometer_rate():
     t = (np.arange(n) * 5_000_000).astype(np.int64)              # 200 Hz
     block = Samples(t, np.zeros((n, 3)), np.zeros((n, 3)), pressure_pa=rng.normal(95000, 100, n),
                     temperature_c=np.r_[0.0, rng.normal(15, 5, n - 1)], differential_pressure_pa=rng.uniform(0, 900, n))
-    encoder = MavlinkNavEncoder("mavlink-scaled-pressure", baro_rate_hz=25.0)
+    # a 25 Hz barometer's readings from t = 0 (closed form): new where floor(t / 40 ms) changes
+    picked = np.flatnonzero(np.r_[True, np.diff(t // 40_000_000) != 0])
+    block.baro_new = np.isin(np.arange(n), picked).astype(float)
+    encoder = MavlinkNavEncoder("mavlink-scaled-pressure")
     messages = decode(encoder.encode(block.slice(0, 33)).data + encoder.encode(block.slice(33, n)).data)
     assert len(messages) == 13                        # 0.5 s at 25 Hz from t = 0 (t = 0 .. 0.495 s)
-    picked = np.flatnonzero(np.r_[True, np.diff(t // 40_000_000) != 0])
     for message, i in zip(messages, picked):
         assert message.press_abs == pytest.approx(block.pressure_pa[i] / 100, rel=2**-23)
         assert message.press_diff == pytest.approx(block.differential_pressure_pa[i] / 100, rel=2**-23, abs=1e-9)
@@ -196,7 +198,7 @@ def test_bad_input_and_options_are_one_line_errors():
     with pytest.raises(EncodeError, match="'gnss_llh' at sample 20, component 1"):
         MavlinkNavEncoder("mavlink-hil-gps").encode(block)
     for options, needle in ((dict(message="mavlink-attitude", id=1), "id: ATTITUDE has no id field"),
-                            (dict(message="mavlink-hil-gps", baro_rate_hz=5), "baro_rate_hz: HIL_GPS carries no"),
+                            (dict(message="mavlink-scaled-pressure", baro_rate_hz=5), r"baro_rate_hz: retired; .*\[imu.barometer\]"),
                             (dict(message="mavlink-nope"), "message: unknown 'mavlink-nope'"),
                             (dict(message="mavlink-hil-gps", sysid=300), "sysid: must be 0..255")):
         with pytest.raises(ValueError, match=needle):

@@ -28,10 +28,10 @@ START_NS = calendar.timegm((2024, 1, 1, 0, 0, 0)) * 10**9
 
 # Capture files: (name, [[stream]] format, options as TOML, file suffix)
 STREAMS = (
-    ("hil_sensor", "mavlink-hil-sensor", "{ mag_rate_hz = 100, baro_rate_hz = 50 }", "bin"),
+    ("hil_sensor", "mavlink-hil-sensor", "{}", "bin"),
     ("hil_gps", "mavlink-hil-gps", "{}", "bin"),
-    ("scaled_pressure", "mavlink-scaled-pressure", "{ baro_rate_hz = 50 }", "bin"),
-    ("dronecan", "dronecan-gnss-compass-baro", "{ node_id = 42, mag_rate_hz = 100, baro_rate_hz = 50 }", "log"),
+    ("scaled_pressure", "mavlink-scaled-pressure", "{}", "bin"),
+    ("dronecan", "dronecan-gnss-compass-baro", "{ node_id = 42 }", "log"),
     ("mip_sensor", "microstrain-mip", "{ fields = 'mag,pressure' }", "bin"),
     ("mip_gnss", "microstrain-mip", "{ descriptor_set = 0x91, fields = 'fix_info,position_llh,velocity_ned,dop' }",
      "bin"),
@@ -128,11 +128,13 @@ def test_mavlink_hil_sensor_mag_and_baro(run):
     assert np.array_equal([m.temperature for m in sensors], f32(ref["baro_temperature_c"]))
     assert np.array_equal([m.diff_pressure for m in sensors], f32(ref["differential_pressure_pa"] / 100))    # hPa
     # fields_updated: the magnetometer's bits (6-8) exactly at its new readings (100 Hz), the barometer's (9, 11,
-    # 12) at its own (50 Hz): where the reference column takes a new value (noise makes every reading differ)
+    # 12) at its own (50 Hz), from the scene's rates with no stream option: where the reference column takes a new
+    # value (noise makes every reading differ), which is where its mag_new / baro_new columns say so
     updated = np.array([m.fields_updated for m in sensors])
     new_mag = np.r_[True, (np.diff(ref["mag"], axis=0) != 0).any(axis=1)]
     new_baro = np.r_[True, np.diff(ref["pressure_pa"]) != 0]
     assert new_mag.sum() == 300 and new_baro.sum() == 150
+    assert np.array_equal(ref["mag_new"] != 0, new_mag) and np.array_equal(ref["baro_new"] != 0, new_baro)
     assert np.array_equal(updated & 0x1C0 == 0x1C0, new_mag) and not (updated & 0x1C0 & ~(0x1C0 * new_mag)).any()
     assert np.array_equal(updated & 0x1A00 == 0x1A00, new_baro)
 
@@ -475,9 +477,9 @@ velocity_error = 0.05
 """
 BODY_VECTORS = {"ENU": ('["20 uT", "5 uT", "-3 uT"]', "[0.3, 0.1, 0.2]"),
                 "NED": ('["20 uT", "-5 uT", "3 uT"]', "[0.3, -0.1, -0.2]")}
-FRD_WIRES = (("hil_sensor", "mavlink-hil-sensor", "{ mag_rate_hz = 100 }", "bin"),
+FRD_WIRES = (("hil_sensor", "mavlink-hil-sensor", "{}", "bin"),
              ("hil_gps", "mavlink-hil-gps", "{}", "bin"),
-             ("dronecan", "dronecan-gnss-compass-baro", "{ mag_rate_hz = 100 }", "log"),
+             ("dronecan", "dronecan-gnss-compass-baro", "{}", "log"),
              ("vectornav", "vectornav-binary", "{ fields = 'imu:pres,mag;gps:fix,poslla,velned' }", "bin"),
              ("mip_gnss", "microstrain-mip", "{ descriptor_set = 0x81, fields = 'position_llh,velocity_ned' }", "bin"))
 
@@ -620,11 +622,11 @@ def test_mavlink_device_carries_the_head_on_one_link(run):
                       differential_pressure_pa=ref["differential_pressure_pa"],
                       gnss_llh=ref["gnss_llh"], gnss_velocity_ned=ref["gnss_velocity_ned"], gnss_fix=ref["gnss_fix"],
                       gnss_new=ref["gnss_new"], gnss_age_s=np.full(600, LATENCY_US / 1e6),   # at each new solution
+                      mag_new=ref["mag_new"], baro_new=ref["baro_new"],
                       **{key: ref[key] for key in ("gnss_satellites", "gnss_hdop", "gnss_vdop",
                                                    "gnss_horizontal_accuracy_m", "gnss_vertical_accuracy_m",
                                                    "gnss_speed_accuracy_mps")})
-    device = create_device("mavlink-hil-sensor", RATE, also="mavlink-hil-gps,mavlink-scaled-pressure",
-                           mag_rate_hz=100.0, baro_rate_hz=50.0)
+    device = create_device("mavlink-hil-sensor", RATE, also="mavlink-hil-gps,mavlink-scaled-pressure")
     messages = mavlink2.MAVLink(None).parse_buffer(b"".join(device.output(samples, k) for k in range(600)))
     kinds = [m.get_type() for m in messages]
     assert kinds.count("HIL_SENSOR") == 600 and kinds.count("SCALED_PRESSURE") == 150

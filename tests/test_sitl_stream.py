@@ -107,6 +107,8 @@ def test_px4_sitl_gets_hil_sensor_and_hil_gps_in_lockstep(tmp_path):
         if proc.poll() is None:
             proc.kill()
     assert proc.returncode == 0, err
+    # PX4 sets its clock from time_usec (px4_clock_settime): the first is one sample period after power-up, not 0
+    assert times[0] == int(1e6 / RATE_HZ)
     assert np.all(np.diff(times) == int(1e6 / RATE_HZ))
     assert "HIL_ACTUATOR_CONTROLS" in err and "connections 1" in err
     # HIL_GPS as handle_message_hil_gps reads it: degE7, mm, cm/s; the circle passes through the origin

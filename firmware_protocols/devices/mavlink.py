@@ -34,9 +34,11 @@ MAV_RESULT ACCEPTED 0 / DENIED 2 / UNSUPPORTED 3).
 - `also`: more messages of the sensor head on the same link (comma-separated format names, e.g.
   "mavlink-hil-gps,mavlink-scaled-pressure,mavlink-attitude"; wire_formats.mavlink_nav), sharing the sequence
   numbers and the signing link. Each goes out at the samples its encoder sends it (GNSS fixes on new solutions,
-  SCALED_PRESSURE at `baro_rate_hz`, attitude every sample), thinned by its own divider that
+  SCALED_PRESSURE on new barometer readings (Samples.baro_new), attitude every sample), thinned by its own divider that
   SET_MESSAGE_INTERVAL sets and GET_MESSAGE_INTERVAL reports like the IMU message's; REQUEST_MESSAGE sends one
-  with the next sample (a GNSS message then repeats the solution held). Also any nav format streamed alone.
+  with the next sample (a GNSS or pressure message then repeats the solution or reading held). A message thinned
+  by its divider carries the new readings (Samples.*_new) of the samples it skipped: HIL_SENSOR at 33 Hz still
+  flags every reading of a 10 Hz barometer, in the first message after it. Also any nav format streamed alone.
 Incoming frames may be MAVLink 1 or 2; replies are MAVLink 2.
 """
 from __future__ import annotations
@@ -164,6 +166,7 @@ class MavlinkDevice(Device):
         self.imu = Divider(1)
         self.heartbeat = Periodic.every(1.0, rate_hz)
         self._once: set = set()          # message ids asked for once with REQUEST_MESSAGE
+        self._unsent: dict = {}          # message id -> new-reading flags seen on samples its divider skipped
         self._reader = _FrameReader()
         self.sysid, self.compid = self.encoder_ids(self.encoder)
         self.link = self.encoder.signing_link
@@ -172,8 +175,6 @@ class MavlinkDevice(Device):
         self.extra = {}
         for name in names:
             options = dict(shared, sysid=self.sysid, compid=self.compid, signing_link=self.link)
-            if NAV_MESSAGES[name].source == "baro" and encoder_options.get("baro_rate_hz") is not None:
-                options["baro_rate_hz"] = encoder_options["baro_rate_hz"]
             encoder = MavlinkNavEncoder(name, **options)
             self.extra[encoder.spec.msgid] = (encoder, Divider(1))
         self._stream_ts: dict = {}       # (link id, sysid, compid) -> last signing timestamp accepted
@@ -211,21 +212,37 @@ class MavlinkDevice(Device):
         if self.heartbeat.due() or HEARTBEAT in self._once:
             parts.append(self._frame(HEARTBEAT, self.heartbeat_payload))
         if self.imu.due() or self.spec.msgid in self._once:
-            parts.append(self._encode(self.encoder, samples, i, self.spec.msgid in self._once))
+            parts.append(self._encode(self.spec.msgid, self.encoder, samples, i, self.spec.msgid in self._once))
+        else:
+            self._skip(self.spec.msgid, samples, i)
         for msgid, (encoder, divider) in self.extra.items():
             if divider.due() or msgid in self._once:
                 encoder.seq = self._next_seq()
-                parts.append(self._encode(encoder, samples, i, msgid in self._once))
+                parts.append(self._encode(msgid, encoder, samples, i, msgid in self._once))
                 self._set_seq(encoder.seq)
+            else:
+                self._skip(msgid, samples, i)
         self._once.clear()
         return b"".join(parts)
 
-    @staticmethod
-    def _encode(encoder, samples: Samples, i: int, requested: bool) -> bytes:
+    def _encode(self, msgid: int, encoder, samples: Samples, i: int, requested: bool) -> bytes:
+        """Sample i as the message: a reading new at this sample, or at one its divider skipped since it was last
+        sent (a rate command thinning it), is new here (the reading held is the newest), so the consumer still sees
+        each sensor update at the message's rate; asked for with REQUEST_MESSAGE, the reading held goes out as
+        new even between updates."""
         one = single(samples, i)
-        if requested and one.gnss_new is not None:
-            one.gnss_new = np.ones(1)          # asked for: the solution held goes out even between fixes
+        carried = self._unsent.pop(msgid, ())
+        for flag in _NEW_FLAGS:
+            if getattr(one, flag) is not None and (requested or flag in carried):
+                setattr(one, flag, np.ones(1))       # a fresh array: `one` holds views of the block
         return encoder.encode(one).data
+
+    def _skip(self, msgid: int, samples: Samples, i: int) -> None:
+        """Sample i is not sent as this message: remember which sensors had a new reading at it."""
+        for flag in _NEW_FLAGS:
+            values = getattr(samples, flag)
+            if values is not None and values[i] != 0:
+                self._unsent.setdefault(msgid, set()).add(flag)
 
     # - input -
     def _receive(self, data: bytes, now_ns: int) -> list:
@@ -334,13 +351,16 @@ def _message_id(value: float) -> int | None:
     return int(value)
 
 
+#: Samples' new-reading flags: a message thinned by its divider carries those of the samples it skipped
+_NEW_FLAGS = ("gnss_new", "baro_new", "mag_new")
+
 _DEVICE_OPTIONS = {
     "heartbeat_type": f"HEARTBEAT type (MAV_TYPE), default {MAV_TYPE_IMU} (MAV_TYPE_IMU)",
     "heartbeat_autopilot": f"HEARTBEAT autopilot (MAV_AUTOPILOT), default {MAV_AUTOPILOT_INVALID} (not a flight "
                            "controller); 0 (generic) makes MAVSDK's first_autopilot() return this system",
 }
 _DEVICE_OPTIONS["also"] = ("more messages on the link, comma-separated: " + ", ".join(NAV_MESSAGES)
-                           + " (GNSS on new fixes, SCALED_PRESSURE at baro_rate_hz)")
+                           + " (GNSS on new fixes, SCALED_PRESSURE on new barometer readings)")
 # A MAVLink device carries GNSS messages only when also= names them: their encoders say `uses_navigation`, and the
 # streamer computes the navigation their fix falls back on (live.config.reports_navigation) for those streams alone.
 for _name in (*MESSAGES, *NAV_MESSAGES):

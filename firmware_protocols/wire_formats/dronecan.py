@@ -345,14 +345,29 @@ class _DroneCanEncoder:
         """The message variant and its source arrays (all (n, w) float64, C-contiguous) for this block."""
         raise NotImplementedError
 
+    #: the Samples flag of the sensor reading the message carries (a compass or baro message goes out only on the
+    #: sensor's new readings, as a node publishes it; every sample when the samples carry no flag)
+    new_flag: str | None = None
+
     def encode(self, samples: Samples) -> np.ndarray:
+        flags = None if self.new_flag is None else getattr(samples, self.new_flag)
+        if flags is not None:
+            samples.require_finite((self.new_flag,))
+            due = np.flatnonzero(flags)
+            if len(due) < len(samples):
+                frames = empty_frames(len(due) * len(self._lengths), fd=self.fd)
+                if len(due):
+                    self._encode(samples.rows(due), frames)
+                    frames["sample"] = due[frames["sample"]]
+                return frames
         frames = empty_frames(len(samples) * len(self._lengths), fd=self.fd)
         self._encode(samples, frames)      # frames as encode_into requires them: no checks per sample
         return frames
 
     def encode_into(self, samples: Samples, frames: np.ndarray) -> int:
         """Encode into a caller's frame array (empty_frames(..., fd=...), reused across blocks, so a long run
-        does not fault in fresh memory for every block); returns the number of frames written from row 0."""
+        does not fault in fresh memory for every block); returns the number of frames written from row 0. Every
+        sample is encoded here, new reading or not (`new_flag` is for `encode`)."""
         n = len(samples)
         needed = n * len(self._lengths)
         wanted = FD_FRAME_DTYPE if self.fd else CLASSIC_FRAME_DTYPE
@@ -422,7 +437,9 @@ class SolutionEncoder(_DroneCanEncoder):
 
 
 class MagneticFieldStrength2Encoder(_DroneCanEncoder):
-    """Magnetic field in gauss from Samples.mag (zeros when absent)."""
+    """Magnetic field in gauss from Samples.mag (zeros when absent), on the magnetometer's new readings."""
+    new_flag = "mag_new"
+    frames_vary = True     # a transfer only at samples with a new reading (Samples.mag_new)
 
     def __init__(self, sensor_id: int = 0, **options):
         if not 0 <= int(sensor_id) <= 255:

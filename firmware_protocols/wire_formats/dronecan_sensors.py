@@ -1,6 +1,8 @@
 """DroneCAN air data and GNSS, and the GNSS/compass/baro node they make together.
 
-Messages (DSDL as shipped with pydronecan, dronecan/dsdl_specs/uavcan/equipment/):
+Messages (DSDL as shipped with pydronecan, dronecan/dsdl_specs/uavcan/equipment/; StaticPressure and
+StaticTemperature, like ahrs.MagneticFieldStrength2, go out only where Samples.baro_new / mag_new mark a new
+reading, every sample without the flags):
 
 - 1028 air_data.StaticPressure, signature 0xCDC7C43412BDC89A: float32 static_pressure (Pa) |
   float16 static_pressure_variance (Pa^2, the `pressure_variance_pa2` option, default 0) = 6 bytes, one frame.
@@ -25,9 +27,10 @@ vertical and speed 1-sigma accuracies (what ArduPilot's AP_GPS_DroneCAN reads ba
 sqrt(mean(cov[3:6]))); pdop = hypot(HDOP, VDOP). Absent quality fields take gnss_time.GNSS_DEFAULTS, an absent
 receiver solution the sample's position_llh/velocity_ned (as MAVLink's GNSS messages do), neither: status NO_FIX.
 
-The node ("dronecan-gnss-compass-baro"): one node id publishing ahrs.MagneticFieldStrength2 (gauss) at
-`mag_rate_hz`, StaticPressure then StaticTemperature at `baro_rate_hz` (None: every sample), and Fix2 at each new
-GNSS solution (gnss_new; every sample without it). A compass or baro message whose inputs are absent (no mag,
+The node ("dronecan-gnss-compass-baro"): one node id publishing ahrs.MagneticFieldStrength2 (gauss) on each new
+magnetometer reading (Samples.mag_new), StaticPressure then StaticTemperature on each new barometer reading
+(baro_new), Fix2 at each new GNSS solution (gnss_new): the scene's companion rates; each flag None means every
+sample (the retired options `mag_rate_hz` / `baro_rate_hz` are refused in one line). A compass or baro message whose inputs are absent (no mag,
 no pressure, no temperature) is not sent; Fix2 always is, with status NO_FIX when there is no position at all
 (a receiver without a fix still reports, and ArduPilot then shows the GPS as present without a fix).
 What ArduPilot expects (ArduPilot/ardupilot libraries/AP_Baro/AP_Baro_DroneCAN.cpp at 19351d4b,
@@ -45,7 +48,7 @@ from firmware_protocols.base import EncodeError, SaturationStats, Samples, empty
 from firmware_protocols.crc import crc16_ccitt_bytes
 from firmware_protocols.gnss_time import GNSS_DEFAULTS, receiver_solution
 from firmware_protocols.registry import FormatInfo, register
-from firmware_protocols.update_rate import UpdateTicks
+from firmware_protocols.update_rate import new_readings, refuse_retired, retired_help
 from firmware_protocols.wire_formats.dronecan import (_COMMON_OPTIONS, OP_F16, OP_F32, DroneCanDecoder,
                                                       MagneticFieldStrength2Encoder, _DroneCanEncoder,
                                                       _f16_from_f32_bits, _Message, _half, _single, can_id_for,
@@ -83,7 +86,9 @@ STATIC_TEMPERATURE = _Message("uavcan.equipment.air_data.StaticTemperature", STA
 
 
 class StaticPressureEncoder(_DroneCanEncoder):
-    """Static pressure in Pa from Samples.pressure_pa (101325 Pa when absent)."""
+    """Static pressure in Pa from Samples.pressure_pa (101325 Pa when absent), on the barometer's new readings (Samples.baro_new)."""
+    new_flag = "baro_new"
+    frames_vary = True
 
     message = STATIC_PRESSURE
 
@@ -97,7 +102,9 @@ class StaticPressureEncoder(_DroneCanEncoder):
 
 
 class StaticTemperatureEncoder(_DroneCanEncoder):
-    """Static temperature in K from Samples.temperature_c (25 degC when absent)."""
+    """Static temperature in K from Samples.temperature_c (25 degC when absent), on the barometer's new readings (Samples.baro_new)."""
+    new_flag = "baro_new"
+    frames_vary = True
 
     message = STATIC_TEMPERATURE
 
@@ -264,8 +271,7 @@ class GnssCompassBaroEncoder:
         self.temperature = StaticTemperatureEncoder(temperature_variance_k2, **common)
         self.fix = Fix2Encoder(**common)
         self.node_id, self.fd = self.mag.node_id, self.mag.fd
-        self._mag_ticks = UpdateTicks(mag_rate_hz, "mag_rate_hz")
-        self._baro_ticks = UpdateTicks(baro_rate_hz, "baro_rate_hz")
+        refuse_retired(mag_rate_hz=mag_rate_hz, baro_rate_hz=baro_rate_hz)
         self.saturated = SaturationStats()
 
     @property
@@ -275,10 +281,12 @@ class GnssCompassBaroEncoder:
 
     def encode(self, samples: Samples) -> np.ndarray:
         parts = []
-        mag_due, baro_due = self._mag_ticks.due(samples.time_ns), self._baro_ticks.due(samples.time_ns)
-        if samples.mag is not None:
+        samples.require_finite(("mag_new", "baro_new"))
+        mag_due, baro_due = new_readings(samples.mag_new, len(samples)), new_readings(samples.baro_new, len(samples))
+        # between readings (a device's sample, mostly) a message is left out before building anything for it
+        if samples.mag is not None and mag_due.any():
             parts.append(self._at(self.mag, samples, mag_due))
-        if samples.pressure_pa is not None:
+        if samples.pressure_pa is not None and baro_due.any():
             parts.append(self._at(self.pressure, samples, baro_due))
             if samples.temperature_c is not None:     # ArduPilot takes temperature only from a registered baro
                 parts.append(self._at(self.temperature, samples, baro_due))
@@ -400,8 +408,7 @@ register(FormatInfo(
     encoder=GnssCompassBaroEncoder, decoder=_decoder(1002, STATIC_PRESSURE_ID, STATIC_TEMPERATURE_ID, FIX2_ID),
     frames_per_sample=_frames(GnssCompassBaroEncoder()),
     options={**_COMMON_OPTIONS, "sensor_id": "compass sensor id 0..255",
-             "mag_rate_hz": "MagneticFieldStrength2 rate, Hz (None: every sample)",
-             "baro_rate_hz": "StaticPressure/StaticTemperature rate, Hz (None: every sample)",
+             "mag_rate_hz": retired_help("mag_rate_hz"), "baro_rate_hz": retired_help("baro_rate_hz"),
              "pressure_variance_pa2": "static_pressure_variance, Pa^2 (default 0)",
              "temperature_variance_k2": "static_temperature_variance, K^2 (default 0)"},
 ))

@@ -24,9 +24,9 @@ HIL_SENSOR      x/y/z acc, gyro, mag f32   m/s^2, rad/s, gauss; |v| > FLT_MAX sa
                 temperature f32            degC
                 fields_updated u16 / u32   bit k set iff float field k (wire order) was provided
                                            and, for mag (bits 6-8) and baro (9-12), that sensor
-                                           has a new reading at this sample (`mag_rate_hz`,
-                                           `baro_rate_hz`; None = every sample); HIL_SENSOR's
-                                           bit 31 (reset) is never set
+                                           has a new reading at this sample (Samples.mag_new,
+                                           baro_new: the scene's companion rates; None = every
+                                           sample); HIL_SENSOR's bit 31 (reset) is never set
                 id u8 (extension)          the `id` option (sensor instance)
 SCALED_IMU,     time_boot_ms u32           ((time_ns - start_ns) // 1_000_000) mod 2^32: since
                                            the run's start (the unit's boot); wraps after 49.7
@@ -46,8 +46,9 @@ HIL_SENSOR for PX4 HITL (PX4-Autopilot simulator_mavlink, SimulatorMavlink.hpp/.
 f66bdc0): PX4 takes a sensor only when ALL its bits are set: ACCEL 0b111, GYRO 0b111000, MAG 0b111000000,
 BARO 0b1101000000000 (abs_pressure, pressure_alt AND temperature: a barometer needs Samples.temperature_c),
 DIFF_PRESS 0b10000000000; pressures hPa x 100 -> Pa. Hence mag and baro bits go on and off together, and the
-magnetometer/barometer rates (`mag_rate_hz`, `baro_rate_hz`; differential pressure follows the barometer)
-decide at which samples they are set, so PX4 sees each reading once at its sensor's rate.
+samples' new-reading flags (Samples.mag_new, baro_new, from the scene's [imu.magnetometer] / [imu.barometer]
+rate_hz; differential pressure follows the barometer) decide at which samples they are set, so PX4 sees each
+reading once at its sensor's rate. The retired options `mag_rate_hz` / `baro_rate_hz` are refused in one line.
 
 Integer fields round to nearest (ties to even) and saturate; each clipped value is counted per wire
 field in ``encoder.saturated``. Missing optional inputs go on the wire as 0, which is MAVLink's own
@@ -67,6 +68,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import io
+import math
 import re
 import struct
 import time
@@ -78,7 +80,7 @@ import numpy as np
 from firmware_protocols.base import DecoderStats, EncodeError, Packet, SaturationStats, Samples, SerialBatch
 from firmware_protocols.crc import crc16_mcrf4xx, crc16_mcrf4xx_bytes
 from firmware_protocols.registry import FormatInfo, register
-from firmware_protocols.update_rate import UpdateTicks
+from firmware_protocols.update_rate import new_readings, refuse_retired, retired_help
 
 STX_V2 = 0xFD
 STX_V1 = 0xFE
@@ -481,12 +483,9 @@ class MavlinkEncoder:
                 raise ValueError(f"{name}: {spec.msg_name} carries no such field")
             if value is not None and not np.isfinite(value):
                 raise ValueError(f"{name}: must be finite, got {value}")
-        for name, value in (("mag_rate_hz", mag_rate_hz), ("baro_rate_hz", baro_rate_hz)):
-            if value is not None and not spec.has_source(S_FIELDS_UPDATED):
-                raise ValueError(f"{name}: {spec.msg_name} has no fields_updated bits to mark new readings with")
-        self._mag_ticks = UpdateTicks(mag_rate_hz, "mag_rate_hz")
-        self._baro_ticks = UpdateTicks(baro_rate_hz, "baro_rate_hz")
-        self._gated = mag_rate_hz is not None or baro_rate_hz is not None
+        refuse_retired(mag_rate_hz=mag_rate_hz, baro_rate_hz=baro_rate_hz)
+        self._flags_updates = spec.has_source(S_FIELDS_UPDATED)
+        self._one_bits = np.empty(1, dtype=np.int64)       # the bits of a block of one, reused
         if sign_time not in ("wall", "sample"):
             raise ValueError(f"sign_time: 'wall' or 'sample', got {sign_time!r}")
         if signing_link is None and signing_key is not None:
@@ -517,13 +516,30 @@ class MavlinkEncoder:
         self.bytes_per_sample = HEADER_LEN + spec.payload_len + 2 + (SIGNATURE_LEN if signing_link else 0)
         self._scratch = np.empty(_CHUNK * self.bytes_per_sample, dtype=np.uint8)
 
-    def _updated_bits(self, time_ns: np.ndarray) -> np.ndarray:
+    def _updated_bits(self, samples: Samples) -> np.ndarray:
         """Per sample, the fields_updated bits allowed: the magnetometer's and the barometer's (static and
         differential pressure, pressure altitude, temperature: PX4's SensorSource BARO and DIFF_PRESS) only
-        where that sensor has a new reading (called only when a rate is set)."""
-        allowed = np.full(len(time_ns), 0xFFFFFFFF, dtype=np.int64)
-        allowed[~self._mag_ticks.due(time_ns)] &= ~_MAG_BITS
-        allowed[~self._baro_ticks.due(time_ns)] &= ~_BARO_BITS
+        where that sensor has a new reading (Samples.mag_new, baro_new); no limit (_NO_BITS) when the samples
+        carry neither flag or the message has no fields_updated."""
+        mag_new, baro_new = samples.mag_new, samples.baro_new
+        if not self._flags_updates or (mag_new is None and baro_new is None):
+            return _NO_BITS
+        n = len(samples)
+        if n == 1:      # a device's one sample: Python scalars, no numpy temporaries (half the per-sample cost)
+            bits = 0xFFFFFFFF
+            for name, flags, mask in (("mag_new", mag_new, _MAG_BITS), ("baro_new", baro_new, _BARO_BITS)):
+                if flags is not None:
+                    value = float(flags[0])
+                    if not math.isfinite(value):
+                        samples.require_finite((name,))        # raises, naming the field and sample
+                    if value == 0:
+                        bits &= ~mask
+            self._one_bits[0] = bits
+            return self._one_bits
+        samples.require_finite(("mag_new", "baro_new"))
+        allowed = np.full(n, 0xFFFFFFFF, dtype=np.int64)
+        allowed[~new_readings(samples.mag_new, n)] &= ~_MAG_BITS
+        allowed[~new_readings(samples.baro_new, n)] &= ~_BARO_BITS
         return allowed
 
     @property
@@ -544,7 +560,7 @@ class MavlinkEncoder:
                   pressure if pressure is not None and self._uses_pressure else _NO_ROWS,
                   diff if diff is not None and self._uses_pressure else _NO_ROWS,
                   _NO_ROWS if temperature is None else temperature,
-                  self._updated_bits(samples.time_ns) if self._gated else _NO_BITS,
+                  self._updated_bits(samples),
                   self._layout, self._lsb, self._consts, params, link_state)
         offsets = np.empty(n + 1, dtype=np.int64)
         scratch, sat = self._scratch, self._sat
@@ -742,8 +758,8 @@ _ID_OPTION = {"id": "sensor instance id 0..255 sent in the message's id field (N
 _PRESSURE_OPTIONS = {
     "diff_pressure_pa": "constant differential pressure to report, Pa, instead of Samples.differential_pressure_pa "
                         "(None: that field, not reported when absent)",
-    "mag_rate_hz": "magnetometer rate: its fields_updated bits only on its new readings (None: every sample)",
-    "baro_rate_hz": "barometer rate: pressure/altitude/temperature bits only on new readings (None: every sample)",
+    "mag_rate_hz": retired_help("mag_rate_hz"),
+    "baro_rate_hz": retired_help("baro_rate_hz"),
     "pressure_alt_m": "constant pressure altitude to report, m (None: ISA altitude of the static pressure)",
 }
 

@@ -33,7 +33,8 @@ fix_type: Samples' 0 (no fix) is GPS_FIX_TYPE_NO_FIX (1): the receiver is there;
 The GNSS messages go out only at samples where gnss_new is 1 (a new solution, at the receiver's rate); every
 sample when gnss_new is None. Height: there is no geoid model here, so alt (MSL) carries the ellipsoid height,
 as gnss_time's records do; GPS_RAW_INT's alt_ellipsoid carries it too.
-SCALED_PRESSURE goes out at the barometer's rate (`baro_rate_hz`, None: every sample); absent pressure and
+SCALED_PRESSURE goes out on the barometer's new readings (Samples.baro_new, from the scene's [imu.barometer]
+rate_hz; every sample when baro_new is None; the retired option `baro_rate_hz` is refused); absent pressure and
 temperature take Samples' documented defaults 101325 Pa and 25 degC.
 
 Integers round to nearest and saturate (counted per wire field in `saturated`); a non-finite input is an
@@ -51,7 +52,7 @@ from firmware_protocols import attitude
 from firmware_protocols.base import SaturationStats, Samples, SerialBatch, to_float32_field, to_int_field
 from firmware_protocols.gnss_time import receiver_solution
 from firmware_protocols.registry import FormatInfo, register
-from firmware_protocols.update_rate import UpdateTicks
+from firmware_protocols.update_rate import new_readings, refuse_retired, retired_help
 from firmware_protocols.wire_formats.mavlink import (_BY_MSGID, EPOCH_2015_NS, HEADER_LEN, SIGNATURE_LEN,
                                                      SigningLink, MavlinkDecoder, pack_frame)
 
@@ -224,8 +225,7 @@ class MavlinkNavEncoder:
         self.spec = spec = NAV_MESSAGES[message]
         if id is not None and "id" not in spec.dtype.names:
             raise ValueError(f"id: {spec.msg_name} has no id field")
-        if baro_rate_hz is not None and spec.source != "baro":
-            raise ValueError(f"baro_rate_hz: {spec.msg_name} carries no barometer reading")
+        refuse_retired(baro_rate_hz=baro_rate_hz)
         if sign_time not in ("wall", "sample"):
             raise ValueError(f"sign_time: 'wall' or 'sample', got {sign_time!r}")
         for name, value in (("sysid", sysid), ("compid", compid), ("seq", seq), ("id", id or 0)):
@@ -237,20 +237,21 @@ class MavlinkNavEncoder:
         self.signing_link = signing_link
         self.sign_time, self.truncate = sign_time, bool(truncate)
         self.saturated = SaturationStats()
-        self._baro = UpdateTicks(baro_rate_hz, "baro_rate_hz")
         self.bytes_per_sample = HEADER_LEN + spec.payload_len + 2 + (SIGNATURE_LEN if signing_link else 0)
 
     def _due(self, samples: Samples) -> np.ndarray:
         if self.spec.source == "gnss":
-            return np.ones(len(samples), bool) if samples.gnss_new is None else samples.gnss_new != 0
+            return new_readings(samples.gnss_new, len(samples))
         if self.spec.source == "baro":
-            return self._baro.due(samples.time_ns)
+            return new_readings(samples.baro_new, len(samples))
         return np.ones(len(samples), bool)
 
     def encode(self, samples: Samples) -> SerialBatch:
         n = len(samples)
-        samples.require_finite(("gnss_new",))
+        samples.require_finite(("gnss_new", "baro_new"))
         due = np.flatnonzero(self._due(samples))
+        if not len(due):        # between readings (most samples of a device): nothing to pack or check
+            return SerialBatch(b"", np.zeros(n + 1, dtype=np.int64))
         # only what is sent is checked (a GNSS message between fixes or a pressure between readings is not)
         samples.require_finite(_INPUTS[self.spec.source] + ("gyro",), None if len(due) == n else due)
         picked = samples if len(due) == n else samples.rows(due)
@@ -284,7 +285,7 @@ _COMMON_OPTIONS = {
     "truncate": "cut trailing zero payload bytes as MAVLink 2 does",
 }
 _EXTRA_OPTIONS = {"gnss": {}, "every": {},
-                  "baro": {"baro_rate_hz": "barometer rate: one message per new reading (None: every sample)"}}
+                  "baro": {"baro_rate_hz": retired_help("baro_rate_hz")}}
 
 for _spec in NAV_MESSAGES.values():
     register(FormatInfo(

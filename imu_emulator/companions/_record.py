@@ -116,9 +116,11 @@ class Held:
         self.last_j = -1                # the update index at the previous block's last sample
         self.last = np.zeros(width)     # the previous block's last output
 
-    def block(self, truth: Truth, measure: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> np.ndarray:
-        """(n, width): `measure(at, j)` gives the readings (len(at), width) of the updates j that happen at this
-        block's samples `at` (called only when some do); each is held until the next."""
+    def block(self, truth: Truth, measure: Callable[[np.ndarray, np.ndarray], np.ndarray]
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """(n, width) outputs and (n,) 1.0 where a new reading arrives (Samples.mag_new / baro_new): `measure(at,
+        j)` gives the readings (len(at), width) of the updates j that happen at this block's samples `at` (called
+        only when some do); each is held until the next."""
         j = update_index(truth.s, truth.rate_hz, self.rate_hz)
         new = changes(j, self.last_j)
         at = np.flatnonzero(new)
@@ -127,7 +129,7 @@ class Held:
             values[at] = measure(at, j[at])
         out = hold(new, values, self.last)
         self.last_j, self.last = int(j[-1]), out[-1].copy()
-        return out
+        return out, new.astype(float)
 
 
 def normals(seed: int, m: int, stream: str, first: int, n: int) -> np.ndarray:

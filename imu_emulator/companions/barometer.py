@@ -88,8 +88,9 @@ class _Barometer(Runner):
         self.held = Held(values["rate_hz"], 3)
 
     def block(self, truth) -> dict[str, np.ndarray]:
-        out = self.held.block(truth, lambda at, ids: self._measure(truth, at, ids))
-        return {"pressure_pa": out[:, 0], "baro_temperature_c": out[:, 1], "differential_pressure_pa": out[:, 2]}
+        out, new = self.held.block(truth, lambda at, ids: self._measure(truth, at, ids))
+        return {"pressure_pa": out[:, 0], "baro_temperature_c": out[:, 1], "differential_pressure_pa": out[:, 2],
+                "baro_new": new}        # 1 where a reading arrives (Samples.baro_new)
 
     def _measure(self, truth, at: np.ndarray, ids: np.ndarray) -> np.ndarray:
         """(len(at), 3) pressure, temperature and differential pressure of the updates ids at samples at."""
@@ -132,7 +133,7 @@ COMPANION = Companion(
     name="barometer",
     description="static pressure of the ICAO standard atmosphere at the true height, with its errors; pitot "
                 "differential pressure",
-    fields={"pressure_pa": 0, "baro_temperature_c": 0, "differential_pressure_pa": 0},
+    fields={"pressure_pa": 0, "baro_temperature_c": 0, "differential_pressure_pa": 0, "baro_new": 0},
     start=_Barometer, validate=validate,
     params=(_param("rate_hz", "Hz", "output data rate; held between updates", 50.0, "`50 Hz`"),
             _param("noise", "Pa", "white noise, 1 sigma per update (the datasheet's RMS noise)", 0.0,

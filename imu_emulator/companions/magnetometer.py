@@ -71,7 +71,8 @@ class _Magnetometer(Runner):
         self.held = Held(values["rate_hz"], 3)
 
     def block(self, truth) -> dict[str, np.ndarray]:
-        return {"mag": self.held.block(truth, lambda at, ids: self._measure(truth, at, ids))}
+        mag, new = self.held.block(truth, lambda at, ids: self._measure(truth, at, ids))
+        return {"mag": mag, "mag_new": new}     # 1 where a reading arrives (Samples.mag_new)
 
     def _measure(self, truth, at: np.ndarray, ids: np.ndarray) -> np.ndarray:
         """(len(at), 3) the readings of the updates ids at samples at, sensor axes."""
@@ -110,7 +111,7 @@ _param = param_maker("magnetometer", "vector3")
 COMPANION = Companion(
     name="magnetometer",
     description="the Earth's field (WMM2025) in the sensor's axes, with hard and soft iron, noise, resolution, range",
-    fields={"mag": 3},
+    fields={"mag": 3, "mag_new": 0},
     start=_Magnetometer, validate=validate,
     params=(_param("rate_hz", "Hz", "output data rate; held between updates", "scalar", 100.0, "`100 Hz`"),
             _param("date_year", "1", "decimal year the field model is evaluated at (WMM2025: 2025-2030)", "scalar",

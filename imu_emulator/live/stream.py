@@ -52,7 +52,13 @@ class Stream:
         self.link = {}              # what the link itself reported, read just before closing it
         self._before = None         # (next k, attitude, increment) of the last sample: see _attitude_change
         self.exact_gyro = False     # the gyro senses the true attitude's rate exactly (run_streams)
-        self.start_ns = 0           # UTC Unix ns of the run's scene time 0 (the streamer sets it before sending)
+        # UTC Unix ns of the unit's power-up: the run's scene time 0 less the link's power-up lead (the streamer
+        # sets it before sending)
+        self.start_ns = 0
+
+    def power_up_lead_ns(self) -> int:
+        """From the unit's power-up to the run's start on this stream's link (Transport.power_up_lead_periods)."""
+        return round(self.transport.power_up_lead_periods * self.period_s * 1e9)
 
     def open(self) -> None:
         self.transport = open_target(self.spec, self.info.kind, self.config.target_options)

@@ -112,7 +112,7 @@ class Streamer:
                 # "now": sample k's time = the wall clock at its ideal deadline.
                 self._time_offset_ns = self._start_unix_ns - int(round(self.t0_s * 1e9))
             for stream in self.streams:     # formats whose wire time counts since start subtract it (Samples.start_ns)
-                stream.start_ns = self._time_offset_ns
+                stream.start_ns = self._time_offset_ns - stream.power_up_lead_ns()
             producer, blocks = Producer(self.sim, self.rate_hz, self.streams, self.total, self.options.loop,
                                          self._time_offset_ns).start()
             # RT only for paced runs: speed 0 never sleeps, and a busy SCHED_FIFO loop starves the machine.

@@ -102,12 +102,16 @@ BIAS = Group("bias_truth", True, True, ("accel_bias", "gyro_bias"),
 
 
 #: the companion sensors' outputs (imu_emulator.companions; the ROS 2 writer reads these names)
-MAGNETOMETER = Group("magnetometer", True, False, ("mag",),
-                     _xyz("mag_", "gauss", "magnetic field measured in the sensor frame"), in_companion=True)
-BAROMETER = Group("barometer", True, False, ("pressure_pa", "baro_temperature_c", "differential_pressure_pa"),
+MAGNETOMETER = Group("magnetometer", True, False, ("mag", "mag_new"),
+                     _xyz("mag_", "gauss", "magnetic field measured in the sensor frame")
+                     + (Column("mag_new", "", "1 where a new magnetometer reading arrived at this sample"),),
+                     in_companion=True, widths=(3, 1))
+BAROMETER = Group("barometer", True, False, ("pressure_pa", "baro_temperature_c", "differential_pressure_pa",
+                                             "baro_new"),
                   (Column("pressure_pa", "Pa", "static pressure measured"),
                    Column("baro_temperature_c", "degC", "the barometer's temperature"),
-                   Column("differential_pressure_pa", "Pa", "pitot differential pressure measured (still air)")),
+                   Column("differential_pressure_pa", "Pa", "pitot differential pressure measured (still air)"),
+                   Column("baro_new", "", "1 where a new barometer reading arrived at this sample")),
                   in_companion=True)
 #: the receiver's solution and the quality figures it reports with it (imu_emulator.companions.gnss)
 GNSS = Group("gnss", True, False, ("gnss_llh", "gnss_velocity_ned", "gnss_fix", "gnss_new", "gnss_satellites",

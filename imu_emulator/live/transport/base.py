@@ -66,6 +66,10 @@ class Transport:
 
     # The stream's sample period, s, set when the stream opens the link (a link that sets the pace uses it).
     sample_period_s: float | None = None
+    # Sample periods from the unit's power-up to the run's start: fields counting since power-up (Samples.start_ns)
+    # then read this many periods at scene time 0. 0 for a part (it counts from the run's start); a flight stack
+    # that takes its clock from the sensor time stamps (PX4 SITL) gets 1, so the first stamp is not 0.
+    power_up_lead_periods = 0
     # Whether the other end sets the pace (a flight stack's simulator interface): then the streaming loop calls
     # `await_turn` before each sample of this link.
     sets_pace = False

@@ -7,7 +7,8 @@ sending sensor data which will set the time", and from then on one HIL_ACTUATOR_
 lockstep) each time actuator_outputs_sim is published, after px4_lockstep_wait_for_components(); it also asks for
 HIL_STATE_QUATERNION with a COMMAND_LONG (a MAVLink device on this link answers it DENIED: no ground truth is
 streamed). Every HIL_SENSOR with id 0 sets PX4's clock to its time_usec (px4_clock_settime): the sensor time
-stamps ARE the stack's time, so lockstep needs only that the simulator wait for the stack.
+stamps ARE the stack's time, so lockstep needs only that the simulator wait for the stack. The first stamp is one
+sample period, never 0 (power_up_lead_periods): the unit's power-up is a period before the run's start.
 
 Lockstep (--speed 0, the target's blocking mode): until the stack's first HIL_ACTUATOR_CONTROLS on a connection
 the samples go at the scene's rate by the wall clock (the stack publishes outputs only once its modules have run
@@ -51,6 +52,12 @@ _INPUT_KEPT = 1 << 16
 
 class Px4SimTransport(Transport):
     sets_pace = True
+    # PX4's clock IS the HIL_SENSOR stamps (handle_message_hil_sensor: px4_clock_settime(CLOCK_MONOTONIC,
+    # time_usec), then update_sensors(hrt_absolute_time(), ...); SimulatorMavlink.cpp at the commit above), and 0
+    # there is uORB's "never published" (its send_controls sends only once actuator_outputs.timestamp > 0) and a
+    # zero interval for the first FIFO sample (dt = time - the last stamp). The unit powers up one sample period before scene time 0, as a physics
+    # simulator's first sensor message comes after its first step: time_usec of sample k is t_k - t_start + period.
+    power_up_lead_periods = 1
 
     def __init__(self, spec: TargetSpec, options: TargetOptions):
         self.host, self.port = spec.path, spec.port
