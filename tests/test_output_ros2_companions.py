@@ -20,8 +20,12 @@ NAMES = ("mag_x", "mag_y", "mag_z", "pressure_pa", "gnss_lat_deg", "gnss_lon_deg
          "gnss_new", "gnss_horizontal_accuracy_m", "gnss_vertical_accuracy_m")
 
 
-def _layout(per_imu: bool):
-    group = Group("companions", per_imu, False, KEYS, tuple(Column(name, "", name) for name in NAMES))
+FLAGS = ("mag_new", "baro_new")     # the companions' new-reading columns: without them, a reading every sample
+
+
+def _layout(per_imu: bool, flags: bool = False):
+    keys, names = (KEYS + FLAGS, NAMES + FLAGS) if flags else (KEYS, NAMES)
+    group = Group("companions", per_imu, False, keys, tuple(Column(name, "", name) for name in names))
 
     @dataclass(frozen=True)
     class WithCompanions(Layout):
@@ -42,16 +46,19 @@ def _block(k0, n, n_imu, per_imu, rng):
     block.gnss_new = (rng.random(size=shape) < 0.2).astype(float)
     block.gnss_horizontal_accuracy_m = rng.uniform(0.5, 3, size=shape)
     block.gnss_vertical_accuracy_m = rng.uniform(1, 5, size=shape)
+    block.mag_new = (rng.random(size=shape) < 0.5).astype(float)
+    block.baro_new = (rng.random(size=shape) < 0.25).astype(float)
     return block
 
 
+@pytest.mark.parametrize("flags", [False, True], ids=["every-sample", "new-readings"])
 @pytest.mark.parametrize("per_imu", [True, False])
-def test_companion_topics_from_their_columns(tmp_path, per_imu):
+def test_companion_topics_from_their_columns(tmp_path, per_imu, flags):
     rng = np.random.default_rng(7)
     names = ["a", "b"]
     blocks = [_block(0, 50, 2, per_imu, rng), _block(50, 30, 2, per_imu, rng)]
     path = tmp_path / "c.mcap"
-    with McapWriter(path, Contents(names, _layout(per_imu), frame="NED")) as writer:
+    with McapWriter(path, Contents(names, _layout(per_imu, flags), frame="NED")) as writer:
         for block in blocks:
             writer.write(block)
     topics = read_bag(path)
@@ -62,15 +69,20 @@ def test_companion_topics_from_their_columns(tmp_path, per_imu):
             return np.concatenate([getattr(b, key)[m] if per_imu else getattr(b, key) for b in blocks])
         ns = DEFAULT_EPOCH_NS + np.arange(80) * 10_000_000
         frame = name or "base_link"
+        # with the flag columns, a message per new reading only (a driver publishes at the sensor's rate)
+        at_mag = np.flatnonzero(column("mag_new")) if flags else np.arange(80)
+        at_baro = np.flatnonzero(column("baro_new")) if flags else np.arange(80)
+        assert not flags or (20 < len(at_mag) < 60 and 5 < len(at_baro) < 40)
         mag = topics[f"{prefix[name]}/mag"]
-        assert [t for t, _ in mag] == list(ns) and {d.header.frame_id for _, d in mag} == {frame}
+        assert [t for t, _ in mag] == list(ns[at_mag]) and {d.header.frame_id for _, d in mag} == {frame}
         # gauss -> tesla (1 G = 1e-4 T); NED scene: sensor FRD -> FLU negates y and z
-        want = column("mag") * 1e-4 * np.array([1.0, -1.0, -1.0])
+        want = column("mag")[at_mag] * 1e-4 * np.array([1.0, -1.0, -1.0])
         np.testing.assert_array_equal([[d.magnetic_field.x, d.magnetic_field.y, d.magnetic_field.z]
                                        for _, d in mag], want)
         assert not any(d.magnetic_field_covariance.any() for _, d in mag)
         pressure = topics[f"{prefix[name]}/pressure"]
-        np.testing.assert_array_equal([d.fluid_pressure for _, d in pressure], column("pressure_pa"))
+        assert [t for t, _ in pressure] == list(ns[at_baro])
+        np.testing.assert_array_equal([d.fluid_pressure for _, d in pressure], column("pressure_pa")[at_baro])
         assert {d.variance for _, d in pressure} == {0.0}
         fixes = topics[f"{prefix[name]}/fix" if per_imu else "/gnss/fix"]
         new = np.flatnonzero(column("gnss_new"))

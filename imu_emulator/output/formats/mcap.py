@@ -9,8 +9,9 @@ where the scene's lever_arm or mounting effect is off, as the samples then carry
 on the Earth `/truth/navsatfix` (WGS-84 degrees and ellipsoidal height; STATUS_FIX, COVARIANCE_TYPE_KNOWN with
 zeros: the truth has no error) and `/truth/odometry_ecef` (frame_id "earth", ECEF; twist the Earth-referenced
 velocity and the body's rate w.r.t. the Earth, omega_eb). Companion sensors, when the run has their columns:
-`/imu/<name>/mag` sensor_msgs/MagneticField (tesla, the IMU's frame), `/imu/<name>/pressure`
-sensor_msgs/FluidPressure (Pa), `/imu/<name>/fix` sensor_msgs/NavSatFix of the GNSS receiver, one per new
+`/imu/<name>/mag` sensor_msgs/MagneticField (tesla, the IMU's frame) and `/imu/<name>/pressure`
+sensor_msgs/FluidPressure (Pa), one per new reading (mag_new, baro_new: at the sensor's own rate, as a driver
+publishes them; every sample for a run without those columns), `/imu/<name>/fix` sensor_msgs/NavSatFix of the GNSS receiver, one per new
 solution (gnss_new), STATUS_NO_FIX or STATUS_FIX from gnss_fix, SERVICE_GPS, a diagonal covariance from its
 1-sigma accuracies (COVARIANCE_TYPE_DIAGONAL_KNOWN; UNKNOWN without them). Shared (not per IMU) companion
 columns go to `/mag`, `/pressure`, `/gnss/fix` in base_link.
@@ -51,6 +52,7 @@ TF_STATIC_QOS = ("- history: 3\n  depth: 0\n  reliability: 1\n  durability: 1\n 
                  "  avoid_ros_namespace_conventions: false\n")
 #: the companion columns (written by the effects that make them; names shared with the other formats)
 MAG, PRESSURE = ("mag_x", "mag_y", "mag_z"), "pressure_pa"
+MAG_NEW, BARO_NEW = "mag_new", "baro_new"
 GNSS = ("gnss_lat_deg", "gnss_lon_deg", "gnss_h_m")
 GNSS_FIX, GNSS_NEW = "gnss_fix", "gnss_new"
 GNSS_ACCURACY = ("gnss_horizontal_accuracy_m", "gnss_vertical_accuracy_m")
@@ -127,12 +129,14 @@ class McapWriter(FinishOnExit):
             self._odometry_ecef = bag.channel("/truth/odometry_ecef", msg.ODOMETRY, msg.DEFINITIONS[msg.ODOMETRY],
                                               msg.odometry("earth", self.earth_axes.base_link))
         # companions: per IMU -> a topic per IMU, shared -> one topic in base_link
+        # a reading per new one where the run says which are new (mag_new, baro_new), as a driver publishes
+        # them; every sample where it does not (dense, with the IMU messages)
         self._companions = []
-        for kind, names, topic, schema, layout in (
-                ("mag", MAG, "mag", msg.MAGNETIC_FIELD, msg.magnetic_field),
-                ("pressure", (PRESSURE,), "pressure", msg.FLUID_PRESSURE, msg.fluid_pressure)):
+        for kind, names, new, topic, schema, layout in (
+                ("mag", MAG, MAG_NEW, "mag", msg.MAGNETIC_FIELD, msg.magnetic_field),
+                ("pressure", (PRESSURE,), BARO_NEW, "pressure", msg.FLUID_PRESSURE, msg.fluid_pressure)):
             if all(n in columns for n in names):
-                self._companions.append((kind, names, self._companion_channels(
+                self._companions.append((kind, names, new if new in columns else None, self._companion_channels(
                     columns[names[0]][0], topic, schema, layout)))
         self._gnss = None
         if all(n in columns for n in GNSS + (GNSS_NEW,)):
@@ -143,7 +147,7 @@ class McapWriter(FinishOnExit):
                 shared_topic="/gnss/fix"))
         self._dense = self._imus + ([self._odometry] if self._odometry else []) + (
             [self._fix_truth, self._odometry_ecef] if self.earth else []) + [
-            c for _, _, channels in self._companions for c in channels]
+            c for _, _, new, channels in self._companions if new is None for c in channels]
 
     def _companion_channels(self, per_imu: bool, topic: str, schema: str, layout, shared_topic: str | None = None):
         from imu_emulator.output.ros2.messages import DEFINITIONS
@@ -261,20 +265,41 @@ class McapWriter(FinishOnExit):
         return added
 
     def _write_companions(self, rows, block: SampleBlock, scene_ns, imu_ns) -> None:
+        """MagneticField and FluidPressure: in the dense rows (every sample), or sparse rows of their own at
+        each new reading."""
         from imu_emulator.output.columns import named_columns
         if not self._companions:
             return
         columns = named_columns(block, self.layout)
-        for kind, names, channels in self._companions:
-            for m, channel in enumerate(channels):
-                r = rows[f"c{channel.id}"]
-                per_imu = columns[names[0]][0]
-                _stamp(r, imu_ns[m] if per_imu else scene_ns)
-                values = [columns[n][1][m] if per_imu else columns[n][1] for n in names]
+        for kind, names, new, channels in self._companions:
+            for m, channel, take, at, stamps in self._readings(columns, names[0], new, channels, scene_ns, imu_ns):
+                if new is None:
+                    r = rows[f"c{channel.id}"]
+                else:
+                    sparse = self._bag.rows([channel], len(at), keep=False)
+                    r = sparse[f"c{channel.id}"]
+                _stamp(r, stamps)
+                values = [take(n)[at] for n in names]
                 if kind == "mag":       # gauss in the sensor frame -> tesla in the bag's IMU axes
                     r["magnetic_field"] = self.axes.body_vectors(np.stack(values, axis=-1) * GAUSS_TO_TESLA)
                 else:
                     r["fluid_pressure"] = values[0]
+                if new is not None:
+                    self._bag.write_rows(sparse)
+
+    @staticmethod
+    def _readings(columns, first: str, new: str | None, channels, scene_ns, imu_ns):
+        """Per channel with something to write: (m, channel, take(column) -> its values, the samples to write,
+        their stamps). A companion column is per IMU (one channel each) or shared (one channel); `new` names the
+        column flagging new readings (None: every sample)."""
+        per_imu = columns[first][0]
+        for m, channel in enumerate(channels):
+            def take(name, m=m):
+                return columns[name][1][m] if per_imu else columns[name][1]
+            at = slice(None) if new is None else np.flatnonzero(take(new) != 0)
+            if new is not None and not len(at):
+                continue
+            yield m, channel, take, at, (imu_ns[m] if per_imu else scene_ns)[at]
 
     def _write_fixes(self, block: SampleBlock, scene_ns, imu_ns) -> None:
         """A NavSatFix per new receiver solution (gnss_new), sparse: rows of their own."""
@@ -282,16 +307,10 @@ class McapWriter(FinishOnExit):
         from imu_emulator.output.ros2.messages import STATUS_FIX, STATUS_NO_FIX
         columns = named_columns(block, self.layout)
         accuracy, channels = self._gnss
-        per_imu = columns[GNSS[0]][0]
-        for m, channel in enumerate(channels):
-            def take(name):
-                return columns[name][1][m] if per_imu else columns[name][1]
-            new = np.flatnonzero(take(GNSS_NEW) != 0)
-            if not len(new):
-                continue
+        for m, channel, take, new, stamps in self._readings(columns, GNSS[0], GNSS_NEW, channels, scene_ns, imu_ns):
             rows = self._bag.rows([channel], len(new), keep=False)
             r = rows[f"c{channel.id}"]
-            _stamp(r, (imu_ns[m] if per_imu else scene_ns)[new])
+            _stamp(r, stamps)
             r["status"] = np.where(take(GNSS_FIX)[new] >= 2, STATUS_FIX, STATUS_NO_FIX)
             r["position"] = np.stack([take(n)[new] for n in GNSS], axis=-1)
             if accuracy:
