@@ -21,7 +21,6 @@ import importlib.util
 import re
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +30,7 @@ sys.path.insert(0, str(TOOLS.parent))
 sys.path.insert(0, str(TOOLS))
 
 from bench_effects import FULL, circle  # noqa: E402
+from bench_normals import interleave, report  # noqa: E402
 
 from imu_emulator.codegen.generate import generate_source  # noqa: E402
 from imu_emulator.codegen.plan import EffectPlan  # noqa: E402
@@ -110,19 +110,9 @@ def main() -> None:
             if label.startswith("chunk") and not (np.array_equal(acc[label], acc["kernel"])
                                                   and np.array_equal(gyro[label], gyro["kernel"])):
                 raise SystemExit(f"error: {label} does not reproduce the kernel's output")
-        times = {label: [] for label in modules}
-        for r in range(1, args.rounds + 1):
-            for label in modules:
-                start = time.thread_time_ns()
-                call(label, r * N)
-                times[label].append((time.thread_time_ns() - start) / N)
-    base = np.array(times["kernel"])
-    print(f"full error model kernel, {N} samples a call, {args.rounds} interleaved rounds, thread CPU ns/sample")
-    for label, values in times.items():
-        v = np.array(values)
-        print(f"  {label:24s} min {v.min():6.1f}  median {np.median(v):6.1f}   per-round ratio to kernel: "
-              f"min {np.min(v / base):.3f} median {np.median(v / base):.3f} max {np.max(v / base):.3f}")
-
+        times = interleave({label: (lambda r, label=label: call(label, r * N)) for label in modules}, args.rounds, N)
+    report(times, "kernel", f"full error model kernel, {N} samples a call, {args.rounds} interleaved rounds, "
+           "thread CPU ns/sample")
 
 if __name__ == "__main__":
     main()

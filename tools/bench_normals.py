@@ -124,6 +124,28 @@ def two_per_hash(keys, s0, n, sig, out):
             walk[a] += sig[a] * w
 
 
+def interleave(calls: dict, rounds: int, n: int) -> dict[str, list[float]]:
+    """Thread CPU ns per sample of each call(round) of `calls` (n samples each), rounds 1.. interleaved."""
+    times = {name: [] for name in calls}
+    for r in range(1, rounds + 1):
+        for name, call in calls.items():
+            start = time.thread_time_ns()
+            call(r)
+            times[name].append((time.thread_time_ns() - start) / n)
+    return times
+
+
+def report(times: dict, base: str, title: str) -> None:
+    """Print min / median and each variant's per-round ratio to the variant `base`."""
+    ref = np.array(times[base])
+    width = max(map(len, times))
+    print(title)
+    for name, values in times.items():
+        v = np.array(values)
+        print(f"  {name:{width}s} min {v.min():6.1f}  median {np.median(v):6.1f}   per-round ratio to {base}: "
+              f"min {np.min(v / ref):.3f} median {np.median(v / ref):.3f} max {np.max(v / ref):.3f}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--rounds", type=int, default=11)
@@ -136,19 +158,9 @@ def main() -> None:
     for name, run in variants.items():       # compile, and check the chunk pass draws the same numbers
         run(keys, 5, n, sig, outs[name])
     assert np.array_equal(outs["chunk pass"], outs["scalar"])
-    times = {name: [] for name in variants}
-    for r in range(args.rounds):
-        for name, run in variants.items():
-            start = time.thread_time_ns()
-            run(keys, 5 + (r + 1) * n, n, sig, outs[name])
-            times[name].append((time.thread_time_ns() - start) / n)
-    base = np.array(times["scalar"])
-    print(f"{n} samples x 12 normals, {args.rounds} interleaved rounds, thread CPU ns/sample")
-    for name, values in times.items():
-        v = np.array(values)
-        print(f"  {name:13s} min {v.min():6.1f}  median {np.median(v):6.1f}   per-round ratio to scalar: "
-              f"min {np.min(v / base):.3f} median {np.median(v / base):.3f} max {np.max(v / base):.3f}")
-
+    times = interleave({name: (lambda r, run=run, name=name: run(keys, 5 + r * n, n, sig, outs[name]))
+                        for name, run in variants.items()}, args.rounds, n)
+    report(times, "scalar", f"{n} samples x 12 normals, {args.rounds} interleaved rounds, thread CPU ns/sample")
 
 if __name__ == "__main__":
     main()
