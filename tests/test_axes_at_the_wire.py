@@ -8,6 +8,7 @@ Manual MT0605P.E §4.2.3 tabulates yaw for a unit pointing north: 90 deg in ENU,
 x forward, y left, z up (acceleration z = +g at rest). scipy's Rotation checks the re-expression itself.
 The same motion written as an ENU and as a NED scene gives identical bytes on every wire."""
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -292,3 +293,114 @@ def test_xsens_device_follows_the_coordinate_system_a_driver_configures(setting,
         w, x, y, z = packet.fields["quat"]
         rpy = Rotation.from_quat([x, y, z, w]).as_euler("ZYX", degrees=True)[::-1]
         np.testing.assert_allclose(np.mod(rpy - XSENS_RPY[setting] + 180.0, 360.0) - 180.0, 0.0, atol=1e-4)
+
+
+# --- the sensor's errors are drawn in its own axes (issue 24) --------------------------------------
+
+# The moving scene with every random error term of the IMU, one seed: the draws belong to the part's
+# forward-right-down axes, so the ENU scene's noise is the NED scene's seen in forward-left-up axes. Per-axis
+# magnitudes keep their axis (y is the part's lateral axis in both habits); signed vectors of the scene
+# (a constant bias, a mounting, a lever arm) are in the scene's axes, as the lever arm above.
+ERRORS = (Path(__file__).parent / "data" / "random_errors.toml").read_text()
+ERROR_EFFECTS = "noise = true\nbias_instability = true\nrandom_walk = true\nbias = true\nvibration = true\n"
+
+
+def _with_errors(text: str) -> str:
+    """`text` (a scene ending in its [effects] table) with a seed, ERRORS' tables added to its one IMU and
+    ERROR_EFFECTS on."""
+    scene, _, imu = text.partition("[[imu]]")
+    imu, _, effects_table = imu.partition("[effects]")
+    return (scene.replace("[scene]\n", "[scene]\nseed = 2024\n") + "[[imu]]" + imu + ERRORS + "\n[effects]"
+            + effects_table + ERROR_EFFECTS)
+
+
+@pytest.fixture(scope="module")
+def noisy(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("noisy")
+    return {frame: _simulate(tmp, _with_errors(text), frame, increments=2) for frame, text in SCENES.items()}
+
+
+def test_enu_and_ned_scenes_with_random_errors_give_the_same_bytes_on_every_wire(noisy):
+    """Noise, bias instability (flicker poles and a Gauss-Markov bias), random walk, turn-on bias and random
+    vibration (linear and angular PSD lines) with one seed: the same forward-right-down samples, to the last bit,
+    and the same bytes on every wire (the attitude, turned by the angular vibration, compared as above)."""
+    frd = {frame: _stream_samples(scene, block, 0, device=True) for frame, (scene, block) in noisy.items()}
+    (_, enu), (_, ned) = noisy["ENU"], noisy["NED"]
+    # the errors are there: the realized biases are far from 0 and differ per axis
+    assert np.all(np.abs(ned.truth["gyro_bias"][0]).max(axis=0) > 1e-4)
+    for name in ("accel", "gyro", "delta_theta", "delta_velocity"):
+        np.testing.assert_array_equal(getattr(frd["ENU"], name), getattr(frd["NED"], name), err_msg=name)
+    # the realized biases too, the scene's axes being FLU and FRD
+    for name in ("gyro_bias", "accel_bias"):
+        np.testing.assert_array_equal(enu.truth[name] * [1.0, -1.0, -1.0], ned.truth[name], err_msg=name)
+    angle = (Rotation.from_quat(frd["ENU"].quat[:, [1, 2, 3, 0]]).inv()
+             * Rotation.from_quat(frd["NED"].quat[:, [1, 2, 3, 0]])).magnitude()
+    assert angle.max() < 1e-12
+    sensors = {frame: dataclasses.replace(samples, quat=None, euler=None, attitude_change=None)
+               for frame, samples in frd.items()}
+    different = [name for name in firmware_protocols.formats()
+                 if _wire(name, sensors["ENU"]) != _wire(name, sensors["NED"])]
+    assert not different, f"ENU and NED scenes differ on {different}"
+    # MAVLink HIL_SENSOR through pymavlink: the NED scene's values (FRD already), decoded
+    data = firmware_protocols.create_encoder("mavlink-hil-sensor").encode(sensors["ENU"]).data
+    messages = mavlink2.MAVLink(None).parse_buffer(data)
+    got = np.array([(m.xgyro, m.ygyro, m.zgyro) for m in messages])
+    np.testing.assert_allclose(got, ned.gyro[0], rtol=1e-7, atol=1e-9)
+
+
+NOISE_ONLY = """
+[scene]
+rate_hz = 400
+duration_s = 50.0
+frame = "{frame}"
+seed = 11
+
+[trajectory]
+shape = "static"
+position_m = [0.0, 0.0, 0.0]
+
+[[imu]]
+name = "imu0"
+
+[imu.gyro]
+noise_density = [0.001, 0.002, 0.004]
+
+[imu.accel]
+noise_density = [0.003, 0.0005, 0.0015]
+
+[effects]
+noise = true
+"""
+
+
+@pytest.fixture(scope="module")
+def noise_only(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("noise")
+    return {frame: _simulate(tmp, NOISE_ONLY.format(frame=frame), frame) for frame in ("ENU", "NED")}
+
+
+def test_per_axis_noise_densities_apply_to_the_parts_axes(noise_only):
+    """README "Sensor errors": a density given per axis x, y, z is the part's forward, lateral and vertical axis
+    in any scene frame, and the draws are the FRD axes' stream: the NED scene's gyro y at rest is
+    +N_y sqrt(f_s) times the stream "noise.gyro.y" (counter_rng, keyed by seed, IMU, name), the ENU scene's the
+    negative of it. Each axis' sample variance against N^2 f_s within the chi-square interval (n - 1 degrees of
+    freedom, two-sided 1e-4), on the wire's FRD axes."""
+    from scipy.stats import chi2
+
+    from imu_emulator.numerics.counter_rng import normals, stream_key
+    rate = 400.0
+    densities = {"gyro": np.array([0.001, 0.002, 0.004]), "accel": np.array([0.003, 0.0005, 0.0015])}
+    for frame, (scene, block) in noise_only.items():
+        n = scene.n_samples
+        frd = _stream_samples(scene, block, 0)
+        for triad in ("gyro", "accel"):
+            values = getattr(frd, triad)
+            for axis, name in enumerate("xyz"):
+                draws = normals(np.uint64(stream_key(11, 0, f"noise.{triad}.{name}")), 0, n)
+                np.testing.assert_array_equal(values[:, axis], densities[triad][axis] * np.sqrt(rate) * draws)
+                sign = -1.0 if frame == "ENU" and axis else 1.0
+                np.testing.assert_array_equal(getattr(block, triad)[0][:, axis], sign * values[:, axis])
+                var = np.var(values[:, axis], ddof=1)
+                want = densities[triad][axis] ** 2 * rate
+                lo, hi = chi2.ppf([5e-5, 1 - 5e-5], n - 1) / (n - 1)
+                assert lo < var / want < hi, (frame, triad, name, var / want)

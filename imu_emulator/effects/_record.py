@@ -157,6 +157,15 @@ class EmitContext:
         return self.plan.add_state_block(self.m, [
             lambda draw, initial=initial: initial(lambda s, c: draw(f"{prefix}.{s}", c)) for initial in initials])
 
+    def frd_sign(self, axis: int) -> float:
+        """The sign that takes a draw on axis `axis` of the part's own forward-right-down axes into this scene's
+        body and sensor axes: -1.0 for y and z in an ENU scene (forward-left-up axes, a half turn about x), else 1.0
+        (NED, ECEF and ECI scenes' are FRD). Random terms are drawn in FRD and turned by it, so one motion written
+        as an ENU and as a NED scene carries the same noise to the wire (issue 24), as the magnetometer's does.
+        Per-axis magnitudes (noise densities, standard deviations) keep their axis: x, y, z are the same axes of
+        the part in both habits, only their direction differs."""
+        return -1.0 if axis and self.scene.frame == "ENU" else 1.0
+
     def number(self, value: float) -> str:
         """Source for a number of the scene (a parameter, or one computed from parameters and the rate): a
         run-time parameter of the kernel, never a literal, so that scenes differing only in it share a kernel.

@@ -12,9 +12,10 @@ def emit(ctx) -> list[str]:
             terms = [ctx.number(constant[axis])] if constant[axis] else []
             if spread[axis]:
                 name = f"{triad}.{AXES[axis]}"
-                # the state holds the standard normal drawn for this run; its scale is in the source
+                # the state holds the standard normal drawn for this run, on the part's FRD axis; its scale (and
+                # the sign into the scene's axes, EmitContext.frd_sign) is a run-time parameter
                 z = ctx.state(f"turn_on[{name}]", lambda draw, name=name: draw(name, 0))
-                terms.append(f"{ctx.number(spread[axis])} * {z}")
+                terms.append(f"{ctx.number(spread[axis] * ctx.frd_sign(axis))} * {z}")
             if terms:
                 lines += ctx.add_bias(triad, axis, " + ".join(terms))
     return lines

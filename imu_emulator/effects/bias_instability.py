@@ -96,7 +96,7 @@ def emit(ctx) -> list[str]:
                 slow.append((name, sigma, grids[name], *_coefficients(sigma, tau, grids[name] * ctx.dt)))
         if not slow:
             if terms:
-                adds += ctx.add_bias(triad, axis, " + ".join(terms))
+                adds += ctx.add_bias(triad, axis, _in_scene_axes(ctx, axis, terms))
             continue
 
         # the sums sa, sb of the slow processes at m-knots i = s // m and i + 1; each process keeps its values xa,
@@ -134,7 +134,7 @@ def emit(ctx) -> list[str]:
             nexts.append(f"({xa} + ({xb} - {xa}) * {ctx.var(f'w{m_p}')})")
         sums.append(f"{sb} = {' + '.join(nexts)}")
         terms.append(f"({sa} + ({sb} - {sa}) * ({r} * {1.0 / m!r}))")
-        adds += ctx.add_bias(triad, axis, " + ".join(terms))
+        adds += ctx.add_bias(triad, axis, _in_scene_axes(ctx, axis, terms))
     if not shift:
         return adds + after
     knot = shift + _nested(sorted(advance), advance, m)
@@ -142,6 +142,14 @@ def emit(ctx) -> list[str]:
     knot += [f"{ctx.var(f'w{m_p}')} = (s % {m_p} + {m}) * {1.0 / m_p!r}" for m_p in sorted(advance) if m_p != m]
     knot += sums
     return [f"{r} = s % {m}", f"if {r} == 0 and s > 0:", *("    " + line for line in knot)] + adds + after
+
+
+def _in_scene_axes(ctx, axis: int, terms: list[str]) -> str:
+    """The axis' processes summed, in the scene's sensor axes: they are drawn on the part's forward-right-down
+    axis (EmitContext.frd_sign), and every process is linear in its draws, so negating the sum is negating each
+    draw, exactly (IEEE rounding is symmetric)."""
+    total = " + ".join(terms)
+    return total if ctx.frd_sign(axis) > 0 else f"-({total})"
 
 
 def _nested(levels: list[int], advance: dict, m: int) -> list[str]:

@@ -27,7 +27,8 @@ def emit(ctx) -> list[str]:
         out = TRIADS[triad][1]
         for axis, density in enumerate(ctx.value(f"imu.{triad}.noise_density")):
             if density:
-                sigma = per_sample_sigma(density, ctx.scene.rate_hz)
+                # drawn in the part's FRD axes (EmitContext.frd_sign): the sign rides on the run-time parameter
+                sigma = per_sample_sigma(density, ctx.scene.rate_hz) * ctx.frd_sign(axis)
                 lines.append(f"{out}{AXES[axis]} += {ctx.number(sigma)} * {ctx.normal(f'{triad}.{AXES[axis]}')}")
     return lines
 

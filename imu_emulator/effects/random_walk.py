@@ -12,9 +12,10 @@ def emit(ctx) -> list[str]:
         for axis, k in enumerate(ctx.value(f"imu.{triad}.random_walk")):
             if k:
                 name = f"{triad}.{AXES[axis]}"
+                # the walk's steps are drawn in the part's FRD axes (EmitContext.frd_sign)
                 walk = ctx.state(f"walk[{name}]", lambda draw: 0.0)
                 lines += ctx.add_bias(triad, axis, walk)
-                lines.append(f"{walk} += {ctx.number(k * math.sqrt(ctx.dt))} * {ctx.normal(name)}")
+                lines.append(f"{walk} += {ctx.number(k * math.sqrt(ctx.dt) * ctx.frd_sign(axis))} * {ctx.normal(name)}")
     return lines
 
 

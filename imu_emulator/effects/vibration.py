@@ -96,7 +96,10 @@ def emit(ctx) -> list[str]:
                       f"    {sn}, {cs} = sincos_cycles(prm[{f} + {i}] * t + state[{base} + {i}])"]
             for order, (target, sign) in enumerate(targets):
                 # integral number `order` of A sin: A / w^order times sin, -cos, -sin
-                amp = ctx.constant(f"A{kind}{order}{a}", [ai / (2.0 * math.pi * fi) ** order for fi, ai in found])
+                # the random lines are drawn on the part's forward-right-down axis: the sign into the scene's
+                # body axes (EmitContext.frd_sign) rides on the amplitudes, so an ENU and a NED scene vibrate alike
+                amp = ctx.constant(f"A{kind}{order}{a}", [ctx.frd_sign(axis) * ai / (2.0 * math.pi * fi) ** order
+                                                         for fi, ai in found])
                 lines.append(f"    {target[axis]} {sign}= prm[{amp} + {i}] * {sn if order % 2 == 0 else cs}")
     if linear:
         d = [disp[i] if i in linear else "0.0" for i in range(3)]
