@@ -7,6 +7,9 @@ the cache, and called on the same Simulation's arguments, interleaved A, B, A, B
 varies 2-3x between runs: only the ratio inside one run means something). Thread CPU time of the kernel call
 alone; min / median / max ns per sample, the ratio of medians.
 
+With expressions whose numbers the kernel takes at run time (imu_emulator.numerics.expressions.lift), a third
+variant: the source with those numbers as literals sympy folded into the derivatives (as generated before).
+
 Part 2, a batch: `--runs N` realizations of a scene with --vary draws of sensor parameters, in this process
 (--workers 0) in a fresh cache: how many kernels were compiled (cache entries), the first load's time, the
 batch's wall and CPU time.
@@ -17,6 +20,7 @@ batch's wall and CPU time.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib.util
 import os
 import re
@@ -59,6 +63,20 @@ def baked(source: str, values) -> str:
                   source, flags=re.M)
 
 
+def literal_expressions(scene, attitude: bool, truth: bool) -> str:
+    """The source as the generator wrote it before the expressions' numbers were lifted (issue 25 (a)): sympy folds
+    them with the derivatives' factors into literals (5*cos(0.3 t) -> a = -0.45 cos(..)); the motion's slots in
+    `prm` are then unread."""
+    from imu_emulator.codegen.generate import generate_source
+    from imu_emulator.motion import code
+    original = code.motion_code
+    code.motion_code = lambda *a, slots=None, **k: original(*a, **k)
+    try:
+        return generate_source(scene, attitude=attitude, truth=truth)
+    finally:
+        code.motion_code = original
+
+
 def bench_kernel(scene_path: str, rounds: int, samples: int) -> None:
     from imu_emulator import load_scene
     from imu_emulator.codegen.generate import generate_source
@@ -66,13 +84,19 @@ def bench_kernel(scene_path: str, rounds: int, samples: int) -> None:
     from imu_emulator.runtime.simulation import Simulation
 
     scene = load_scene(scene_path)
+    # long enough for `samples` (the duration is a run-time number: the source is the same)
+    scene = dataclasses.replace(scene, duration_s=max(scene.duration_s, samples / scene.rate_hz))
     sim = Simulation(scene, attitude=False)
     source = generate_source(scene, attitude=False, truth=False)
     values = sim._plan.param_values()
     kernels._realize_runtime()
     with tempfile.TemporaryDirectory() as tmp:
         variants = {}
-        for name, text in (("parametric", source), ("baked", baked(source, values))):
+        literal = literal_expressions(scene, attitude=False, truth=False)
+        for name, text in (("parametric", source), ("baked", baked(source, values)),
+                           ("literal-expressions", literal if literal != source else None)):
+            if text is None:     # no expression numbers in this scene: the same source as parametric
+                continue
             start = time.process_time()
             variants[name] = _compile(text, Path(tmp), f"bench_parametric_{name}")
             sim.kernel = variants[name]
@@ -92,10 +116,12 @@ def bench_kernel(scene_path: str, rounds: int, samples: int) -> None:
                 sim.block(0, n)
                 spent[name].append(timer["ns"] / n)
         for name, values_ns in spent.items():
-            print(f"{name:>10}: {min(values_ns):6.1f} / {statistics.median(values_ns):6.1f} / "
+            print(f"{name:>19}: {min(values_ns):6.1f} / {statistics.median(values_ns):6.1f} / "
                   f"{max(values_ns):6.1f} ns per sample (min / median / max of {rounds}, {n} samples each)")
-        ratio = statistics.median(spent["parametric"]) / statistics.median(spent["baked"])
-        print(f"parametric / baked (medians): {ratio:.3f}")
+        for other in variants:
+            if other != "parametric":
+                ratio = statistics.median(spent["parametric"]) / statistics.median(spent[other])
+                print(f"parametric / {other} (medians): {ratio:.3f}")
 
 
 def bench_batch(scene_path: str, runs: int, vary: list[str]) -> None:

@@ -7,8 +7,9 @@ contributes no line, so it is absent from the machine code rather than multiplie
 are not in the source: the effects' parameters, lever arms, mountings, t0 and the sample interval arrive at run
 time in the array `prm` (imu_emulator.codegen.plan), the seed as stream keys, so scenes that differ only in them
 (a Monte Carlo over seeds, a --vary over parameters, another duration) compile once. What stays literal: which
-values are zero (a zero removes its line), the motion's expressions and their phase constants (the origin is a
-parameter: imu_emulator.motion.earth.origin_terms). Variables each stage may read and update:
+values are zero (a zero removes its line), the form of the motion's expressions with the numbers that stay in them
+(phases, exponents, zeros: imu_emulator.numerics.expressions.lift; the others are parameters) and the phase
+constants (the origin is a parameter: imu_emulator.motion.earth.origin_terms). Variables each stage may read and update:
 imu_emulator.effects.STAGE_CONTRACT. How the kernel is called: imu_emulator.codegen.signature; how it is cached, compiled and loaded: imu_emulator.runtime.kernels.
 """
 from __future__ import annotations
@@ -59,7 +60,7 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
     from imu_emulator.motion.code import motion_code
 
     plan = EffectPlan(scene)
-    motion = motion_code(scene, angles=truth, origin=plan.origin)
+    motion = motion_code(scene, angles=truth, origin=plan.origin, slots=plan.expression_slots)
     n_phase = len(motion.phase_vars)
     phase_stage = []
     if n_phase:
