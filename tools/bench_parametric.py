@@ -10,6 +10,9 @@ alone; min / median / max ns per sample, the ratio of medians.
 With expressions whose numbers the kernel takes at run time (imu_emulator.numerics.expressions.lift), a third
 variant: the source with those numbers as literals sympy folded into the derivatives (as generated before).
 
+Part 1b, the outputs: one kernel whose attitude and truth outputs are switched by the arrays passed, against the
+kernel generated for each of generate, generate --truth and stream (attitude), interleaved likewise.
+
 Part 2, a batch: `--runs N` realizations of a scene with --vary draws of sensor parameters, in this process
 (--workers 0) in a fresh cache: how many kernels were compiled (cache entries), the first load's time, the
 batch's wall and CPU time.
@@ -104,8 +107,10 @@ def bench_kernel(scene_path: str, rounds: int, samples: int) -> None:
             print(f"{name}: compiled in {time.process_time() - start:.1f} s CPU")
         spent = {name: [] for name in variants}
         n = min(samples, sim.n_samples)
-        for _ in range(rounds):
-            for name, kernel in variants.items():
+        out = sim._new_block(0, sim.times(0, n))
+        for r in range(rounds):
+            # the order alternates, and each writes into the same arrays (no first-touch page faults inside)
+            for name, kernel in list(variants.items())[::1 if r % 2 else -1]:
                 timer = {}
 
                 def timed(*args, kernel=kernel, timer=timer):
@@ -113,7 +118,7 @@ def bench_kernel(scene_path: str, rounds: int, samples: int) -> None:
                     kernel(*args)
                     timer["ns"] = timer.get("ns", 0) + time.thread_time_ns() - start
                 sim.kernel = timed
-                sim.block(0, n)
+                sim.block(0, n, out=out)
                 spent[name].append(timer["ns"] / n)
         for name, values_ns in spent.items():
             print(f"{name:>19}: {min(values_ns):6.1f} / {statistics.median(values_ns):6.1f} / "
@@ -122,6 +127,55 @@ def bench_kernel(scene_path: str, rounds: int, samples: int) -> None:
             if other != "parametric":
                 ratio = statistics.median(spent["parametric"]) / statistics.median(spent[other])
                 print(f"parametric / {other} (medians): {ratio:.3f}")
+
+
+def bench_outputs(scene_path: str, rounds: int, samples: int) -> None:
+    """One kernel with switched outputs (generate_source(switched=True): the attitude and truth written only when
+    their arrays are passed) against the kernel generated for each choice of outputs, called on the same
+    Simulation's arguments, interleaved; thread CPU time of the kernel call."""
+    from imu_emulator import load_scene
+    from imu_emulator.codegen.generate import generate_source
+    from imu_emulator.runtime import kernels
+    from imu_emulator.runtime.simulation import Simulation
+
+    scene = load_scene(scene_path)
+    scene = dataclasses.replace(scene, duration_s=max(scene.duration_s, samples / scene.rate_hz))
+    kernels._realize_runtime()
+    choices = {"generate": (False, False), "generate --truth": (False, True), "stream": (True, False)}
+    with tempfile.TemporaryDirectory() as tmp:
+        start = time.process_time()
+        switched = _compile(generate_source(scene, False, False, switched=True), Path(tmp), "bench_outputs_switched")
+        print(f"switched: generated in {time.process_time() - start:.1f} s CPU")
+        runs = {}
+        for i, (name, (attitude, truth)) in enumerate(choices.items()):
+            sim = Simulation(scene, attitude=attitude, truth=truth)
+            own = _compile(generate_source(scene, attitude, truth), Path(tmp), f"bench_outputs_{i}")
+            for kernel in (own, switched):   # compiles (numba: on the first call with these types)
+                sim.kernel = kernel
+                sim.block(0, 10)
+            runs[name] = (sim, own)
+        n = min(samples, scene.n_samples)
+        spent = {(name, variant): [] for name in choices for variant in ("own", "switched")}
+        outs = {name: sim._new_block(0, sim.times(0, n)) for name, (sim, _) in runs.items()}
+        for r in range(rounds):
+            for name, (sim, own) in runs.items():
+                # the order alternates, and each writes into the same arrays (no first-touch page faults inside)
+                for variant, kernel in (("own", own), ("switched", switched))[::1 if r % 2 else -1]:
+                    timer = {}
+
+                    def timed(*args, kernel=kernel, timer=timer):
+                        start = time.thread_time_ns()
+                        kernel(*args)
+                        timer["ns"] = timer.get("ns", 0) + time.thread_time_ns() - start
+                    sim.kernel = timed
+                    sim.block(0, n, out=outs[name])
+                    spent[name, variant].append(timer["ns"] / n)
+        for name in choices:
+            own, one = spent[name, "own"], spent[name, "switched"]
+            print(f"{name:>17}: own kernel {min(own):6.1f} / {statistics.median(own):6.1f} / {max(own):6.1f}, "
+                  f"switched {min(one):6.1f} / {statistics.median(one):6.1f} / {max(one):6.1f} ns per sample "
+                  f"(min / median / max of {rounds}); switched / own (medians) "
+                  f"{statistics.median(one) / statistics.median(own):.3f}")
 
 
 def bench_batch(scene_path: str, runs: int, vary: list[str]) -> None:
@@ -151,6 +205,7 @@ def main() -> None:
     print(machine())
     print(f"scene {args.scene}")
     bench_kernel(args.scene, args.rounds, args.samples)
+    bench_outputs(args.scene, args.rounds, args.samples)
     if not args.skip_batch:
         from imu_emulator import load_scene
         imu = load_scene(args.scene).imu_names[0]
