@@ -18,7 +18,7 @@ Part 2, a batch: `--runs N` realizations of a scene with --vary draws of sensor 
 batch's wall and CPU time.
 
     PYTHONPATH=. python tools/bench_parametric.py [--scene examples/drone_imu.toml] [--rounds 7] [--samples 200000]
-                                                  [--runs 100] [--skip-batch]
+                                                  [--runs 100] [--skip-batch] [--skip-outputs]
 """
 from __future__ import annotations
 
@@ -66,6 +66,21 @@ def baked(source: str, values) -> str:
                   source, flags=re.M)
 
 
+def timed_block(sim, kernel, n: int, out) -> float:
+    """Thread CPU ns per sample of `kernel` alone, computing samples 0..n-1 of `sim` into `out` (the same arrays
+    every round: fresh ones would put first-touch page faults inside the timed call)."""
+    spent = 0
+
+    def timed(*args):
+        nonlocal spent
+        start = time.thread_time_ns()
+        kernel(*args)
+        spent += time.thread_time_ns() - start
+    sim.kernel = timed
+    sim.block(0, n, out=out)
+    return spent / n
+
+
 def literal_expressions(scene, attitude: bool, truth: bool) -> str:
     """The source as the generator wrote it before the expressions' numbers were lifted (issue 25 (a)): sympy folds
     them with the derivatives' factors into literals (5*cos(0.3 t) -> a = -0.45 cos(..)); the motion's slots in
@@ -111,15 +126,7 @@ def bench_kernel(scene_path: str, rounds: int, samples: int) -> None:
         for r in range(rounds):
             # the order alternates, and each writes into the same arrays (no first-touch page faults inside)
             for name, kernel in list(variants.items())[::1 if r % 2 else -1]:
-                timer = {}
-
-                def timed(*args, kernel=kernel, timer=timer):
-                    start = time.thread_time_ns()
-                    kernel(*args)
-                    timer["ns"] = timer.get("ns", 0) + time.thread_time_ns() - start
-                sim.kernel = timed
-                sim.block(0, n, out=out)
-                spent[name].append(timer["ns"] / n)
+                spent[name].append(timed_block(sim, kernel, n, out))
         for name, values_ns in spent.items():
             print(f"{name:>19}: {min(values_ns):6.1f} / {statistics.median(values_ns):6.1f} / "
                   f"{max(values_ns):6.1f} ns per sample (min / median / max of {rounds}, {n} samples each)")
@@ -161,15 +168,7 @@ def bench_outputs(scene_path: str, rounds: int, samples: int) -> None:
             for name, (sim, own) in runs.items():
                 # the order alternates, and each writes into the same arrays (no first-touch page faults inside)
                 for variant, kernel in (("own", own), ("switched", switched))[::1 if r % 2 else -1]:
-                    timer = {}
-
-                    def timed(*args, kernel=kernel, timer=timer):
-                        start = time.thread_time_ns()
-                        kernel(*args)
-                        timer["ns"] = timer.get("ns", 0) + time.thread_time_ns() - start
-                    sim.kernel = timed
-                    sim.block(0, n, out=outs[name])
-                    spent[name, variant].append(timer["ns"] / n)
+                    spent[name, variant].append(timed_block(sim, kernel, n, outs[name]))
         for name in choices:
             own, one = spent[name, "own"], spent[name, "switched"]
             print(f"{name:>17}: own kernel {min(own):6.1f} / {statistics.median(own):6.1f} / {max(own):6.1f}, "
@@ -201,11 +200,13 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=100)
     parser.add_argument("--vary", action="append", default=None)
     parser.add_argument("--skip-batch", action="store_true")
+    parser.add_argument("--skip-outputs", action="store_true", help="skip part 1b (the switched outputs)")
     args = parser.parse_args()
     print(machine())
     print(f"scene {args.scene}")
     bench_kernel(args.scene, args.rounds, args.samples)
-    bench_outputs(args.scene, args.rounds, args.samples)
+    if not args.skip_outputs:
+        bench_outputs(args.scene, args.rounds, args.samples)
     if not args.skip_batch:
         from imu_emulator import load_scene
         imu = load_scene(args.scene).imu_names[0]
