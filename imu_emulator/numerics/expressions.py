@@ -193,7 +193,8 @@ def uses_time(tree: ast.Expression) -> bool:
 #   source is generated. Attitude angles, latitude and longitude are such arguments themselves (the kernel takes
 #   their cos and sin): `phase` says the whole expression is one.
 # - an exponent stays (t**2 differentiates to 2*t and prints as a multiplication; t**c would be pow() calls);
-# - a zero stays (as an effect's zero removes its line, and 1/(t*0) is refused when generated, not at run time);
+# - a zero stays, and a time-free part that is zero (as an effect's zero removes its line, and t/0 or t/(2 - 2) is
+#   refused when generated, not at run time), and a time-free function call (tan(pi/2) is refused, sqrt(4) is 2);
 # - pi and e stay (the same in every scene). Every other number, and every [params] value, is lifted.
 _CONST, _LINEAR, _OTHER = 0, 1, 2
 PHASE_FUNCTIONS = ("sin", "cos", "tan")
@@ -251,6 +252,9 @@ def _fold(tree: ast.Expression, constant, name, call, lift=None):
                 return number(-value if isinstance(node.op, ast.USub) else value, keep)   # the sign is the value's
             operand = walk(node.operand, keep)
             return -operand if isinstance(node.op, ast.USub) else operand
+        if lift is not None and not keep and isinstance(node, (ast.BinOp, ast.Call)) and _degree(node) == _CONST:
+            # a time-free call (tan(pi/2): sympy's zoo, refused when generated) or a time-free zero (t/(2 - 2))
+            keep = isinstance(node, ast.Call) or _constant_parts(node, lift[0], "", "") == 0.0
         if isinstance(node, ast.BinOp):
             op = type(node.op)
             a, b = walk(node.left, keep), walk(node.right, keep or op is ast.Pow)
