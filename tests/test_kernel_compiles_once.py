@@ -160,3 +160,122 @@ def test_the_origin_is_a_number_and_its_exact_zeros_are_structure():
                                 "imu": [{"name": "a"}], "effects": {"gravity": True, "earth_rate": True}})
     assert scene_key(at(47.0, 8.0, 400.0), True, True) == scene_key(at(-33.5, 151.2, -20.0), True, True)
     assert scene_key(at(0.0, 0.0, 0.0), True, True) != scene_key(at(47.0, 8.0, 400.0), True, True)
+
+
+# --- the numbers of the motion's expressions (issue 25 (a)) ----------------------------------------------------
+# imu_emulator.numerics.expressions.lift: an expression's numbers and [params] arrive in prm too, except phases
+# (the argument of sin/cos/tan linear in t, and an Euler angle or geodetic latitude/longitude linear in t as a
+# whole: reduced exactly when generated), exponents and zeros.
+
+def _expressions(amp, b, c, d, y, frequency=0.3, yaw=None):
+    from imu_emulator import scene_from_dict
+    return scene_from_dict({
+        "scene": {"rate_hz": 100, "duration_s": 2.0, "frame": "ENU"}, "params": {"amp": amp},
+        "trajectory": {"x": f"amp*cos({frequency!r}*t) + {b!r}*t**2", "y": f"{c!r}*t", "z": f"{d!r}"},
+        "attitude": {"roll": "0", "pitch": "0", "yaw": yaw or f"{y!r}*t*t"},
+        "imu": [{"name": "a"}], "effects": {"gravity": True}})
+
+
+def _sympy_truth(amp, b, c, d, y, t):
+    """Position, velocity, specific force and rate from sympy's derivatives of the literal texts (no lifting)."""
+    import numpy as np
+    import sympy
+    s = sympy.Symbol("t", real=True)
+    pos = [sympy.sympify(f"{amp!r}*cos(0.3*t) + {b!r}*t**2", locals={"t": s}), sympy.sympify(f"{c!r}*t",
+                                                                                           locals={"t": s}),
+           sympy.Float(d)]
+    yaw = sympy.sympify(f"{y!r}*t*t", locals={"t": s})
+
+    def f(e, n=0):
+        return np.broadcast_to(sympy.lambdify(s, sympy.diff(e, s, n) if n else e, "numpy")(t), t.shape)
+    p = np.stack([f(e) for e in pos], axis=1)
+    v = np.stack([f(e, 1) for e in pos], axis=1)
+    a = np.stack([f(e, 2) for e in pos], axis=1)
+    psi, rate = f(yaw), f(yaw, 1)
+    # body axes = Rz(yaw)^T nav (roll = pitch = 0); at rest ENU reads (0, 0, +g)
+    accel = np.stack([np.cos(psi) * a[:, 0] + np.sin(psi) * a[:, 1], -np.sin(psi) * a[:, 0] + np.cos(psi) * a[:, 1],
+                      a[:, 2] + G], axis=1)
+    gyro = np.stack([0 * rate, 0 * rate, rate], axis=1)
+    return p, v, accel, gyro
+
+
+def test_scenes_differing_only_in_expression_numbers_share_one_kernel(fresh_cache, monkeypatch):
+    import numpy as np
+
+    from imu_emulator.runtime import kernels
+    from imu_emulator.runtime.simulation import Simulation
+    generated = []
+    original = kernels.generate_source
+    monkeypatch.setattr(kernels, "generate_source", lambda *a, **k: generated.append(original(*a, **k))
+                        or generated[-1])
+    numbers = [(5.0, 0.2, 1.5, 3.0, 0.05), (6.25, -0.7, 2.5, -1.0, 0.11)]
+    for values in numbers:
+        block = Simulation(_expressions(*values), attitude=False, truth=True).run()
+        p, v, accel, gyro = _sympy_truth(*values, block.t_s)
+        np.testing.assert_allclose(block.truth["position"], p, rtol=0, atol=1e-13, err_msg=str(values))
+        np.testing.assert_allclose(block.truth["velocity"], v, rtol=0, atol=1e-13, err_msg=str(values))
+        np.testing.assert_allclose(block.accel[0], accel, rtol=0, atol=1e-12, err_msg=str(values))
+        np.testing.assert_allclose(block.gyro[0], gyro, rtol=0, atol=1e-15, err_msg=str(values))
+    assert len(generated) == 1, f"{len(generated)} kernels generated for scenes differing only in numbers"
+    # the numbers are not in the source (6.25 and -0.7 would print as themselves); the phase 0.3 is
+    assert "6.25" not in generated[0] and "0.7" not in generated[0] and "0.11" not in generated[0]
+    assert "prm_" in generated[0]
+
+
+def test_phases_exponents_and_zeros_of_expressions_stay_structure():
+    """A linear phase's numbers are compiled in (its exact reduction is computed from them), as is an Euler angle
+    linear in t (the kernel takes its cos and sin), an exponent and a zero; another amplitude or a nonlinear angle's
+    coefficient is not."""
+    from imu_emulator.runtime.cache import scene_key
+
+    def key(*args, **kw):
+        return scene_key(_expressions(*args, **kw), False, True)
+    base = key(5.0, 0.2, 1.5, 3.0, 0.05)
+    assert key(7.0, 0.3, 1.25, 3.5, 0.02) == base
+    assert key(5.0, 0.2, 1.5, 3.0, 0.05, frequency=0.4) != base        # sin/cos argument linear in t
+    assert key(5.0, 0.2, 1.5, 0.0, 0.05) != base                       # a zero stays a literal
+    linear = key(5.0, 0.2, 1.5, 3.0, 0.05, yaw="0.05*t")
+    assert linear != key(5.0, 0.2, 1.5, 3.0, 0.05, yaw="0.06*t")       # the yaw angle is a phase
+    assert key(5.0, 0.2, 1.5, 3.0, 0.05, yaw="0.05*t**3") != key(5.0, 0.2, 1.5, 3.0, 0.05, yaw="0.05*t**2")
+    assert key(5.0, 0.2, 1.5, 3.0, 0.05, yaw="0.05*t**3") == key(5.0, 0.2, 1.5, 3.0, 0.05, yaw="0.9*t**3")
+
+
+# --- one kernel for every choice of outputs: measured, not used (issue 25 (b)) ---------------------------------
+# generate_source(switched=True) writes the attitude and truth only when their arrays are passed; it costs a
+# measurable amount against each choice's own kernel (tools/bench_parametric.py; README "How the kernel pays only
+# for what the scene names"), so the cache keeps one kernel per choice. The benchmark's figure means something only
+# if both compute the same: this test holds them to it.
+
+@pytest.mark.slow
+@pytest.mark.parametrize("attitude,truth", [(False, False), (False, True), (True, False)],
+                         ids=["generate", "generate-truth", "stream"])
+def test_the_switched_kernel_writes_what_each_choices_own_kernel_writes(tmp_path, attitude, truth):
+    import importlib.util
+
+    import numpy as np
+
+    from imu_emulator.codegen.generate import generate_source
+    from imu_emulator.runtime import kernels
+    from imu_emulator.runtime.simulation import Simulation
+    # tangent attitude (its angles derived for the truth only) and biases (their realized values in the truth)
+    scene = _tangent(_turning(trajectory={"x": "3*cos(0.5*t)", "y": "2*sin(0.5*t)", "z": "0.1*t"}))
+    kernels._realize_runtime()
+    path = tmp_path / f"switched_{attitude}_{truth}.py"
+    path.write_text(generate_source(scene, attitude, truth, switched=True))
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    own = Simulation(scene, attitude=attitude, truth=truth)
+    switched = Simulation(scene, attitude=attitude, truth=truth)
+    switched.kernel = module.kernel
+    a, b = own.run(), switched.run()
+    for name in ("accel", "gyro", "quat"):
+        if getattr(a, name) is None:
+            assert getattr(b, name) is None, name
+        else:
+            np.testing.assert_array_equal(getattr(b, name), getattr(a, name), err_msg=name)
+    assert (a.truth is None) == (b.truth is None)
+    for key in (a.truth or {}):
+        np.testing.assert_array_equal(b.truth[key], a.truth[key], err_msg=key)
+    if truth:
+        assert set(a.truth) >= {"euler", "gyro_bias"} and np.ptp(a.truth["euler"][:, 2]) > 0.1

@@ -7,16 +7,23 @@ the cache, and called on the same Simulation's arguments, interleaved A, B, A, B
 varies 2-3x between runs: only the ratio inside one run means something). Thread CPU time of the kernel call
 alone; min / median / max ns per sample, the ratio of medians.
 
+With expressions whose numbers the kernel takes at run time (imu_emulator.numerics.expressions.lift), a third
+variant: the source with those numbers as literals sympy folded into the derivatives (as generated before).
+
+Part 1b, the outputs: one kernel whose attitude and truth outputs are switched by the arrays passed, against the
+kernel generated for each of generate, generate --truth and stream (attitude), interleaved likewise.
+
 Part 2, a batch: `--runs N` realizations of a scene with --vary draws of sensor parameters, in this process
 (--workers 0) in a fresh cache: how many kernels were compiled (cache entries), the first load's time, the
 batch's wall and CPU time.
 
     PYTHONPATH=. python tools/bench_parametric.py [--scene examples/drone_imu.toml] [--rounds 7] [--samples 200000]
-                                                  [--runs 100] [--skip-batch]
+                                                  [--runs 100] [--skip-batch] [--skip-outputs]
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib.util
 import os
 import re
@@ -59,6 +66,35 @@ def baked(source: str, values) -> str:
                   source, flags=re.M)
 
 
+def timed_block(sim, kernel, n: int, out) -> float:
+    """Thread CPU ns per sample of `kernel` alone, computing samples 0..n-1 of `sim` into `out` (the same arrays
+    every round: fresh ones would put first-touch page faults inside the timed call)."""
+    spent = 0
+
+    def timed(*args):
+        nonlocal spent
+        start = time.thread_time_ns()
+        kernel(*args)
+        spent += time.thread_time_ns() - start
+    sim.kernel = timed
+    sim.block(0, n, out=out)
+    return spent / n
+
+
+def literal_expressions(scene, attitude: bool, truth: bool) -> str:
+    """The source as the generator wrote it before the expressions' numbers were lifted (issue 25 (a)): sympy folds
+    them with the derivatives' factors into literals (5*cos(0.3 t) -> a = -0.45 cos(..)); the motion's slots in
+    `prm` are then unread."""
+    from imu_emulator.codegen.generate import generate_source
+    from imu_emulator.motion import code
+    original = code.motion_code
+    code.motion_code = lambda *a, slots=None, **k: original(*a, **k)
+    try:
+        return generate_source(scene, attitude=attitude, truth=truth)
+    finally:
+        code.motion_code = original
+
+
 def bench_kernel(scene_path: str, rounds: int, samples: int) -> None:
     from imu_emulator import load_scene
     from imu_emulator.codegen.generate import generate_source
@@ -66,13 +102,19 @@ def bench_kernel(scene_path: str, rounds: int, samples: int) -> None:
     from imu_emulator.runtime.simulation import Simulation
 
     scene = load_scene(scene_path)
+    # long enough for `samples` (the duration is a run-time number: the source is the same)
+    scene = dataclasses.replace(scene, duration_s=max(scene.duration_s, samples / scene.rate_hz))
     sim = Simulation(scene, attitude=False)
     source = generate_source(scene, attitude=False, truth=False)
     values = sim._plan.param_values()
     kernels._realize_runtime()
     with tempfile.TemporaryDirectory() as tmp:
         variants = {}
-        for name, text in (("parametric", source), ("baked", baked(source, values))):
+        literal = literal_expressions(scene, attitude=False, truth=False)
+        for name, text in (("parametric", source), ("baked", baked(source, values)),
+                           ("literal-expressions", literal if literal != source else None)):
+            if text is None:     # no expression numbers in this scene: the same source as parametric
+                continue
             start = time.process_time()
             variants[name] = _compile(text, Path(tmp), f"bench_parametric_{name}")
             sim.kernel = variants[name]
@@ -80,22 +122,59 @@ def bench_kernel(scene_path: str, rounds: int, samples: int) -> None:
             print(f"{name}: compiled in {time.process_time() - start:.1f} s CPU")
         spent = {name: [] for name in variants}
         n = min(samples, sim.n_samples)
-        for _ in range(rounds):
-            for name, kernel in variants.items():
-                timer = {}
-
-                def timed(*args, kernel=kernel, timer=timer):
-                    start = time.thread_time_ns()
-                    kernel(*args)
-                    timer["ns"] = timer.get("ns", 0) + time.thread_time_ns() - start
-                sim.kernel = timed
-                sim.block(0, n)
-                spent[name].append(timer["ns"] / n)
+        out = sim._new_block(0, sim.times(0, n))
+        for r in range(rounds):
+            # the order alternates, and each writes into the same arrays (no first-touch page faults inside)
+            for name, kernel in list(variants.items())[::1 if r % 2 else -1]:
+                spent[name].append(timed_block(sim, kernel, n, out))
         for name, values_ns in spent.items():
-            print(f"{name:>10}: {min(values_ns):6.1f} / {statistics.median(values_ns):6.1f} / "
+            print(f"{name:>19}: {min(values_ns):6.1f} / {statistics.median(values_ns):6.1f} / "
                   f"{max(values_ns):6.1f} ns per sample (min / median / max of {rounds}, {n} samples each)")
-        ratio = statistics.median(spent["parametric"]) / statistics.median(spent["baked"])
-        print(f"parametric / baked (medians): {ratio:.3f}")
+        for other in variants:
+            if other != "parametric":
+                ratio = statistics.median(spent["parametric"]) / statistics.median(spent[other])
+                print(f"parametric / {other} (medians): {ratio:.3f}")
+
+
+def bench_outputs(scene_path: str, rounds: int, samples: int) -> None:
+    """One kernel with switched outputs (generate_source(switched=True): the attitude and truth written only when
+    their arrays are passed) against the kernel generated for each choice of outputs, called on the same
+    Simulation's arguments, interleaved; thread CPU time of the kernel call."""
+    from imu_emulator import load_scene
+    from imu_emulator.codegen.generate import generate_source
+    from imu_emulator.runtime import kernels
+    from imu_emulator.runtime.simulation import Simulation
+
+    scene = load_scene(scene_path)
+    scene = dataclasses.replace(scene, duration_s=max(scene.duration_s, samples / scene.rate_hz))
+    kernels._realize_runtime()
+    choices = {"generate": (False, False), "generate --truth": (False, True), "stream": (True, False)}
+    with tempfile.TemporaryDirectory() as tmp:
+        start = time.process_time()
+        switched = _compile(generate_source(scene, False, False, switched=True), Path(tmp), "bench_outputs_switched")
+        print(f"switched: generated in {time.process_time() - start:.1f} s CPU")
+        runs = {}
+        for i, (name, (attitude, truth)) in enumerate(choices.items()):
+            sim = Simulation(scene, attitude=attitude, truth=truth)
+            own = _compile(generate_source(scene, attitude, truth), Path(tmp), f"bench_outputs_{i}")
+            for kernel in (own, switched):   # compiles (numba: on the first call with these types)
+                sim.kernel = kernel
+                sim.block(0, 10)
+            runs[name] = (sim, own)
+        n = min(samples, scene.n_samples)
+        spent = {(name, variant): [] for name in choices for variant in ("own", "switched")}
+        outs = {name: sim._new_block(0, sim.times(0, n)) for name, (sim, _) in runs.items()}
+        for r in range(rounds):
+            for name, (sim, own) in runs.items():
+                # the order alternates, and each writes into the same arrays (no first-touch page faults inside)
+                for variant, kernel in (("own", own), ("switched", switched))[::1 if r % 2 else -1]:
+                    spent[name, variant].append(timed_block(sim, kernel, n, outs[name]))
+        for name in choices:
+            own, one = spent[name, "own"], spent[name, "switched"]
+            print(f"{name:>17}: own kernel {min(own):6.1f} / {statistics.median(own):6.1f} / {max(own):6.1f}, "
+                  f"switched {min(one):6.1f} / {statistics.median(one):6.1f} / {max(one):6.1f} ns per sample "
+                  f"(min / median / max of {rounds}); switched / own (medians) "
+                  f"{statistics.median(one) / statistics.median(own):.3f}")
 
 
 def bench_batch(scene_path: str, runs: int, vary: list[str]) -> None:
@@ -121,10 +200,13 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=100)
     parser.add_argument("--vary", action="append", default=None)
     parser.add_argument("--skip-batch", action="store_true")
+    parser.add_argument("--skip-outputs", action="store_true", help="skip part 1b (the switched outputs)")
     args = parser.parse_args()
     print(machine())
     print(f"scene {args.scene}")
     bench_kernel(args.scene, args.rounds, args.samples)
+    if not args.skip_outputs:
+        bench_outputs(args.scene, args.rounds, args.samples)
     if not args.skip_batch:
         from imu_emulator import load_scene
         imu = load_scene(args.scene).imu_names[0]

@@ -7,8 +7,9 @@ contributes no line, so it is absent from the machine code rather than multiplie
 are not in the source: the effects' parameters, lever arms, mountings, t0 and the sample interval arrive at run
 time in the array `prm` (imu_emulator.codegen.plan), the seed as stream keys, so scenes that differ only in them
 (a Monte Carlo over seeds, a --vary over parameters, another duration) compile once. What stays literal: which
-values are zero (a zero removes its line), the motion's expressions and their phase constants (the origin is a
-parameter: imu_emulator.motion.earth.origin_terms). Variables each stage may read and update:
+values are zero (a zero removes its line), the form of the motion's expressions with the numbers that stay in them
+(phases, exponents, zeros: imu_emulator.numerics.expressions.lift; the others are parameters) and the phase
+constants (the origin is a parameter: imu_emulator.motion.earth.origin_terms). Variables each stage may read and update:
 imu_emulator.effects.STAGE_CONTRACT. How the kernel is called: imu_emulator.codegen.signature; how it is cached, compiled and loaded: imu_emulator.runtime.kernels.
 """
 from __future__ import annotations
@@ -53,13 +54,38 @@ INLINE_IMUS = 16     # up to this many IMUs, their lines sit in the kernel's loo
 
 # --- source ------------------------------------------------------------------------------------------
 
-def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int = 0) -> str:
+#: Angles derived from what the motion computed anyway (tangent: cos/sin; a quaternion or a reference: R), which
+#: only the truth output reads: with switched outputs they run where the truth is written, only when it is
+_DERIVED_ANGLE = re.compile(r"^(roll|pitch|yaw) = (math\.atan2\(.*|0\.0)$")
+#: With switched outputs: which outputs the caller passed (an output not wanted is an empty array,
+#: imu_emulator.codegen.signature.arguments), read once per call
+_SWITCHES = ["# the outputs this call writes: an output not wanted is an empty array (one kernel serves every choice)",
+             "want_quat = out_quat.shape[0] > 0", "want_truth = tr_pos.shape[0] > 0",
+             "want_bias = tr_bias_acc.shape[0] > 0"]
+
+
+def _when(flag: str, lines: list[str]) -> list[str]:
+    return [f"if {flag}:"] + ["    " + line for line in lines] if lines else []
+
+
+def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int = 0, switched: bool = False) -> str:
     """The kernel module for this scene and outputs (`increments`: Gauss–Legendre nodes of the integrated
-    outputs, 0 for none). No user text reaches it except validated numbers as repr."""
+    outputs, 0 for none). `switched`: every output's lines, each written only when the caller passes its arrays
+    (not empty), so that one kernel could serve generate, generate --truth and stream (`attitude` and `truth` are
+    then ignored). The cache does not use it: it cost 3-7 % per sample against each choice's own kernel
+    (tools/bench_parametric.py; README "How the kernel pays only for what the scene names"); it stays for that
+    benchmark to measure again. No user text reaches the source except validated numbers as repr."""
     from imu_emulator.motion.code import motion_code
 
+    if switched:
+        attitude = truth = True
     plan = EffectPlan(scene)
-    motion = motion_code(scene, angles=truth, origin=plan.origin)
+    motion = motion_code(scene, angles=truth, origin=plan.origin, slots=plan.expression_slots)
+    derived_angles = []
+    if switched:
+        derived_angles = [line for line in motion.lines + motion.after_rotation if _DERIVED_ANGLE.match(line)]
+        motion.lines = [line for line in motion.lines if not _DERIVED_ANGLE.match(line)]
+        motion.after_rotation = [line for line in motion.after_rotation if not _DERIVED_ANGLE.match(line)]
     n_phase = len(motion.phase_vars)
     phase_stage = []
     if n_phase:
@@ -106,10 +132,12 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
                 quat = ["qw, qx, qy, qz = qbw, qbx, qby, qbz"]
             quat = (["# this IMU's attitude: the body's, then its axes' turns, then its mounting"] + quat
                     + [f"out_quat[{m}, j, {i}] = q{c}" for i, c in enumerate("wxyz")])
+            quat = _when("want_quat", quat) if switched else quat
         bias_truth = []
         if truth and plan.bias_truth:
             for array, prefix in (("tr_bias_acc", TRIADS["accel"][2]), ("tr_bias_gyro", TRIADS["gyro"][2])):
                 bias_truth += [f"{array}[{m}, j, {i}] = {prefix}{c}" for i, c in enumerate(AXES)]
+            bias_truth = _when("want_bias", bias_truth) if switched else bias_truth
         sensor = stages["sensor"]
         if sensor:   # the true sensor-frame values and the realized bias, for the error effects to use
             sensor = ["# the true sensor-frame values (tf.., tw..) and the realized bias (ba.., bg..) for the errors",
@@ -128,10 +156,13 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
     truth_lines = []
     if truth:
         truth_lines.append("# truth: the motion of the reference point S")
+        truth_lines += derived_angles
         for array, names in TRUTH_OUTPUTS:
             truth_lines += [f"{array}[j, {i}] = {name}" for i, name in enumerate(names)]
+        truth_lines = _when("want_truth", truth_lines) if switched else truth_lines
     attitude_lines = (["qbw, qbx, qby, qbz = matrix_to_quat_scalar(r00, r01, r02, r10, r11, r12, r20, r21, r22)"]
                       if attitude else [])
+    attitude_lines = _when("want_quat", attitude_lines) if switched else attitude_lines
     imports = [f"from {module} import {', '.join(names)}" for module, names in RUNTIME_IMPORTS.items()]
     constants = [f"{name} = {value!r}" for name, value in motion.constants.items()]
     args, integrate = ARGS, []
@@ -168,6 +199,7 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
                             increments=increments)
     header += explain.glossary(plan, args=args, arg_notes=ARG_NOTES, motion_constants=motion.constants)
     load_state = ["# the state slots this loop keeps in local variables (the glossary names them)"] * bool(shared_slots)
+    load_state = (_SWITCHES if switched else []) + load_state
     return explain.stamp(_load_params(fill(
         KERNEL_TEMPLATE, header=header, imports=imports, eps_v2=repr(EPS_SPEED ** 2), chunk=CHUNK,
         constants=constants, load_params=[_LOAD_PARAMS],

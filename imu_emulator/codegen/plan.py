@@ -17,6 +17,7 @@ from imu_emulator.codegen.explain import effect_comment
 from imu_emulator.effects import EFFECTS, FRAME_ORDERS, EmitContext, Stage
 from imu_emulator.effects.mounting import rotation as mounting_rotation
 from imu_emulator.geo.rotations import matrix_to_quat
+from imu_emulator.motion.code import lifted_numbers
 from imu_emulator.scene.earth import model_on
 from imu_emulator.scene.model import Scene
 
@@ -52,6 +53,13 @@ class EffectPlan:
             self._effect = "(the origin: ECEF position r0 and axes C of the navigation frame)"
             self.origin = origin_terms(scene, self.add_param)
             self._effect = None
+        # the numbers of the motion's expressions (motion.code.lifted_numbers): parameters too, less those that stay
+        # in the source (phases, exponents, zeros); the structures stand for the expressions in the cache key
+        self._effect = "(the numbers of the motion's expressions)"
+        lifted = lifted_numbers(scene)
+        self.expression_structures = {key: structure for key, (structure, _) in lifted.items()}
+        self.expression_slots = {key: [self.add_param(v) for v in values] for key, (_, values) in lifted.items()}
+        self._effect = None
         navigation = [e for e in self.active if e.stage == Stage.NAVIGATION]
         self.clock = self._emit([e for e in navigation if e.sample_clock], None, None)
         self.navigation = self._emit([e for e in navigation if not e.sample_clock], None, None)
@@ -130,7 +138,8 @@ class EffectPlan:
                 "slots": [(var, m) for var, m, _ in self.slots], "streams": self.streams, "counters": self.counters,
                 "constants": {name: [self.constant_bases[name], len(v)] for name, v in self.constants.items()},
                 "axes_turns": sorted(self.axes_turns.items()), "mounting_quat": sorted(self.mounting_quat.items()),
-                "origin": self.origin, "params": len(self.params), "bias_truth": self.bias_truth}
+                "origin": self.origin, "params": len(self.params), "bias_truth": self.bias_truth,
+                "expressions": self.expression_structures}
 
     def add_axes_turn(self, m: int, lines: list[str], quaternion: tuple) -> None:
         self.axes_turns.setdefault(m, []).append((lines, quaternion))

@@ -84,12 +84,30 @@ def _symbolic(parts: list[tuple[str, object]], scene: Scene) -> MotionCode:
                       phase_vars=[f"{sc}ph{i}" for i in range(n_phases) for sc in "sc"])
 
 
-def translational_parts(exprs: Expressions, scene: Scene, order: int):
-    """sympy expressions of s, v, a[, j] for x, y, z."""
+#: Expressions the kernel takes the cos and sin of as a whole (their numbers are phases: expressions.lift)
+PHASE_KEYS = ("attitude.roll", "attitude.pitch", "attitude.yaw", "trajectory.lat_deg", "trajectory.lon_deg")
+
+
+def lifted_numbers(scene: Scene) -> dict[str, tuple[str, list[float]]]:
+    """Per expression key, its structure and the numbers the kernel takes at run time (expressions.lift): the
+    EffectPlan gives each a parameter slot and the cache keys on the structures. No sympy."""
+    return {key: expressions.lift(expressions.check(text, key, scene.params), scene.params, key in PHASE_KEYS)
+            for key, text, _ in _keyed_expressions(scene)}
+
+
+def _to_sympy(text: str, key: str, scene: Scene, t, slots):
+    """A checked expression in sympy; its lifted numbers are the symbols slots[key] (parameter slots prm_i) when
+    given, literals otherwise (explain_nonfinite, tests)."""
+    tree = expressions.check(text, key, scene.params)
+    return expressions.to_sympy(tree, scene.params, t, lifted=None if slots is None else slots[key],
+                                phase=key in PHASE_KEYS)
+
+
+def translational_parts(exprs: Expressions, scene: Scene, order: int, slots=None):
+    """sympy expressions of s, v, a[, j] for x, y, z (`slots`: _to_sympy's)."""
     import sympy
     t = sympy.Symbol("t", real=True)
-    given = [expressions.to_sympy(expressions.check(text, f"trajectory.{key}", scene.params), scene.params, t)
-             for key, text in zip(exprs.keys, exprs.texts)]
+    given = [_to_sympy(text, f"trajectory.{key}", scene, t, slots) for key, text in zip(exprs.keys, exprs.texts)]
     if exprs.keys != ("x", "y", "z"):
         from imu_emulator.motion.earth import geodetic_to_ecef
         given = geodetic_to_ecef(given)
@@ -106,14 +124,14 @@ def translational_parts(exprs: Expressions, scene: Scene, order: int):
     return parts
 
 
-def attitude_parts(exprs: Expressions, scene: Scene, angles: bool):
+def attitude_parts(exprs: Expressions, scene: Scene, angles: bool, slots=None):
     """cos/sin of each angle, first and second derivatives; sympy folds constant angles away."""
     import sympy
     t = sympy.Symbol("t", real=True)
     parts = []
     for suffix, key, text in zip(ANGLES, ("roll", "pitch", "yaw"), exprs.texts):
         where = f"attitude.{key}"
-        e = expressions.to_sympy(expressions.check(text, where, scene.params), scene.params, t)
+        e = _to_sympy(text, where, scene, t, slots)
         d1 = sympy.diff(e, t)
         for d, part in enumerate((e, d1, sympy.diff(d1, t))):
             expressions.check_symbolic(part, where, text, DERIVATIVE_NAMES[d])
@@ -233,15 +251,16 @@ def tangent_lines(angles: bool, v: str = "v", a: str = "a", j: str = "j") -> lis
     return lines
 
 
-def motion_code(scene: Scene, angles: bool, origin=None) -> MotionCode:
+def motion_code(scene: Scene, angles: bool, origin=None, slots=None) -> MotionCode:
     """All motion lines for the kernel: translation first (tangent attitude reads v, a, j). `origin`: the sources
-    of the tangent frame's origin (imu_emulator.motion.earth.origin_terms; default literals)."""
+    of the tangent frame's origin (imu_emulator.motion.earth.origin_terms; default literals); `slots`: per
+    expression key, the parameter slots of its lifted numbers (lifted_numbers; default literals)."""
     tangent = scene.attitude_mode == "tangent"
     order = 3 if tangent else 2
     symbolic_parts = []
     lines: list[str] = []
     if isinstance(scene.trajectory, Expressions):
-        symbolic_parts += translational_parts(scene.trajectory, scene, order)
+        symbolic_parts += translational_parts(scene.trajectory, scene, order, slots)
     else:
         lines += sampled_translational_lines(order)
     attitude_lines: list[str] = []
@@ -256,7 +275,7 @@ def motion_code(scene: Scene, angles: bool, origin=None) -> MotionCode:
     elif tangent:
         attitude_lines = tangent_lines(angles)
     elif isinstance(scene.attitude, Expressions):
-        symbolic_parts += attitude_parts(scene.attitude, scene, angles)
+        symbolic_parts += attitude_parts(scene.attitude, scene, angles, slots)
     elif scene.attitude.kind == "quaternion":
         attitude_lines = sampled_quaternion_lines(angles)
         rotation_given = True

@@ -186,29 +186,103 @@ def uses_time(tree: ast.Expression) -> bool:
     return any(isinstance(n, ast.Name) and n.id == TIME for n in ast.walk(tree))
 
 
-def _fold(tree: ast.Expression, constant, name, call):
+# Which numbers of an expression the kernel takes at run time ("lifted": a parameter slot, so scenes differing
+# only in them share a kernel) and which stay literals of its source (keyed), decided on the tree alone (no sympy):
+# - a number in the argument of sin, cos or tan that is linear in t (A t + B) stays: the kernel reduces such a
+#   phase exactly from A and B at 50 digits (imu_emulator.motion.phases), which needs their values when the
+#   source is generated. Attitude angles, latitude and longitude are such arguments themselves (the kernel takes
+#   their cos and sin): `phase` says the whole expression is one.
+# - an exponent stays (t**2 differentiates to 2*t and prints as a multiplication; t**c would be pow() calls);
+# - a zero stays, and a time-free part that is zero (as an effect's zero removes its line, and t/0 or t/(2 - 2) is
+#   refused when generated, not at run time), and a time-free function call (tan(pi/2) is refused, sqrt(4) is 2);
+# - pi and e stay (the same in every scene). Every other number, and every [params] value, is lifted.
+_CONST, _LINEAR, _OTHER = 0, 1, 2
+PHASE_FUNCTIONS = ("sin", "cos", "tan")
+
+
+def _degree(node: ast.AST) -> int:
+    """Whether a checked subtree is constant, linear in t or neither, from its form (t*t - t*t counts as
+    neither: a phase sympy would find linear then only loses the exact reduction, never correctness)."""
+    if isinstance(node, ast.Constant):
+        return _CONST
+    if isinstance(node, ast.Name):
+        return _LINEAR if node.id == TIME else _CONST
+    if isinstance(node, ast.UnaryOp):
+        return _degree(node.operand)
+    if isinstance(node, ast.Call):
+        return _CONST if all(_degree(a) == _CONST for a in node.args) else _OTHER
+    a, b = _degree(node.left), _degree(node.right)
+    op = type(node.op)
+    if op in (ast.Add, ast.Sub):
+        return max(a, b)
+    if op is ast.Mult and min(a, b) == _CONST or op is ast.Div and b == _CONST:
+        return a if op is ast.Div else max(a, b)
+    return _CONST if a == b == _CONST else _OTHER
+
+
+def _is_number(node: ast.AST, params) -> bool:
+    return isinstance(node, ast.Constant) or isinstance(node, ast.Name) and node.id in params
+
+
+def _fold(tree: ast.Expression, constant, name, call, lift=None):
     """Evaluate a checked tree; the caller supplies what numbers, names and function calls become, and
-    + - * / ** work on whatever those are (floats, or sympy objects)."""
-    def walk(node):
+    + - * / ** work on whatever those are (floats, or sympy objects). `lift`: (params, phase, lifted): the numbers
+    and params the rule above lifts become lifted(value, i), i counting them in this walk's order."""
+    count = 0
+
+    def number(value, keep):
+        nonlocal count
+        if lift is None or keep or float(value) == 0.0:
+            return constant(value)
+        count += 1
+        return lift[2](float(value), count - 1)
+
+    def walk(node, keep):
         if isinstance(node, ast.Expression):
-            return walk(node.body)
+            return walk(node.body, keep)
         if isinstance(node, ast.Constant):
-            return constant(node.value)
+            return number(node.value, keep)
         if isinstance(node, ast.Name):
+            if lift is not None and node.id in lift[0]:
+                return number(lift[0][node.id], keep)
             return name(node.id)
         if isinstance(node, ast.UnaryOp):
-            operand = walk(node.operand)
+            if lift is not None and not keep and _is_number(node.operand, lift[0]):
+                value = node.operand.value if isinstance(node.operand, ast.Constant) else lift[0][node.operand.id]
+                return number(-value if isinstance(node.op, ast.USub) else value, keep)   # the sign is the value's
+            operand = walk(node.operand, keep)
             return -operand if isinstance(node.op, ast.USub) else operand
+        if lift is not None and not keep and isinstance(node, (ast.BinOp, ast.Call)) and _degree(node) == _CONST:
+            # a time-free call (tan(pi/2): sympy's zoo, refused when generated) or a time-free zero (t/(2 - 2))
+            keep = isinstance(node, ast.Call) or _constant_parts(node, lift[0], "", "") == 0.0
         if isinstance(node, ast.BinOp):
-            a, b = walk(node.left), walk(node.right)
             op = type(node.op)
+            a, b = walk(node.left, keep), walk(node.right, keep or op is ast.Pow)
             return a + b if op is ast.Add else a - b if op is ast.Sub else a * b if op is ast.Mult \
                 else a / b if op is ast.Div else a ** b
         if isinstance(node, ast.Call):
-            return call(node.func.id, [walk(a) for a in node.args])
+            phase = node.func.id in PHASE_FUNCTIONS
+            return call(node.func.id, [walk(a, keep or phase and _degree(a) == _LINEAR) for a in node.args])
         raise AssertionError(f"unchecked node {node!r}")  # check() guarantees we never get here
 
-    return walk(tree)
+    body = tree.body if isinstance(tree, ast.Expression) else tree
+    return walk(tree, lift is not None and lift[1] and _degree(body) == _LINEAR)
+
+
+def lift(tree: ast.Expression, params: Mapping[str, float], phase: bool) -> tuple[str, list[float]]:
+    """The expression's structure and its lifted numbers (the rule above; `phase`: the kernel takes the cos and
+    sin of the whole expression). The structure is the text with each lifted number as `c` and every kept one as
+    the repr of its value: what the kernel cache keys on. No sympy."""
+    values: list[float] = []
+
+    def lifted(value, i):
+        values.append(value)
+        return _Code("c")
+
+    def call(fn, args):
+        return _Code(f"{fn}(" + ", ".join(args) + ")")
+    structure = _fold(tree, lambda v: _Code(repr(v)), _Code, call, lift=(params, phase, lifted))
+    return str(structure), values
 
 
 def evaluate_constant(tree: ast.Expression, values: Mapping[str, float], where: str) -> float:
@@ -224,8 +298,9 @@ def evaluate_constant(tree: ast.Expression, values: Mapping[str, float], where: 
     return value
 
 
-def to_sympy(tree: ast.Expression, params: Mapping[str, float], t_symbol):
-    """Translate a checked tree into a sympy expression; params become exact binary floats."""
+def to_sympy(tree: ast.Expression, params: Mapping[str, float], t_symbol, lifted=None, phase: bool = False):
+    """Translate a checked tree into a sympy expression; params become exact binary floats. `lifted`: names of
+    the symbols the lifted numbers (lift, with `phase`) become, in their order; None: every number a literal."""
     import sympy
 
     def constant(value):
@@ -238,7 +313,8 @@ def to_sympy(tree: ast.Expression, params: Mapping[str, float], t_symbol):
             return sympy.Float(params[n], 17)
         return sympy.pi if n == "pi" else sympy.E
 
-    return _fold(tree, constant, name, lambda fn, args: getattr(sympy, FUNCTIONS[fn][0])(*args))
+    rule = None if lifted is None else (params, phase, lambda value, i: sympy.Symbol(lifted[i], real=True))
+    return _fold(tree, constant, name, lambda fn, args: getattr(sympy, FUNCTIONS[fn][0])(*args), lift=rule)
 
 
 def drop_impulses(expr):

@@ -88,9 +88,14 @@ def _code_fingerprint() -> str:
     return h.hexdigest()
 
 #: Scene fields no line of the kernel holds: the duration (no line reads it), the IMUs (their names reach no
-#: line; their values reach the lines only as parameter slots, so EffectPlan.structure() stands for them) and the
-#: origin (parameters too; which of its ECEF terms are exactly 0 or 1 is in EffectPlan.structure()).
-PARAMETRIC = ("duration_s", "imus", "origin")
+#: line; their values reach the lines only as parameter slots, so EffectPlan.structure() stands for them), the
+#: origin (parameters too; which of its ECEF terms are exactly 0 or 1 is in EffectPlan.structure()) and the
+#: expressions' [params] (their values reach the lines as parameter slots or inside the expressions' structures).
+PARAMETRIC = ("duration_s", "imus", "origin", "params")
+#: Scene parts whose expressions' texts the key leaves out: EffectPlan.structure() holds their structures (the texts
+#: with the numbers that arrive in prm as `c`: imu_emulator.numerics.expressions.lift) and, there, the [params]
+#: values that stay in the source (phases, exponents, zeros), so the params table is parametric too.
+EXPRESSION_PARTS = ("trajectory", "attitude")
 #: Run-time parameters too (prm's t0, dt), but the phase constants of periodic motion (imu_emulator.motion.phases:
 #: sin, cos, tan of a phase linear in t, reduced exactly) are literals computed from them: keyed while the motion
 #: may have such (periodic_motion).
@@ -118,6 +123,9 @@ def scene_key(scene: Scene, attitude: bool, truth: bool, increments: int = 0, pl
     described = canonical(scene)
     for name in PARAMETRIC + (() if periodic_motion(scene) else TIMING):
         described.pop(name)
+    for part in EXPRESSION_PARTS:    # the expressions' structures (in the plan's) stand for their texts
+        if isinstance(getattr(scene, part), Expressions):
+            described[part].pop("texts")
     spec = {"scene": described, "plan": (plan or EffectPlan(scene)).structure(), "outputs": outputs,
             "code": _code_fingerprint(), "python": list(sys.version_info[:2])}
     return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:32]
