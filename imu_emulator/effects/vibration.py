@@ -13,20 +13,37 @@ the IMU's axes really turn. (--truth roll, pitch, yaw stay the body's, like its 
   linear (an acceleration, "2 g") gives d'' = A sin(2 pi f t + phase), angular (a rate, "3 deg/s") gives the
   relative rate A sin(2 pi f t + phase). Plain numbers are m/s^2 unless kind = "angular" (rad/s).
 - `psd`: random linear vibration given as an acceleration PSD table ((m/s^2)^2/Hz, e.g. "0.04 g^2/Hz"), one-
-  sided as vibration specifications print it, interpolated log-log between breakpoints. Realized on each body
-  axis (weighted by psd_axes, a factor on the PSD) as a sum of psd_lines sinusoids: the band between the
-  first and last breakpoint cut into cells of equal log width, one line at each cell's geometric centre f_i
-  with amplitude sqrt(2 S(f_i) df_i) (its power S(f_i) df_i) and a phase drawn uniformly from the seed (per IMU
-  and axis, at the run's start). A continuous motion with exact derivatives whose PSD, averaged over a cell,
-  is the table's; the frequencies are incommensurate, so it does not repeat.
+  sided as vibration specifications print it, interpolated log-log between breakpoints, zero outside them. On
+  each body axis (weighted by psd_axes, a factor on the PSD) it is Gaussian noise of that PSD (issue 25): unit
+  white noise w_j (counter-based normals of the axis's stream, j the run sample) through FIR filters of
+  psd_lines taps, the acceleration's and its two integrals': H_a = sqrt(S fs / 2) on the taps' frequency grid
+  (one-sided S = 2 T |H|^2 for white noise of unit variance at rate fs = 1/T), H_v = H_a / (j 2 pi f),
+  H_d = -H_a / (2 pi f)^2, each made a linear-phase FIR (delay psd_lines / 2 samples) and tapered by a Hann
+  window. So d'' is the acceleration sampled (whose Welch estimate the tests hold to the table within its
+  chi-square interval), and d', d are the same noise through the exact integrators, tapered alike: exact on the
+  frequency grid, smoothed between its points by the window (resolution fs / psd_lines), which is what d'' has
+  too; they enter the lever-arm terms above unchanged (for a vibration of tens of Hz and more they are small
+  beside d''). The table's resolution is the filter's: breakpoints closer than 2 fs / psd_lines are blurred.
+  Rows are computed a chunk at a time (max(256, psd_lines) samples, one direct-form FIR pass:
+  imu_emulator.numerics.shaped_noise) into the IMU's state, a cache of a pure function of (seed, run sample):
+  the same bytes for any block size, and the table's levels are run-time numbers (the taps are parameters,
+  only their count is structure). Cost per axis and sample: orders x psd_lines multiply-adds and at most two
+  normals, no sin/cos (tools/bench_vibration.py).
+  Between samples (the quadrature nodes of the integrated outputs) the motion is the quintic through
+  (d, d', d'') at the samples s - 1 and s, its derivatives with it (cubic through (angle, rate) for angular):
+  the increments integrate that interpolant exactly, continuous with the samples. The clock effect's offset does
+  not move the vibration: its realization follows the run sample.
 - `angular_psd`: random angular vibration, an angular rate PSD table ((rad/s)^2/Hz, "(deg/s)^2/Hz"), realized
-  the same way (weights angular_psd_axes, phases of their own) as lines of the relative rate: each is an
-  angular sine line, so it turns the axes exactly as those do.
+  the same way (weights angular_psd_axes, streams of their own) as the relative rate and its integral, the angle:
+  each axis turns the IMU's axes exactly as an angular sine does.
 
-Lines above the Nyquist rate (rate_hz / 2) alias, as they do in a MEMS part whose anti-alias filter does not
+Sines above the Nyquist rate (rate_hz / 2) alias, as they do in a MEMS part whose anti-alias filter does not
 reach them (a gyro's drive resonance, a shaker's harmonics): the simulation samples the continuous motion and
-adds no filter, which would be a property of the part (its bandwidth), not of the vibration. Scene validation
-warns once per such sine (with the frequency it aliases to) and once per PSD table with lines above Nyquist.
+adds no filter, which would be a property of the part (its bandwidth), not of the vibration. A PSD table's band
+above Nyquist is folded the same way into 0 .. rate_hz / 2 (the filter's level at f is the sum of the table's at
+every frequency that samples to f); its d' and d are then those of the folded frequency (larger than the true
+ones by the frequency ratio, in the small coupling terms only). Scene validation warns once per such sine (with
+the frequency it aliases to) and once per PSD table reaching past Nyquist (with the share of its power there).
 """
 import math
 

@@ -18,18 +18,31 @@ from imu_emulator.numerics.counter_rng import normal
 @jit(fastmath=True)
 def fill_chunk(key, chunk, size, taps, orders, prm, h_base, state, out_base, scratch_base):
     """Rows r = 0 .. size of chunk `chunk` (run sample chunk * size - 1 + r) into
-    state[out_base + r * orders + o]; taps of order o, reversed (oldest noise first), at prm[h_base + o * taps]."""
+    state[out_base + r * orders + o], orders 2 or 3; taps of order o, reversed (oldest noise first), at
+    prm[h_base + o * taps]."""
     first = chunk * size - taps      # the run sample of scratch[0]: taps - 1 samples before row 0
     for i in range(size + taps):
         state[scratch_base + i] = normal(key, first + i + taps)
+    # the orders in one pass over the noise (it is read once per row, not once per order)
+    h0, h1, h2 = h_base, h_base + taps, h_base + 2 * taps
     for r in range(size + 1):
-        for o in range(orders):
-            acc = 0.0
-            h = h_base + o * taps
-            w = scratch_base + r
+        w = scratch_base + r
+        y = out_base + r * orders
+        acc0, acc1, acc2 = 0.0, 0.0, 0.0
+        if orders == 3:
             for m in range(taps):
-                acc += prm[h + m] * state[w + m]
-            state[out_base + r * orders + o] = acc
+                x = state[w + m]
+                acc0 += prm[h0 + m] * x
+                acc1 += prm[h1 + m] * x
+                acc2 += prm[h2 + m] * x
+            state[y + 2] = acc2
+        else:
+            for m in range(taps):
+                x = state[w + m]
+                acc0 += prm[h0 + m] * x
+                acc1 += prm[h1 + m] * x
+        state[y] = acc0
+        state[y + 1] = acc1
 
 
 @jit
