@@ -304,6 +304,13 @@ def test_lines_above_nyquist_warn_once_each_and_alias():
     assert s.warnings == (f"imu[0].vibration.angular_psd: its band above the Nyquist rate 500 Hz of rate_hz = 1000 "
                           f"(500 to 2000 Hz, {100 * 1500 / 1980:.3g} % of its power) folds into 0 to 500 Hz "
                           "(no anti-alias filter is simulated)",)
+    # a band narrower than the filter resolves (256 taps at 1 kHz: bins every 3.906 Hz; 10 to 20 Hz holds the
+    # bins at 11.7, 15.6 and 19.5 Hz): a warning that it is coarse, and how to fix it
+    s = scene({"psd": [["10 Hz", 0.1], ["20 Hz", 0.1]]})
+    assert s.warnings == ("imu[0].vibration.psd: its band 10 to 20 Hz holds 3 of the shaping filter's frequency "
+                          "bins (every 3.90625 Hz at psd_lines = 256): it is realized coarsely or not at all; raise "
+                          "psd_lines",)
+    assert scene({"psd": [["10 Hz", 0.1], ["20 Hz", 0.1]], "psd_lines": 1024}).warnings == ()
     # a table with every weight 0 realizes no line: no warning
     assert scene({"psd": [["20 Hz", 0.1], ["2 kHz", 0.1]], "psd_axes": 0.0}).warnings == ()
 

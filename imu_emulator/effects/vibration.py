@@ -51,6 +51,7 @@ from imu_emulator.effects._record import AXES, Effect, Param, Stage
 from imu_emulator.errors import SceneError
 
 MIN_TAPS, MAX_TAPS = 16, 16384    # psd_lines: taps of the shaping filter (its cost per sample)
+MIN_BINS = 4     # fewer of its frequency bins in a PSD band: a warning (the band is realized coarsely)
 
 
 def psd_level(table, f: float) -> float:
@@ -271,9 +272,19 @@ def warn(values: dict, where: str, rate_hz: float) -> list[str]:
             out.append(f"{where}.vibration.sines[{k}]: {f:g} Hz ({AXES[axis]}, {('linear', 'angular')[kind]}) is "
                        f"above the Nyquist rate {nyquist:g} Hz of rate_hz = {rate_hz:g}: it aliases to "
                        f"{alias_hz(f, rate_hz):g} Hz (no anti-alias filter is simulated)")
+    taps = int(values["imu.vibration.psd_lines"])
     for key in ("psd", "angular_psd"):
         table = values[f"imu.vibration.{key}"]
-        if not table or not any(w > 0 for w in values[f"imu.vibration.{key}_axes"]) or table[-1][0] <= nyquist:
+        if not table or not any(w > 0 for w in values[f"imu.vibration.{key}_axes"]):
+            continue
+        # the filter resolves rate_hz / taps: a band holding few of its frequency bins is realized coarsely, or
+        # not at all
+        bins = sum(1 for i in range(taps // 2 + 1) if table[0][0] <= i * rate_hz / taps <= table[-1][0])
+        if bins < MIN_BINS:
+            out.append(f"{where}.vibration.{key}: its band {table[0][0]:g} to {table[-1][0]:g} Hz holds {bins} of "
+                       f"the shaping filter's frequency bins (every {rate_hz / taps:g} Hz at psd_lines = {taps}): "
+                       f"it is realized coarsely or not at all; raise psd_lines")
+        if table[-1][0] <= nyquist:
             continue
         total, above = _power(table, table[0][0], table[-1][0]), _power(table, max(nyquist, table[0][0]), table[-1][0])
         out.append(f"{where}.vibration.{key}: its band above the Nyquist rate {nyquist:g} Hz of rate_hz = {rate_hz:g} "
