@@ -44,6 +44,8 @@ above Nyquist is folded the same way into 0 .. rate_hz / 2 (the filter's level a
 every frequency that samples to f); its d' and d are then those of the folded frequency (larger than the true
 ones by the frequency ratio, in the small coupling terms only). Scene validation warns once per such sine (with
 the frequency it aliases to) and once per PSD table reaching past Nyquist (with the share of its power there).
+A PSD band holding fewer than MIN_BINS of the filter's frequency bins (rate_hz / psd_lines apart) is warned
+about too: it would be realized coarsely, or not at all.
 """
 import math
 
