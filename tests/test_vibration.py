@@ -371,3 +371,20 @@ def test_random_vibration_is_the_same_in_a_per_imu_function_and_with_increments(
     assert one.accel[0].tobytes() == separate.accel[0].tobytes()
     assert one.gyro[0].tobytes() == separate.gyro[0].tobytes()
     assert np.abs(np.corrcoef(separate.accel[0, :, 0], separate.accel[INLINE_IMUS, :, 0])[0, 1]) < 5 / math.sqrt(2000)
+
+
+def test_hermite_interpolants_reproduce_polynomials_of_their_degree():
+    # The quintic through (d, d', d'') at both ends of a step h reproduces any quintic, the cubic through (x, x')
+    # any cubic, with their derivatives (in seconds: d/dt = d/du / h): numpy's Polynomial as the oracle.
+    from numpy.polynomial import Polynomial
+    from imu_emulator.numerics.shaped_noise import hermite3, hermite5
+    h = 1e-3
+    rng = np.random.default_rng(3)
+    for degree, function in ((5, hermite5), (3, hermite3)):
+        p = Polynomial(rng.normal(size=degree + 1), domain=[0, h], window=[0, h])   # p(t), t in seconds
+        # (value, derivatives up to (degree - 1) / 2) at t = 0, then at t = h: the interpolants' arguments
+        ends = [p.deriv(i)(t) if i else p(t) for t in (0.0, h) for i in range((degree + 1) // 2)]
+        for u in (0.0, 0.13, 0.5, 0.87, 1.0):
+            got = function(u, h, *ends)
+            want = [p.deriv(i)(u * h) if i else p(u * h) for i in range(len(got))]
+            np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12)
