@@ -73,13 +73,11 @@ def folded_level(table, f: float, rate_hz: float) -> float:
     """The table's one-sided level folded into [0, rate_hz / 2] at f: the sum over the frequencies that sample
     to f (|f + m rate_hz|, m whole), as a part without anti-alias filter samples them (module doc)."""
     lo, hi = table[0][0], table[-1][0]
-    total, m = 0.0, 0
+    found, m = set(), 0
     while m * rate_hz - f <= hi:
-        for g in ((m * rate_hz - f, m * rate_hz + f) if m else (f,)):
-            if lo <= g <= hi and g > 0:
-                total += psd_level(table, g)
+        found |= {abs(m * rate_hz - f), m * rate_hz + f}     # a set: at f = rate_hz / 2 both are one frequency
         m += 1
-    return total
+    return sum(psd_level(table, g) for g in found if lo <= g <= hi and g > 0)
 
 
 def shaping_taps(table, taps: int, rate_hz: float, weight: float, orders: int) -> list[list[float]]:
@@ -89,7 +87,7 @@ def shaping_taps(table, taps: int, rate_hz: float, weight: float, orders: int) -
     freqs = np.fft.rfftfreq(taps, 1.0 / rate_hz)
     # one-sided S = 2 T |H|^2 for unit white noise at rate 1/T
     magnitude = np.sqrt(np.array([weight * folded_level(table, f, rate_hz) for f in freqs]) * rate_hz / 2.0)
-    window = np.hanning(taps + 2)[1:-1]     # nonzero at both ends; 1 at the centre, where the response sits
+    window = np.hanning(taps + 2)[1:-1]     # nonzero at both ends; ~1 at the centre, where the response sits
     out = []
     for order in range(orders):
         with np.errstate(divide="ignore", invalid="ignore"):

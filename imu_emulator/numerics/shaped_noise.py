@@ -13,9 +13,9 @@ from imu_emulator.native.lazy import jit
 from imu_emulator.numerics.counter_rng import normal
 
 
-# fastmath: the dot products vectorize (reassociated sums); one compiled function computes every chunk, so the
-# values stay identical for any block size
-@jit(fastmath=True)
+# No fastmath: reassociated sums would vectorize, but differently in the kernel's machine code and in numba's
+# dispatcher (tests/test_native_kernel.py holds the two to the bit)
+@jit
 def fill_chunk(key, chunk, size, taps, orders, prm, h_base, state, out_base, scratch_base):
     """Rows r = 0 .. size of chunk `chunk` (run sample chunk * size - 1 + r) into
     state[out_base + r * orders + o], orders 2 or 3; taps of order o, reversed (oldest noise first), at
