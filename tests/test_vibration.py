@@ -388,3 +388,22 @@ def test_hermite_interpolants_reproduce_polynomials_of_their_degree():
             got = function(u, h, *ends)
             want = [p.deriv(i)(u * h) if i else p(u * h) for i in range(len(got))]
             np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("taps, orders", [(16, 2), (17, 3), (40, 3)])
+def test_fill_chunk_is_the_convolution_of_the_streams_normals(taps, orders):
+    # Row r of chunk c is sample c * size - 1 + r of sum_i h_o[i] w[j - i], w_j = normal(key, j + taps): numpy's
+    # convolution of counter_rng.normals as the oracle (even and odd tap counts, 2 and 3 orders).
+    from imu_emulator.numerics.counter_rng import normals
+    from imu_emulator.numerics.shaped_noise import fill_chunk
+    size, chunk, key = 32, 3, 987654321
+    rng = np.random.default_rng(1)
+    h = rng.normal(size=(orders, taps))
+    prm = np.concatenate([[7.0], h[:, ::-1].ravel()])       # reversed taps, after an unrelated parameter
+    state = np.zeros(5 + (size + 1) * orders + size + taps)
+    fill_chunk(np.uint64(key), chunk, size, taps, orders, prm, 1, state, 5, 5 + (size + 1) * orders)
+    first = chunk * size - 1                                 # the run sample of row 0
+    w = normals(key, first - taps + 1 + taps, size + taps)   # w_j for j = first - taps + 1 .. first + size
+    for o in range(orders):
+        want = np.convolve(w, h[o], mode="valid")             # samples first .. first + size
+        np.testing.assert_allclose(state[5 + o: 5 + (size + 1) * orders: orders], want, rtol=1e-13, atol=1e-13)

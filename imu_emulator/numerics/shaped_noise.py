@@ -26,39 +26,29 @@ def fill_chunk(key, chunk, size, taps, orders, prm, h_base, state, out_base, scr
     # the orders in one pass over the noise (read once per row, not once per order), two partial sums per order
     # in a fixed order: independent chains the CPU overlaps, nothing reassociated
     h0, h1, h2 = h_base, h_base + taps, h_base + 2 * taps
-    even = taps - taps % 2
     for r in range(size + 1):
         w = scratch_base + r
         y = out_base + r * orders
         a0, a1, a2, b0, b1, b2 = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-        if orders == 3:
-            for m in range(0, even, 2):
-                x, z = state[w + m], state[w + m + 1]
-                a0 += prm[h0 + m] * x
-                b0 += prm[h0 + m + 1] * z
-                a1 += prm[h1 + m] * x
-                b1 += prm[h1 + m + 1] * z
+        third = orders == 3      # invariant: LLVM takes the test out of the loop
+        for m in range(0, taps - 1, 2):
+            x, z = state[w + m], state[w + m + 1]
+            a0 += prm[h0 + m] * x
+            b0 += prm[h0 + m + 1] * z
+            a1 += prm[h1 + m] * x
+            b1 += prm[h1 + m + 1] * z
+            if third:
                 a2 += prm[h2 + m] * x
                 b2 += prm[h2 + m + 1] * z
-            if even < taps:
-                x = state[w + even]
-                a0 += prm[h0 + even] * x
-                a1 += prm[h1 + even] * x
-                a2 += prm[h2 + even] * x
-            state[y + 2] = a2 + b2
-        else:
-            for m in range(0, even, 2):
-                x, z = state[w + m], state[w + m + 1]
-                a0 += prm[h0 + m] * x
-                b0 += prm[h0 + m + 1] * z
-                a1 += prm[h1 + m] * x
-                b1 += prm[h1 + m + 1] * z
-            if even < taps:
-                x = state[w + even]
-                a0 += prm[h0 + even] * x
-                a1 += prm[h1 + even] * x
+        if taps % 2:     # an odd tap count: the last tap has no partner
+            x = state[w + taps - 1]
+            a0, a1 = a0 + prm[h0 + taps - 1] * x, a1 + prm[h1 + taps - 1] * x
+            if third:
+                a2 += prm[h2 + taps - 1] * x
         state[y] = a0 + b0
         state[y + 1] = a1 + b1
+        if third:
+            state[y + 2] = a2 + b2
 
 
 @jit
