@@ -106,36 +106,62 @@ def random_vibration():
                  rate_hz=RATE, duration_s=SECONDS, seed=7)
 
 
-def assert_flat_psd(x, level):
-    """x's Welch PSD is `level` across [F_LO, F_HI] (chi-square intervals) and nothing outside."""
-    freqs, pxx = signal.welch(x, fs=RATE, window="hann", nperseg=NPERSEG, noverlap=0, detrend="constant")
-    inside = (freqs > F_LO + 10) & (freqs < F_HI - 10)     # away from the band edges' window leakage
-    segments = x.size // NPERSEG
-    # For a Gaussian process each bin is level * chi2(2K) / 2K over K non-overlapping segments. A sum of
-    # sinusoids with random phases has no such spread from the lines' powers (they are exact), but the cross
-    # terms of lines within one window bandwidth average out over the segments only where their beat is not near
-    # a multiple of 1/T_seg, so a single bin can leave that interval; means over bins average the cross terms
-    # (their signs are random). Hann makes neighbouring bins correlated: count K degrees of freedom per bin, half
-    # of 2K. Checked: the band's mean (two-sided 1e-3) and the mean of each of 5 sub-bands (two-sided 1e-3 / 5,
-    # Bonferroni), which also checks the spectrum is flat across the band.
-    n_bins = int(inside.sum())
-    nu = segments * n_bins
-    lo, hi = stats.chi2.ppf([0.5e-3, 1 - 0.5e-3], nu) / nu
-    assert lo * level < pxx[inside].mean() < hi * level, pxx[inside].mean() / level
-    for part in np.array_split(pxx[inside], 5):
-        nu = segments * part.size
-        lo, hi = stats.chi2.ppf([0.1e-3, 1 - 0.1e-3], nu) / nu
-        assert lo * level < part.mean() < hi * level, part.mean() / level
-    # outside the band: nothing but the edges' leakage (far below the level)
-    assert np.all(pxx[(freqs > F_HI + 20) | ((freqs < F_LO - 20) & (freqs > 0))] < 1e-3 * level)
+def assert_welch_matches(x, rate, level, at, outside=(), nperseg=NPERSEG, p=1e-3):
+    """x's Welch PSD (Hann, non-overlapping segments) at each frequency of `at` is level(f) within the chi-square
+    interval of its K segments: a Gaussian process's bin is level * chi2(2K) / 2K (two-sided p over all the
+    frequencies tested, Bonferroni); at each frequency of `outside` it is below 1e-3 of level's largest value."""
+    freqs, pxx = signal.welch(x, fs=rate, window="hann", nperseg=nperseg, noverlap=0, detrend="constant")
+    k = x.size // nperseg
+    lo, hi = stats.chi2.ppf([p / 2 / len(at), 1 - p / 2 / len(at)], 2 * k) / (2 * k)
+    for f in at:
+        i = int(np.argmin(np.abs(freqs - f)))
+        ratio = pxx[i] / level(freqs[i])
+        assert lo < ratio < hi, (f, ratio, lo, hi)
+    peak = max(level(f) for f in at)
+    for f in outside:
+        assert pxx[int(np.argmin(np.abs(freqs - f)))] < 1e-3 * peak, f
+
+
+#: frequencies inside the band, more than the filter's and Welch's resolution (2 Hz each here) from its edges
+INSIDE = (60.0, 97.0, 151.0, 203.0, 257.0, 311.0, 353.0, 390.0)
+OUTSIDE = (20.0, 35.0, 420.0, 600.0, 900.0)
 
 
 def test_random_vibration_psd_level_by_welch_within_chi_square_interval(random_vibration):
     out = run(random_vibration)
-    assert_flat_psd(out.accel[0, :, 0], PSD_G2HZ * G0 ** 2)
+    assert_welch_matches(out.accel[0, :, 0], RATE, lambda f: PSD_G2HZ * G0 ** 2, INSIDE, OUTSIDE)
+    # the band's mean level, tighter: over n bins of K segments; Hann makes neighbouring bins correlated, so count
+    # K (not 2K) degrees of freedom per bin (conservative), two-sided 1e-3
+    freqs, pxx = signal.welch(out.accel[0, :, 0], fs=RATE, window="hann", nperseg=NPERSEG, noverlap=0)
+    inside = (freqs > F_LO + 10) & (freqs < F_HI - 10)
+    nu = out.accel.shape[1] // NPERSEG * int(inside.sum())
+    lo, hi = stats.chi2.ppf([0.5e-3, 1 - 0.5e-3], nu) / nu
+    assert lo < pxx[inside].mean() / (PSD_G2HZ * G0 ** 2) < hi
     # the y and z axes carry no vibration (weight 0): z is gravity exactly
     np.testing.assert_array_equal(out.accel[0, :, 1], 0.0)
     np.testing.assert_allclose(out.accel[0, :, 2], G0, rtol=1e-15)
+
+
+def test_random_vibration_log_log_table_and_axis_weights_by_welch():
+    # A rising then flat table on two axes, weights 1 and 0.25: level f -> s0 (f / f0)^(log(s1/s0) / log(f1/f0))
+    # between breakpoints (the definition, written here), times the weight; x and y independent (their cross
+    # spectrum's coherence stays small).
+    table = [(40.0, 1e-3), (120.0, 2e-2), (300.0, 2e-2)]
+
+    def level(f):
+        for (f0, s0), (f1, s1) in zip(table, table[1:]):
+            if f <= f1:
+                return s0 * (f / f0) ** (math.log(s1 / s0) / math.log(f1 / f0))
+    out = run(scene({"psd": [list(row) for row in table], "psd_lines": 512, "psd_axes": [1.0, 0.25, 0.0]},
+                    rate_hz=1000, duration_s=60.0, seed=11))
+    at = (50.0, 70.0, 90.0, 110.0, 150.0, 220.0, 280.0)
+    assert_welch_matches(out.accel[0, :, 0], 1000, level, at, (15.0, 330.0, 450.0), nperseg=512)
+    assert_welch_matches(out.accel[0, :, 1], 1000, lambda f: 0.25 * level(f), at, nperseg=512)
+    freqs, coherence = signal.coherence(out.accel[0, :, 0], out.accel[0, :, 1], fs=1000, nperseg=512, noverlap=0)
+    # independent Gaussian: the coherence of K segments is Beta(1, K - 1) per bin; its mean in the band is 1 / K
+    band = (freqs > 50) & (freqs < 280)
+    k = out.accel.shape[1] // 512
+    assert coherence[band].mean() < 2.0 / k
 
 
 def test_random_vibration_same_bytes_for_any_block_size_and_new_phases_for_another_seed(random_vibration):
@@ -193,62 +219,45 @@ DEG_PSD = 0.5     # (deg/s)^2/Hz
 def test_angular_random_vibration_gyro_psd_by_welch_within_chi_square_interval():
     # Angular PSD on x only, body at rest: the relative rate about x is the gyro's x reading exactly (b = c = 0 in
     # the module's relative-rate formula), so its Welch PSD is the table's level converted to (rad/s)^2/Hz; y and
-    # z read zero. Same chi-square intervals as the linear PSD (assert_flat_psd).
+    # z read zero.
     out = run(scene({"angular_psd": [[f"{F_LO} Hz", f"{DEG_PSD} (deg/s)^2/Hz"], [f"{F_HI} Hz", f"{DEG_PSD} deg^2/s^2/Hz"]],
                      "psd_lines": 1000, "angular_psd_axes": [1.0, 0.0, 0.0]},
                     rate_hz=RATE, duration_s=SECONDS, seed=3))
-    assert_flat_psd(out.gyro[0, :, 0], DEG_PSD * math.radians(1) ** 2)
+    assert_welch_matches(out.gyro[0, :, 0], RATE, lambda f: DEG_PSD * math.radians(1) ** 2, INSIDE, OUTSIDE)
     np.testing.assert_array_equal(out.gyro[0, :, 1:], 0.0)
 
 
-def _fit_line(t, x, w):
-    """Least squares x = p sin(w t) + q cos(w t): the amplitude and phase of a line A sin(w t + phi)."""
-    basis = np.stack([np.sin(w * t), np.cos(w * t)], axis=1)
-    (p, q), *_ = np.linalg.lstsq(basis, x, rcond=None)
-    return math.hypot(p, q), math.atan2(q, p)
+def test_angular_psd_turns_gravity_by_the_integral_of_its_rate_and_the_attitude_with_it():
+    # Angular PSD on x, body at rest (ENU, level): the axes turn by the angle a about x, so gravity reads
+    # f = Rx(a)^T (0, 0, g) = (0, g sin a, g cos a) and a = atan2(f_y, f_z) is read back from the accelerometer
+    # alone. The attitude is the exact rotation by a: (cos a/2, sin a/2, 0, 0). a is the rate's integral: its
+    # Welch PSD is the rate's level / (2 pi f)^2 (chi-square interval), and its steps match the trapezoid of
+    # the gyro (error (w T)^2 / 12 of the step: under 2 % for content below 80 Hz at 1 kHz).
+    level = math.radians(2.0) ** 2
+    out = run(scene({"angular_psd": [[20.0, level], [80.0, level]], "psd_lines": 512, "angular_psd_axes": [1, 0, 0]},
+                    duration_s=40.0, attitude={"roll": "0", "pitch": "0", "yaw": "0"}, seed=5), attitude=True)
+    a = np.arctan2(out.accel[0, :, 1], out.accel[0, :, 2])
+    np.testing.assert_allclose(out.accel[0, :, 0], 0.0, atol=0)
+    np.testing.assert_allclose(np.hypot(out.accel[0, :, 1], out.accel[0, :, 2]), G0, rtol=1e-14)
+    np.testing.assert_allclose(out.quat[0], np.stack([np.cos(a / 2), np.sin(a / 2), 0 * a, 0 * a], axis=1),
+                               rtol=0, atol=1e-13)
+    assert_welch_matches(a, 1000, lambda f: level / (2 * np.pi * f) ** 2, (25.0, 40.0, 55.0, 75.0), nperseg=512)
+    rate = out.gyro[0, :, 0]
+    trapezoid = 0.5e-3 * (rate[1:] + rate[:-1])
+    assert np.sqrt(np.mean((np.diff(a) - trapezoid) ** 2)) < 0.02 * np.sqrt(np.mean(np.diff(a) ** 2))
 
 
-def test_angular_psd_single_line_turns_gravity_and_the_attitude_closed_form():
-    # One line (psd_lines = 1) of a flat angular PSD S on x: at the band's geometric centre f0 = sqrt(f1 f2) with
-    # amplitude A = sqrt(2 S (f2 - f1)) (the whole band's power in one line) and a phase phi drawn from the seed.
-    # The phase is the one unknown: fitted from the gyro, whose amplitude must then be A. Body at rest (ENU, level):
-    # angle a = -A / w cos(w t + phi), gravity seen through the turned axes f = Rx(a)^T (0, 0, g) =
-    # (0, g sin a, g cos a), the attitude quaternion the exact rotation by a about x: (cos a/2, sin a/2, 0, 0).
-    f1, f2, level = 20.0, 80.0, math.radians(2.0) ** 2
-    out = run(scene({"angular_psd": [[f1, level], [f2, level]], "psd_lines": 1, "angular_psd_axes": [1, 0, 0]},
-                    duration_s=0.5, attitude={"roll": "0", "pitch": "0", "yaw": "0"}, seed=5), attitude=True)
-    t, w, amp = out.t_s, 2 * np.pi * math.sqrt(f1 * f2), math.sqrt(2 * level * (f2 - f1))
-    fitted, phi = _fit_line(t, out.gyro[0, :, 0], w)
-    assert abs(fitted - amp) < 1e-12 * amp
-    np.testing.assert_allclose(out.gyro[0, :, 0], amp * np.sin(w * t + phi), rtol=0, atol=1e-12 * amp)
-    a = -amp / w * np.cos(w * t + phi)
-    np.testing.assert_allclose(out.accel[0], np.stack([0 * t, G0 * np.sin(a), G0 * np.cos(a)], axis=1),
-                               rtol=0, atol=1e-12 * G0)
-    np.testing.assert_allclose(out.quat[0], np.stack([np.cos(a / 2), np.sin(a / 2), 0 * t, 0 * t], axis=1),
-                               rtol=0, atol=1e-14)
-
-
-def test_angular_psd_line_is_an_angular_sine_line():
-    # A one-line angular PSD and the angular sine at the same frequency, amplitude and phase are the same motion:
-    # identical outputs and attitude (coning included: a second, sinusoidal axis turns with them).
-    f1, f2, level = 20.0, 80.0, 1e-3
-    base = {"roll": "0.2*sin(t)", "pitch": "0.1", "yaw": "0.3*t"}
-    psd = run(scene({"angular_psd": [[f1, level], [f2, level]], "psd_lines": 1, "angular_psd_axes": [0, 0, 1],
-                     "sines": [{"axis": "x", "kind": "angular", "amplitude": 0.05, "frequency": 33.0}]},
-                    attitude=base, seed=9), attitude=True)
-    w, amp = 2 * np.pi * math.sqrt(f1 * f2), math.sqrt(2 * level * (f2 - f1))
-    # the line's phase is drawn from (seed, IMU, axis) alone: fit it where the gyro's z is that line only
-    alone = run(scene({"angular_psd": [[f1, level], [f2, level]], "psd_lines": 1, "angular_psd_axes": [0, 0, 1]},
-                      seed=9))
-    _, phi = _fit_line(alone.t_s, alone.gyro[0, :, 2], w)
-    sines = run(scene({"sines": [{"axis": "x", "kind": "angular", "amplitude": 0.05, "frequency": 33.0},
-                                 {"axis": "z", "kind": "angular", "amplitude": amp, "frequency": math.sqrt(f1 * f2),
-                                  "phase": phi}]},
-                      attitude=base), attitude=True)
-    # the fitted phase is exact to ~1e-13 rad, not to the bit: compare to 1e-9
-    np.testing.assert_allclose(psd.gyro, sines.gyro, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(psd.accel, sines.accel, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(psd.quat, sines.quat, rtol=0, atol=1e-9)
+def test_linear_psd_velocity_is_the_coriolis_term_on_a_turning_body():
+    # Linear PSD on x, the body turning about z at W (yaw = W t): w x d' = (0, W v, 0), so the IMU reads
+    # f_y = 2 W v with v = d' the vibration's velocity, and f_x = a - W^2 d (W^2 d / a ~ (W / w)^2 < 1e-5).
+    # v's Welch PSD is the table's / (2 pi f)^2, and its steps are the trapezoid of a (as above).
+    big_w, level = 0.5, 0.02
+    out = run(scene({"psd": [[20.0, level], [80.0, level]], "psd_lines": 512, "psd_axes": [1, 0, 0]},
+                    duration_s=40.0, attitude={"roll": "0", "pitch": "0", "yaw": f"{big_w}*t"}, seed=6))
+    v, acc = out.accel[0, :, 1] / (2 * big_w), out.accel[0, :, 0]
+    assert_welch_matches(v, 1000, lambda f: level / (2 * np.pi * f) ** 2, (25.0, 40.0, 55.0, 75.0), nperseg=512)
+    trapezoid = 0.5e-3 * (acc[1:] + acc[:-1])
+    assert np.sqrt(np.mean((np.diff(v) - trapezoid) ** 2)) < 0.02 * np.sqrt(np.mean(np.diff(v) ** 2))
 
 
 def test_attitude_is_body_then_vibration_then_mounting_against_scipy():
@@ -288,15 +297,20 @@ def test_lines_above_nyquist_warn_once_each_and_alias():
     out = run(s)
     k = np.arange(out.t_s.size)
     np.testing.assert_allclose(out.accel[0, :, 0], -np.sin(2 * np.pi * 300 * k / 1000), rtol=0, atol=1e-11)
-    # a PSD band reaching past Nyquist: one warning naming the table, how many of its lines and their band. The
-    # lines sit at the log-cells' centres 20 * 100^((i + 1/2) / 64) Hz, i < 64.
-    centres = 20.0 * 100.0 ** ((np.arange(64) + 0.5) / 64)
-    above = centres[centres > 500.0]
+    # a PSD band reaching past Nyquist: one warning naming the table, its band above Nyquist and that band's share
+    # of the power (a flat table: (2000 - 500) / (2000 - 20) of it)
     s = scene({"angular_psd": [["20 Hz", "1e-4 (deg/s)^2/Hz"], ["2 kHz", "1e-4 (deg/s)^2/Hz"]], "psd_lines": 64,
                "angular_psd_axes": [0, 1, 0]})
-    assert s.warnings == (f"imu[0].vibration.angular_psd: {above.size} of 64 lines above the Nyquist rate 500 Hz of "
-                          f"rate_hz = 1000 ({above[0]:.4g} to {above[-1]:.4g} Hz): they alias into 0 to 500 Hz "
+    assert s.warnings == (f"imu[0].vibration.angular_psd: its band above the Nyquist rate 500 Hz of rate_hz = 1000 "
+                          f"(500 to 2000 Hz, {100 * 1500 / 1980:.3g} % of its power) folds into 0 to 500 Hz "
                           "(no anti-alias filter is simulated)",)
+    # a band narrower than the filter resolves (256 taps at 1 kHz: bins every 3.906 Hz; 10 to 20 Hz holds the
+    # bins at 11.7, 15.6 and 19.5 Hz): a warning that it is coarse, and how to fix it
+    s = scene({"psd": [["10 Hz", 0.1], ["20 Hz", 0.1]]})
+    assert s.warnings == ("imu[0].vibration.psd: its band 10 to 20 Hz holds 3 of the shaping filter's frequency "
+                          "bins (every 3.90625 Hz at psd_lines = 256): it is realized coarsely or not at all; raise "
+                          "psd_lines",)
+    assert scene({"psd": [["10 Hz", 0.1], ["20 Hz", 0.1]], "psd_lines": 1024}).warnings == ()
     # a table with every weight 0 realizes no line: no warning
     assert scene({"psd": [["20 Hz", 0.1], ["2 kHz", 0.1]], "psd_axes": 0.0}).warnings == ()
 
@@ -312,16 +326,84 @@ def test_check_command_prints_the_nyquist_warning(tmp_path, capsys):
             "it aliases to 50 Hz") in capsys.readouterr().out
 
 
-def test_increments_integrate_an_angular_random_vibration_line():
-    # A one-line angular PSD on y, body at rest: the rotation is about one fixed axis, so dtheta_y over (t-T, t] is
-    # the angle's change a(t) - a(t-T), a = -A / w cos(w t + phi) (phi fitted from the gyro, as above); the
-    # quadrature reruns the line at every node (its phase is drawn once per run).
-    f1, f2, level = 30.0, 120.0, math.radians(1.0) ** 2
-    s = scene({"angular_psd": [[f1, level], [f2, level]], "psd_lines": 1, "angular_psd_axes": [0, 1, 0]},
-              effects=("vibration",), seed=4)
+def test_increments_integrate_an_angular_random_vibration():
+    # Angular PSD on y, body at rest: the rotation is about one fixed axis, so dtheta_y over (t-T, t] is the angle's
+    # change b(t) - b(t-T), b read back from gravity (f = Ry(b)^T (0, 0, g) = (-g sin b, 0, g cos b)). Between
+    # samples the angle is the cubic through (b, b') at both ends, whose derivative Gauss-Legendre integrates
+    # exactly: to rounding.
+    level = math.radians(1.0) ** 2
+    s = scene({"angular_psd": [[30.0, level], [120.0, level]], "psd_lines": 256, "angular_psd_axes": [0, 1, 0]},
+              seed=4)
     out = Simulation(s, attitude=False, increments=8).run()
-    t, w, T, amp = out.t_s, 2 * np.pi * math.sqrt(f1 * f2), 1.0 / 1000, math.sqrt(2 * level * (f2 - f1))
-    _, phi = _fit_line(t, out.gyro[0, :, 1], w)
-    expected = -amp / w * (np.cos(w * t + phi) - np.cos(w * (t - T) + phi))
-    np.testing.assert_allclose(out.dtheta[0][:, 1], expected, rtol=0, atol=1e-11 * amp * T)
-    assert np.abs(out.dtheta[0][:, [0, 2]]).max() < 1e-15 and np.abs(out.dvel[0]).max() < 1e-15
+    b = np.arctan2(-out.accel[0, :, 0], out.accel[0, :, 2])
+    np.testing.assert_allclose(out.dtheta[0][1:, 1], np.diff(b), rtol=0, atol=1e-9 * np.abs(np.diff(b)).max())
+    assert np.abs(out.dtheta[0][:, [0, 2]]).max() < 1e-15
+
+
+def test_increments_integrate_a_linear_random_vibration():
+    # Linear PSD on x on a body turning about z at W: v = f_y / 2W (previous test but one), and dvel_x over
+    # (t-T, t] is the integral of f_x = a - W^2 d: v(t) - v(t-T) (the quintic through (d, d', d'') at both ends,
+    # its a integrated exactly) less W^2 times d's integral, under 1e-4 of the step here.
+    big_w, level = 0.5, 0.02
+    s = scene({"psd": [[20.0, level], [80.0, level]], "psd_lines": 256, "psd_axes": [1, 0, 0]},
+              attitude={"roll": "0", "pitch": "0", "yaw": f"{big_w}*t"}, seed=6)
+    out = Simulation(s, attitude=False, increments=4).run()
+    v = out.accel[0, :, 1] / (2 * big_w)
+    np.testing.assert_allclose(out.dvel[0][1:, 0], np.diff(v), rtol=0, atol=1e-4 * np.abs(np.diff(v)).max())
+
+
+@pytest.mark.slow
+def test_random_vibration_is_the_same_in_a_per_imu_function_and_with_increments():
+    # More IMUs than INLINE_IMUS: each IMU's lines are a function of their own, reading its own state slots; the
+    # quadrature nodes of the increments fill and read the same chunk cache. IMU 0's outputs are then the bytes of
+    # the single-IMU run without increments; another IMU has noise of its own.
+    vib = {"psd": [["50 Hz", "0.01 g^2/Hz"], ["400 Hz", "0.01 g^2/Hz"]], "psd_axes": [1, 0, 0],
+           "angular_psd": [[20, 1e-4], [80, 1e-4]], "angular_psd_axes": [0, 0, 1]}
+
+    def many(n):
+        return scene_from_dict({"scene": {"rate_hz": 1000, "duration_s": 2, "seed": 7},
+                                "trajectory": {"x": "0", "y": "0", "z": "0"},
+                                "imu": [{"name": f"i{m}", "vibration": vib} for m in range(n)],
+                                "effects": {"gravity": True, "vibration": True}})
+    from imu_emulator.codegen.generate import INLINE_IMUS
+    one = run(many(1))
+    separate = Simulation(many(INLINE_IMUS + 1), attitude=False, increments=4).run()
+    assert one.accel[0].tobytes() == separate.accel[0].tobytes()
+    assert one.gyro[0].tobytes() == separate.gyro[0].tobytes()
+    assert np.abs(np.corrcoef(separate.accel[0, :, 0], separate.accel[INLINE_IMUS, :, 0])[0, 1]) < 5 / math.sqrt(2000)
+
+
+def test_hermite_interpolants_reproduce_polynomials_of_their_degree():
+    # The quintic through (d, d', d'') at both ends of a step h reproduces any quintic, the cubic through (x, x')
+    # any cubic, with their derivatives (in seconds: d/dt = d/du / h): numpy's Polynomial as the oracle.
+    from numpy.polynomial import Polynomial
+    from imu_emulator.numerics.shaped_noise import hermite3, hermite5
+    h = 1e-3
+    rng = np.random.default_rng(3)
+    for degree, function in ((5, hermite5), (3, hermite3)):
+        p = Polynomial(rng.normal(size=degree + 1), domain=[0, h], window=[0, h])   # p(t), t in seconds
+        # (value, derivatives up to (degree - 1) / 2) at t = 0, then at t = h: the interpolants' arguments
+        ends = [p.deriv(i)(t) if i else p(t) for t in (0.0, h) for i in range((degree + 1) // 2)]
+        for u in (0.0, 0.13, 0.5, 0.87, 1.0):
+            got = function(u, h, *ends)
+            want = [p.deriv(i)(u * h) if i else p(u * h) for i in range(len(got))]
+            np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("taps, orders", [(16, 2), (17, 3), (40, 3)])
+def test_fill_chunk_is_the_convolution_of_the_streams_normals(taps, orders):
+    # Row r of chunk c is sample c * size - 1 + r of sum_i h_o[i] w[j - i], w_j = normal(key, j + taps): numpy's
+    # convolution of counter_rng.normals as the oracle (even and odd tap counts, 2 and 3 orders).
+    from imu_emulator.numerics.counter_rng import normals
+    from imu_emulator.numerics.shaped_noise import fill_chunk
+    size, chunk, key = 32, 3, 987654321
+    rng = np.random.default_rng(1)
+    h = rng.normal(size=(orders, taps))
+    prm = np.concatenate([[7.0], h[:, ::-1].ravel()])       # reversed taps, after an unrelated parameter
+    state = np.zeros(5 + (size + 1) * orders + size + taps)
+    fill_chunk(np.uint64(key), chunk, size, taps, orders, prm, 1, state, 5, 5 + (size + 1) * orders)
+    first = chunk * size - 1                                 # the run sample of row 0
+    w = normals(key, first - taps + 1 + taps, size + taps)   # w_j for j = first - taps + 1 .. first + size
+    for o in range(orders):
+        want = np.convolve(w, h[o], mode="valid")             # samples first .. first + size
+        np.testing.assert_allclose(state[5 + o: 5 + (size + 1) * orders: orders], want, rtol=1e-13, atol=1e-13)

@@ -146,7 +146,7 @@ def main() -> None:
                 ("+ bias", ["bias"]), ("stochastic (noise, BI, RW, bias)", ["noise", "bias_instability", "random_walk", "bias"]),
                 *((f"+ {name}", [name]) for name in DETERMINISTIC),
                 ("full error model (issue 9 §6)", FULL), ("every error effect", [*FULL, "bias", *DETERMINISTIC[2:5]]),
-                ("+ vibration, 3 sines", ["vibration"], SINES), ("+ vibration, PSD 3 x 256 lines", ["vibration"], PSD)]
+                ("+ vibration, 3 sines", ["vibration"], SINES), ("+ vibration, PSD 3 x 256 taps", ["vibration"], PSD)]
     sims = []
     for label, effects, *vibration in variants:
         scene = circle(effects, args.seconds, *vibration)
@@ -163,12 +163,12 @@ def main() -> None:
 
 def bench_vibration(args) -> None:
     """The vibration variants alone: the cost per sample of its sines, linear PSD and angular PSD (3 axes x 256
-    lines each), and of the attitude output turned by the angular vibration."""
+    filter taps each), and of the attitude output turned by the angular vibration."""
     variants = [("kinematics only (gravity + lever arm)", None, False),
                 ("kinematics, attitude output", None, True),
                 ("+ vibration, 3 sines (2 linear, 1 angular)", SINES, False),
-                ("+ vibration, linear PSD 3 x 256 lines", PSD, False),
-                ("+ vibration, angular PSD 3 x 256 lines", ANGULAR_PSD, False),
+                ("+ vibration, linear PSD 3 x 256 taps", PSD, False),
+                ("+ vibration, angular PSD 3 x 256 taps", ANGULAR_PSD, False),
                 ("+ vibration, angular PSD, attitude output", ANGULAR_PSD, True)]
     sims = []
     for label, vib, attitude in variants:
@@ -179,8 +179,8 @@ def bench_vibration(args) -> None:
     report(sims, cpu, wall, f"vibration on the circle scene, 1 kHz, lever arm, {args.seconds:g} s per run, "
            f"{args.rounds} interleaved rounds (ns/sample; thread CPU min / median / max, wall median; Msamples/s "
            "from the CPU median)", "vs kinematics")
-    line = (np.median(cpu[sims[4][0]]) - np.median(cpu[sims[0][0]])) / (3 * 256)
-    print(f"angular PSD per line and sample (thread CPU median): {line:.2f} ns")
+    tap = (np.median(cpu[sims[4][0]]) - np.median(cpu[sims[0][0]])) / (3 * 256)
+    print(f"angular PSD per filter tap and sample (thread CPU median; 2 multiply-adds each): {tap:.2f} ns")
 
 
 if __name__ == "__main__":

@@ -50,11 +50,11 @@ def check_integrable(effects) -> None:
     """The navigation- and body-stage lines run once more per node, at the node's t: an effect there must be a
     pure function of the variables it reads (no state, no random draws, which would advance or repeat per node).
     The sample clock is the exception: its lines run for the interval's two ends only; so is an effect whose
-    state is drawn once at the run's start and only read (vibration's random phases)."""
+    state only caches a pure function of (seed, run sample) (vibration's filtered noise)."""
     from imu_emulator.effects import Stage
     from imu_emulator.errors import ImuEmulatorError
     for effect in effects:
-        repeated = effect.stage in (Stage.NAVIGATION, Stage.BODY) and not effect.sample_clock and not effect.drawn_once
+        repeated = effect.stage in (Stage.NAVIGATION, Stage.BODY) and not effect.sample_clock and not effect.cached_state
         if repeated and (effect.state or effect.random):
             raise ImuEmulatorError(f"increments: effect {effect.name!r} keeps state or draws random numbers in the "
                                    "navigation or body stage, which the quadrature evaluates at several instants "

@@ -85,7 +85,9 @@ class Effect:
     params: tuple[Param, ...] = ()
     state: tuple[str, ...] = ()  # what the per-IMU state slots hold (carried across blocks)
     random: bool = False         # draws random numbers (needs [scene] seed for a chosen realization)
-    drawn_once: bool = False     # its state and draws are made at the run's start and only read after
+    #: its state is a cache of values that are a pure function of (seed, run sample) (vibration's filtered noise,
+    #: filled a chunk at a time): the quadrature's reruns at the nodes read the same values
+    cached_state: bool = False
     nav_rate: bool = False       # navigation-stage effect that adds a rate of the navigation frame
     #: navigation-stage effect whose lines define `clk`, the actual sampling instant's offset from sample k in
     #: samples (t = t0 + (k + clk) dt); they run before the motion, which is evaluated at that instant
@@ -184,6 +186,12 @@ class EmitContext:
             raise KeyError(f"{self.effect.name} is not declared random")
         index = self.plan.add_stream(self.m, f"{self.effect.name}.{stream}")
         return f"normal(keys[{index}], {counter})"
+
+    def stream_key(self, stream: str) -> str:
+        """Source for the key of this IMU's stream `stream` (for a helper that draws normal(key, counter) itself)."""
+        if not self.effect.random:
+            raise KeyError(f"{self.effect.name} is not declared random")
+        return f"keys[{self.plan.add_stream(self.m, f'{self.effect.name}.{stream}')}]"
 
     def count(self, label: str) -> str:
         """A counter of this IMU carried across blocks (a state slot from 0, exact up to 2**53): returns its

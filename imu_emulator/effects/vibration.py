@@ -13,27 +13,47 @@ the IMU's axes really turn. (--truth roll, pitch, yaw stay the body's, like its 
   linear (an acceleration, "2 g") gives d'' = A sin(2 pi f t + phase), angular (a rate, "3 deg/s") gives the
   relative rate A sin(2 pi f t + phase). Plain numbers are m/s^2 unless kind = "angular" (rad/s).
 - `psd`: random linear vibration given as an acceleration PSD table ((m/s^2)^2/Hz, e.g. "0.04 g^2/Hz"), one-
-  sided as vibration specifications print it, interpolated log-log between breakpoints. Realized on each body
-  axis (weighted by psd_axes, a factor on the PSD) as a sum of psd_lines sinusoids: the band between the
-  first and last breakpoint cut into cells of equal log width, one line at each cell's geometric centre f_i
-  with amplitude sqrt(2 S(f_i) df_i) (its power S(f_i) df_i) and a phase drawn uniformly from the seed (per IMU
-  and axis, at the run's start). A continuous motion with exact derivatives whose PSD, averaged over a cell,
-  is the table's; the frequencies are incommensurate, so it does not repeat.
+  sided as vibration specifications print it, interpolated log-log between breakpoints, zero outside them. On
+  each body axis (weighted by psd_axes, a factor on the PSD) it is Gaussian noise of that PSD (issue 25): unit
+  white noise w_j (counter-based normals of the axis's stream, j the run sample) through FIR filters of
+  psd_lines taps, the acceleration's and its two integrals': H_a = sqrt(S fs / 2) on the taps' frequency grid
+  (one-sided S = 2 T |H|^2 for white noise of unit variance at rate fs = 1/T), H_v = H_a / (j 2 pi f),
+  H_d = -H_a / (2 pi f)^2, each made a linear-phase FIR (delay psd_lines / 2 samples) and tapered by a Hann
+  window. So d'' is the acceleration sampled (whose Welch estimate the tests hold to the table within its
+  chi-square interval), and d', d are the same noise through the exact integrators, tapered alike: exact on the
+  frequency grid, smoothed between its points by the window (resolution fs / psd_lines), which is what d'' has
+  too; they enter the lever-arm terms above unchanged (for a vibration of tens of Hz and more they are small
+  beside d''). The table's resolution is the filter's: breakpoints closer than 2 fs / psd_lines are blurred.
+  Rows are computed a chunk at a time (max(256, psd_lines) samples, one direct-form FIR pass:
+  imu_emulator.numerics.shaped_noise) into the IMU's state, a cache of a pure function of (seed, run sample):
+  the same bytes for any block size, and the table's levels are run-time numbers (the taps are parameters,
+  only their count is structure). Cost per axis and sample: orders x psd_lines multiply-adds and at most two
+  normals, no sin/cos (tools/bench_vibration.py).
+  Between samples (the quadrature nodes of the integrated outputs) the motion is the quintic through
+  (d, d', d'') at the samples s - 1 and s, its derivatives with it (cubic through (angle, rate) for angular):
+  the increments integrate that interpolant exactly, continuous with the samples. The clock effect's offset does
+  not move the vibration: its realization follows the run sample.
 - `angular_psd`: random angular vibration, an angular rate PSD table ((rad/s)^2/Hz, "(deg/s)^2/Hz"), realized
-  the same way (weights angular_psd_axes, phases of their own) as lines of the relative rate: each is an
-  angular sine line, so it turns the axes exactly as those do.
+  the same way (weights angular_psd_axes, streams of their own) as the relative rate and its integral, the angle:
+  each axis turns the IMU's axes exactly as an angular sine does.
 
-Lines above the Nyquist rate (rate_hz / 2) alias, as they do in a MEMS part whose anti-alias filter does not
+Sines above the Nyquist rate (rate_hz / 2) alias, as they do in a MEMS part whose anti-alias filter does not
 reach them (a gyro's drive resonance, a shaker's harmonics): the simulation samples the continuous motion and
-adds no filter, which would be a property of the part (its bandwidth), not of the vibration. Scene validation
-warns once per such sine (with the frequency it aliases to) and once per PSD table with lines above Nyquist.
+adds no filter, which would be a property of the part (its bandwidth), not of the vibration. A PSD table's band
+above Nyquist is folded the same way into 0 .. rate_hz / 2 (the filter's level at f is the sum of the table's at
+every frequency that samples to f); its d' and d are then those of the folded frequency (larger than the true
+ones by the frequency ratio, in the small coupling terms only). Scene validation warns once per such sine (with
+the frequency it aliases to) and once per PSD table reaching past Nyquist (with the share of its power there).
+A PSD band holding fewer than MIN_BINS of the filter's frequency bins (rate_hz / psd_lines apart) is warned
+about too: it would be realized coarsely, or not at all.
 """
 import math
 
 from imu_emulator.effects._record import AXES, Effect, Param, Stage
 from imu_emulator.errors import SceneError
 
-MAX_LINES = 100000
+MIN_TAPS, MAX_TAPS = 16, 16384    # psd_lines: taps of the shaping filter (its cost per sample)
+MIN_BINS = 4     # fewer of its frequency bins in a PSD band: a warning (the band is realized coarsely)
 
 
 def psd_level(table, f: float) -> float:
@@ -44,26 +64,42 @@ def psd_level(table, f: float) -> float:
     return table[-1][1]
 
 
-def psd_lines(table, n: int, weight: float = 1.0) -> list[tuple[float, float]]:
-    """(frequency in Hz, acceleration amplitude) of the n lines realizing the PSD table (see the module doc)."""
+#: samples per chunk of filtered noise at least (the chunk is max(CHUNK, taps): a chunk draws size + taps - 1
+#: normals, so at most two per sample)
+CHUNK = 256
+
+
+def folded_level(table, f: float, rate_hz: float) -> float:
+    """The table's one-sided level folded into [0, rate_hz / 2] at f: the sum over the frequencies that sample
+    to f (|f + m rate_hz|, m whole), as a part without anti-alias filter samples them (module doc)."""
     lo, hi = table[0][0], table[-1][0]
-    ratio = (hi / lo) ** (1.0 / n)
-    lines = []
-    for i in range(n):
-        left, right = lo * ratio ** i, lo * ratio ** (i + 1)
-        f = math.sqrt(left * right)
-        lines.append((f, math.sqrt(2.0 * weight * psd_level(table, f) * (right - left))))
-    return lines
+    found, m = set(), 0
+    while m * rate_hz - f <= hi:
+        found |= {abs(m * rate_hz - f), m * rate_hz + f}     # a set: at f = rate_hz / 2 both are one frequency
+        m += 1
+    return sum(psd_level(table, g) for g in found if lo <= g <= hi and g > 0)
 
 
-def _uniform(draw, axis: str, i: int) -> float:
-    """A phase in cycles, uniform on [0, 1): the normal's distribution function."""
-    return 0.5 * math.erfc(-draw(axis, i) / math.sqrt(2.0))
+def shaping_taps(table, taps: int, rate_hz: float, weight: float, orders: int) -> list[list[float]]:
+    """The FIR taps (reversed: oldest noise first) of order 0 .. orders - 1 (the quantity, its integral, its double
+    integral) shaping unit white noise at rate_hz into the table's PSD times weight (module doc)."""
+    import numpy as np
+    freqs = np.fft.rfftfreq(taps, 1.0 / rate_hz)
+    # one-sided S = 2 T |H|^2 for unit white noise at rate 1/T
+    magnitude = np.sqrt(np.array([weight * folded_level(table, f, rate_hz) for f in freqs]) * rate_hz / 2.0)
+    window = np.hanning(taps + 2)[1:-1]     # nonzero at both ends; ~1 at the centre, where the response sits
+    out = []
+    for order in range(orders):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            response = np.where(freqs > 0, magnitude / (2j * np.pi * np.where(freqs > 0, freqs, 1.0)) ** order, 0)
+        h = np.roll(np.fft.irfft(response, taps), taps // 2) * window   # linear phase, delay taps // 2
+        out.append([float(x) for x in h[::-1]])
+    return out
 
 
 def emit(ctx) -> list[str]:
     sines = ctx.value("imu.vibration.sines")
-    n = int(ctx.value("imu.vibration.psd_lines"))
+    taps = int(ctx.value("imu.vibration.psd_lines"))
     # per axis: linear acceleration, velocity, displacement; angular rate and angle (body axes)
     acc, vel, disp = ([ctx.var(f"{q}{a}") for a in AXES] for q in ("acc", "vel", "disp"))
     rate, angle = ([ctx.var(f"{q}{a}") for a in AXES] for q in ("rate", "angle"))
@@ -84,23 +120,8 @@ def emit(ctx) -> list[str]:
                       f"{disp[axis]} -= {number(amplitude / w ** 2)} * {sn}"]
         else:           # rate = A sin, angle = -A/w cos
             lines += [f"{rate[axis]} += {number(amplitude)} * {sn}", f"{angle[axis]} -= {number(amplitude / w)} * {cs}"]
-    i = ctx.var("i")
-    for kind, per_axis in psd.items():
-        # the same lines as the sines above, in a loop over the constants of each axis
-        targets = ((acc, "+"), (vel, "-"), (disp, "-")) if kind == 0 else ((rate, "+"), (angle, "-"))
-        for axis, found in per_axis.items():
-            a = AXES[axis]
-            f = ctx.constant(f"F{kind}{a}", [fi for fi, _ in found])
-            base = ctx.state_block(STATES[kind], [lambda draw, a=a, k=k: _uniform(draw, a, k) for k in range(n)])
-            lines += [f"for {i} in range({n}):",
-                      f"    {sn}, {cs} = sincos_cycles(prm[{f} + {i}] * t + state[{base} + {i}])"]
-            for order, (target, sign) in enumerate(targets):
-                # integral number `order` of A sin: A / w^order times sin, -cos, -sin
-                # the random lines are drawn on the part's forward-right-down axis: the sign into the scene's
-                # body axes (EmitContext.frd_sign) rides on the amplitudes, so an ENU and a NED scene vibrate alike
-                amp = ctx.constant(f"A{kind}{order}{a}", [ctx.frd_sign(axis) * ai / (2.0 * math.pi * fi) ** order
-                                                         for fi, ai in found])
-                lines.append(f"    {target[axis]} {sign}= prm[{amp} + {i}] * {sn if order % 2 == 0 else cs}")
+    if psd[0] or psd[1]:
+        lines += _filtered_noise(ctx, psd, taps, (acc, vel, disp), (rate, angle))
     if linear:
         d = [disp[i] if i in linear else "0.0" for i in range(3)]
         v = [vel[i] if i in linear else "0.0" for i in range(3)]
@@ -121,17 +142,58 @@ def emit(ctx) -> list[str]:
     return lines
 
 
-STATES = {0: "phase", 1: "angular_phase"}
+def _filtered_noise(ctx, psd, taps: int, linear_vars, angular_vars) -> list[str]:
+    """Lines adding each PSD axis's filtered noise (linear: a, v, d; angular: rate, angle) at this instant: the
+    sample's rows of its chunk, or between the run samples s - 1 and s (the increments' quadrature nodes) the
+    Hermite interpolant of those two rows."""
+    size = max(CHUNK, taps)
+    u, row, chunk = ctx.var("u"), ctx.var("row"), ctx.var("chunk")
+    # where this instant sits between the samples s - 1 (u = 0) and s (u = 1): the quadrature's nodes lie inside,
+    # the sample itself at 1 (to rounding, which the clamp and the exact branch below take out)
+    lines = [f"{u} = min(1.0, max(0.0, 1.0 + (t - {ctx.plan.t0}) / {ctx.plan.dt} - k))",
+             f"{chunk} = s // {size}", f"{row} = s - {chunk} * {size} + 1"]
+    for kind, per_axis in psd.items():
+        orders = 3 if kind == 0 else 2
+        # targets: (value, first integral, second integral) of the acceleration, (rate, angle) of the angular rate
+        targets = [linear_vars[0], linear_vars[1], linear_vars[2]] if kind == 0 else list(angular_vars)
+        for axis, weight in per_axis.items():
+            a = AXES[axis]
+            # drawn on the part's forward-right-down axis: the sign into the scene's body axes
+            # (EmitContext.frd_sign) rides on the taps, so an ENU and a NED scene vibrate alike
+            h = ctx.constant(f"H{kind}{a}", [ctx.frd_sign(axis) * x for order in shaping_taps(
+                ctx.value(f"imu.vibration.{('psd', 'angular_psd')[kind]}"), taps, ctx.scene.rate_hz, weight,
+                orders) for x in order])
+            block = ctx.state_block(STATES[kind], [lambda draw: -1.0] + [lambda draw: 0.0] * (
+                (size + 1) * orders + size + taps))
+            cached, out, scratch = block, block + 1, block + 1 + (size + 1) * orders
+            key = ctx.stream_key(f"{STATES[kind]}.{a}")
+            here = [f"state[{out} + {row} * {orders} + {o}]" for o in range(orders)]
+            before = [f"state[{out} + ({row} - 1) * {orders} + {o}]" for o in range(orders)]
+            got = [ctx.var(f"y{kind}{o}{a}") for o in range(orders)]
+            # the value first, then its integrals: the interpolants take the highest integral first
+            hermite = "hermite5" if orders == 3 else "hermite3"
+            args = ", ".join(x for pair in (before[::-1], here[::-1]) for x in pair)
+            lines += [f"if state[{cached}] != {chunk}:",   # a chunk not cached yet: compute it
+                      f"    fill_chunk({key}, {chunk}, {size}, {taps}, {orders}, prm, {h}, state, {out}, {scratch})",
+                      f"    state[{cached}] = {chunk}",
+                      f"if {u} > {1.0 - 1e-6!r}:",   # the sample (nodes stay below 1 - 5e-3)
+                      *[f"    {g} = {x}" for g, x in zip(got, here)],
+                      "else:",
+                      f"    {', '.join(got[::-1])} = {hermite}({u}, {ctx.plan.dt}, {args})"]
+            lines += [f"{targets[o][axis]} += {got[o]}" for o in range(orders)]
+    return lines
 
 
-def _psd_axes(ctx, key: str) -> dict[int, list[tuple[float, float]]]:
-    """{axis: its lines} of the PSD table `key` ("psd" or "angular_psd"), for the axes of nonzero weight."""
+STATES = {0: "noise", 1: "angular_noise"}
+
+
+def _psd_axes(ctx, key: str) -> dict[int, float]:
+    """{axis: its weight} of the PSD table `key` ("psd" or "angular_psd"), for the axes of nonzero weight."""
     table = ctx.value(f"imu.vibration.{key}")
     weights = ctx.value(f"imu.vibration.{key}_axes")
-    n = int(ctx.value("imu.vibration.psd_lines"))
     if not table:
         return {}
-    return {axis: psd_lines(table, n, weights[axis]) for axis in range(3) if weights[axis] > 0}
+    return {axis: weights[axis] for axis in range(3) if weights[axis] > 0}
 
 
 def _quaternion(ctx, angular, angle) -> tuple[list[str], tuple[str, str, str, str]]:
@@ -175,11 +237,27 @@ def _rotate(ctx, angular, rate, angle) -> list[str]:
 
 def validate(values: dict, where: str) -> None:
     n = values["imu.vibration.psd_lines"]
-    if not (n == int(n) and 1 <= n <= MAX_LINES):
-        raise SceneError(f"{where}.vibration.psd_lines: expected a whole number from 1 to {MAX_LINES}, got {n!r}")
+    if not (n == int(n) and MIN_TAPS <= n <= MAX_TAPS):
+        raise SceneError(f"{where}.vibration.psd_lines: expected a whole number from {MIN_TAPS} to {MAX_TAPS} (the "
+                         f"shaping filter's taps), got {n!r}")
     for key in ("psd_axes", "angular_psd_axes"):
         if any(w < 0 for w in values[f"imu.vibration.{key}"]):
             raise SceneError(f"{where}.vibration.{key}: weights are >= 0, got {values[f'imu.vibration.{key}']!r}")
+
+
+def _power(table, f0: float, f1: float) -> float:
+    """The table's power between f0 and f1 (the integral of its log-log segments: closed form per segment)."""
+    total = 0.0
+    for (fa, sa), (fb, sb) in zip(table, table[1:]):
+        lo, hi = max(f0, fa), min(f1, fb)
+        if hi <= lo:
+            continue
+        slope = math.log(sb / sa) / math.log(fb / fa)    # S = sa (f / fa)^slope
+        if abs(slope + 1.0) < 1e-12:
+            total += sa * fa * math.log(hi / lo)
+        else:
+            total += sa * fa ** -slope * (hi ** (slope + 1.0) - lo ** (slope + 1.0)) / (slope + 1.0)
+    return total
 
 
 def alias_hz(f: float, rate_hz: float) -> float:
@@ -196,16 +274,24 @@ def warn(values: dict, where: str, rate_hz: float) -> list[str]:
             out.append(f"{where}.vibration.sines[{k}]: {f:g} Hz ({AXES[axis]}, {('linear', 'angular')[kind]}) is "
                        f"above the Nyquist rate {nyquist:g} Hz of rate_hz = {rate_hz:g}: it aliases to "
                        f"{alias_hz(f, rate_hz):g} Hz (no anti-alias filter is simulated)")
-    n = int(values["imu.vibration.psd_lines"])
+    taps = int(values["imu.vibration.psd_lines"])
     for key in ("psd", "angular_psd"):
         table = values[f"imu.vibration.{key}"]
         if not table or not any(w > 0 for w in values[f"imu.vibration.{key}_axes"]):
             continue
-        above = [f for f, _ in psd_lines(table, n) if f > nyquist]
-        if above:
-            out.append(f"{where}.vibration.{key}: {len(above)} of {n} lines above the Nyquist rate {nyquist:g} Hz "
-                       f"of rate_hz = {rate_hz:g} ({above[0]:.4g} to {above[-1]:.4g} Hz): they alias into 0 to "
-                       f"{nyquist:g} Hz (no anti-alias filter is simulated)")
+        # the filter resolves rate_hz / taps: a band holding few of its frequency bins is realized coarsely, or
+        # not at all
+        bins = sum(1 for i in range(taps // 2 + 1) if table[0][0] <= i * rate_hz / taps <= table[-1][0])
+        if bins < MIN_BINS:
+            out.append(f"{where}.vibration.{key}: its band {table[0][0]:g} to {table[-1][0]:g} Hz holds {bins} of "
+                       f"the shaping filter's frequency bins (every {rate_hz / taps:g} Hz at psd_lines = {taps}): "
+                       f"it is realized coarsely or not at all; raise psd_lines")
+        if table[-1][0] <= nyquist:
+            continue
+        total, above = _power(table, table[0][0], table[-1][0]), _power(table, max(nyquist, table[0][0]), table[-1][0])
+        out.append(f"{where}.vibration.{key}: its band above the Nyquist rate {nyquist:g} Hz of rate_hz = {rate_hz:g} "
+                   f"({max(nyquist, table[0][0]):.4g} to {table[-1][0]:.4g} Hz, {100.0 * above / total:.3g} % of its "
+                   f"power) folds into 0 to {nyquist:g} Hz (no anti-alias filter is simulated)")
     return out
 
 
@@ -213,7 +299,7 @@ EFFECT = Effect(
     name="vibration",
     description="vibration as motion of the IMU: sinusoidal lines (linear or angular) and random PSDs",
     stage=Stage.BODY, order=50, emit=emit, validate=validate, warn=warn, random=True,
-    state=("phase", "angular_phase"), drawn_once=True,
+    state=("noise", "angular_noise"), cached_state=True,
     params=(Param("sines", "imu.vibration", "m/s^2|rad/s", "sinusoidal lines: [{axis, amplitude, frequency, "
                   "phase}], amplitude as the sensor sees it (acceleration, or kind = \"angular\": rate)",
                   shape="sines", default=(), datasheet="`[{axis = \"x\", amplitude = \"2 g\", frequency = "
@@ -227,5 +313,5 @@ EFFECT = Effect(
                   datasheet="`[[\"10 Hz\", \"1e-4 (deg/s)^2/Hz\"], [\"500 Hz\", \"1e-4 (deg/s)^2/Hz\"]]`"),
             Param("angular_psd_axes", "imu.vibration", "1", "angular PSD weight per body axis (0: none)",
                   default=1.0),
-            Param("psd_lines", "imu.vibration", "1", "sinusoids per axis realizing each PSD", shape="scalar",
-                  default=256.0, example=64.0)))
+            Param("psd_lines", "imu.vibration", "1", "taps of the FIR filter shaping each PSD's noise (its "
+                  "frequency resolution: rate_hz / psd_lines)", shape="scalar", default=256.0, example=64.0)))
