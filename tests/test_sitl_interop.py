@@ -39,6 +39,16 @@ def test_defaults_file_reads_back_with_pymavlink(tmp_path, device):
         # Tools/autotest/arduplane.py fly_external_AHRS's parameters, the port as SITL numbers it
         assert params["SERIAL4_PROTOCOL"] == 36 and params["AHRS_EKF_TYPE"] == 11 and params["GPS1_TYPE"] == 21
         assert params["EAHRS_TYPE"] == {"vn300": 1, "gq7": 7}[device]
+        assert params["EAHRS_SENSORS"] == 0xF          # the parameter's default: GPS, IMU, baro, compass
+
+
+def test_sensor_mask_is_ardupilots_bitmask():
+    """AP_ExternalAHRS.h AvailableSensor (265753db8b): GPS 1<<0, IMU 1<<1, BARO 1<<2, COMPASS 1<<3."""
+    assert ardupilot_params.sensors_mask("gps") == 1 and ardupilot_params.sensors_mask("gps,baro") == 5
+    assert ardupilot_params.sensors_mask("imu,compass") == 10 and ardupilot_params.sensors_mask("all") == 15
+    assert ardupilot_params.device_params("vn300", sensors="gps")["EAHRS_SENSORS"] == 1
+    with pytest.raises(ValueError, match="airspeed"):
+        ardupilot_params.sensors_mask("gps,airspeed")
 
 
 @pytest.mark.parametrize("params, says", [({"EAHRS_TYPE_TOO_LONG_NAME": 1}, "not an ArduPilot parameter name"),

@@ -30,8 +30,27 @@ DEVICES = {
 _NAME = re.compile(r"[A-Z][A-Z0-9_]{0,15}")
 
 
-def device_params(device: str, serial_port: int = SERIAL_PORT) -> dict[str, float]:
-    """The parameters selecting `device` (a key of DEVICES, or "json") on SERIAL<serial_port>."""
+#: EAHRS_SENSORS bits (libraries/AP_ExternalAHRS/AP_ExternalAHRS.h AvailableSensor, 265753db8b): which of the
+#: unit's sensors ArduPilot registers as its own; the attitude and position (AHRS_EKF_TYPE 11) come from the unit
+#: whatever they are
+SENSOR_BITS = {"gps": 1, "imu": 2, "baro": 4, "compass": 8}
+
+
+def sensors_mask(names: str) -> int:
+    """EAHRS_SENSORS from a comma-separated list of SENSOR_BITS names ("all": every one)."""
+    if names == "all":
+        return sum(SENSOR_BITS.values())
+    mask = 0
+    for name in filter(None, (n.strip() for n in names.split(","))):
+        if name not in SENSOR_BITS:
+            raise ValueError(f"sensor {name!r}: not one of {', '.join(SENSOR_BITS)} (or all)")
+        mask |= SENSOR_BITS[name]
+    return mask
+
+
+def device_params(device: str, serial_port: int = SERIAL_PORT, sensors: str = "all") -> dict[str, float]:
+    """The parameters selecting `device` (a key of DEVICES, or "json") on SERIAL<serial_port>, with the unit's
+    `sensors` (sensors_mask) registered in ArduPilot."""
     common = {"DISARM_DELAY": 0, "FS_CRASH_CHECK": 0}
     if device == "json":
         return common            # SITL's own EKF3 on the emulator's IMU, GPS from the JSON position
@@ -43,7 +62,8 @@ def device_params(device: str, serial_port: int = SERIAL_PORT) -> dict[str, floa
             f"SERIAL{serial_port}_BAUD": BAUD,
             "GPS1_TYPE": 21,
             "AHRS_EKF_TYPE": 11,
-            "INS_GYR_CAL": 1}
+            "INS_GYR_CAL": 1,
+            "EAHRS_SENSORS": sensors_mask(sensors)}
 
 
 def param_text(params: dict[str, float]) -> str:

@@ -123,7 +123,7 @@ def run(args) -> dict:
     work = Path(tempfile.mkdtemp(prefix=f"sitl-{args.device}-"))
     truth = scene_truth(args.scene)
     duration = float(truth.t[-1] - truth.t[0])
-    params = ardupilot_params.device_params(args.device)
+    params = {**ardupilot_params.device_params(args.device, sensors=args.sensors), **dict(args.param)}
     parm = ardupilot_params.write_params(work / "emulated.parm", params)
     env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     emu_cmd = emulator_command(args.scene, args.device, work)
@@ -268,6 +268,17 @@ STATUSTEXT ({len(texts)}):
     return out / f"{name}.md"
 
 
+def _param(text: str) -> tuple[str, float]:
+    name, sep, value = text.partition("=")
+    if not sep:
+        raise argparse.ArgumentTypeError(f"{text!r}: NAME=VALUE")
+    try:
+        ardupilot_params.param_text({name: float(value)})        # the name and value checks of the file
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return name, float(value)
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--arducopter", type=Path, required=True, help="a built Copter SITL binary")
@@ -278,6 +289,11 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=Path, default=REPO / "docs" / "sitl")
     p.add_argument("--no-arm", dest="arm", action="store_false", help="only watch, never arm")
     p.add_argument("--ardupilot-commit", default="unknown", help="written in the report")
+    p.add_argument("--sensors", default="all",
+                   help="the unit's sensors ArduPilot registers (EAHRS_SENSORS): all, or some of gps,imu,baro,compass; "
+                        "the others stay SITL's own simulated ones")
+    p.add_argument("--param", action="append", default=[], type=_param, metavar="NAME=VALUE",
+                   help="one more SITL parameter (after the device's), repeatable")
     args = p.parse_args(argv)
     for path in (args.arducopter, args.defaults, args.scene):
         if not path.is_file():
