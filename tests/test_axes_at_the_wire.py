@@ -80,9 +80,7 @@ EAST, NORTH, UP = "3*cos(2*pi*0.3*t)", "2*sin(2*pi*0.4*t) + 0.5*t", "0.7*sin(2*p
 ENU_PITCH, ENU_YAW = "0.3*cos(2*pi*0.5*t)", "0.6*t + 0.2*sin(2*pi*1.1*t)"
 SCENES = {
     "ENU": MOVING.format(frame="ENU", x=EAST, y=NORTH, z=UP, pitch=ENU_PITCH, yaw=ENU_YAW, arm="[0.1, 0.2, 0.3]"),
-    # negated as a negative number, not a negated expression: expression numbers are run-time inputs, a unary
-    # minus goes with its number, and the kernels then do the same operations on numbers of opposite sign
-    "NED": MOVING.format(frame="NED", x=NORTH, y=EAST, z=f"-{UP}", pitch=f"-{ENU_PITCH}",
+    "NED": MOVING.format(frame="NED", x=NORTH, y=EAST, z=f"-({UP})", pitch=f"-({ENU_PITCH})",
                          yaw=f"pi/2 - ({ENU_YAW})", arm="[0.1, -0.2, -0.3]"),
 }
 
@@ -230,33 +228,6 @@ def _wire(name, samples):
     return bytes(out.data) if hasattr(out, "data") else out.tobytes()
 
 
-#: formats writing doubles as text: the last bits of a double show in their bytes
-DOUBLE_TEXT = ("ardupilot-json",)
-
-
-def _same_on_every_wire(sensors) -> None:
-    """The two scenes' samples give the same bytes on every wire of float32 (or coarser) resolution; the formats
-    writing doubles as text carry the same numbers to 1e-12. The kernels of the two scenes evaluate differently
-    written expressions (yaw_ned = pi/2 - yaw_enu, their numbers run-time inputs since issue 25), so their doubles
-    may differ in the last bit, which only a double on the wire shows."""
-    import json
-    different = [name for name in firmware_protocols.formats()
-                 if _wire(name, sensors["ENU"]) != _wire(name, sensors["NED"])]
-    assert not set(different) - set(DOUBLE_TEXT), f"ENU and NED scenes differ on {different}"
-    for name in different:
-        lines = {frame: [json.loads(line) for line in _wire(name, samples).split(b"\n") if line.strip()]
-                 for frame, samples in sensors.items()}
-        assert len(lines["ENU"]) == len(lines["NED"]) == len(sensors["NED"].accel)
-
-        def numbers(value):
-            if isinstance(value, dict):
-                return [x for key in sorted(value) for x in numbers(value[key])]
-            if isinstance(value, list):
-                return [x for item in value for x in numbers(item)]
-            return [float(value)]
-        np.testing.assert_allclose(numbers(lines["ENU"]), numbers(lines["NED"]), rtol=1e-12, atol=1e-12, err_msg=name)
-
-
 def test_enu_and_ned_versions_of_one_motion_give_the_same_bytes_on_every_wire(moving):
     (enu_scene, enu), (ned_scene, ned) = moving["ENU"], moving["NED"]
     # the two scenes are one motion: the NED truth is the ENU truth's permutation
@@ -279,7 +250,9 @@ def test_enu_and_ned_versions_of_one_motion_give_the_same_bytes_on_every_wire(mo
     # last bits of a double (above), which can tip a float32 rounding, so it is compared decoded, below.
     sensors = {frame: dataclasses.replace(samples, quat=None, euler=None, attitude_change=None)
                for frame, samples in frd.items()}
-    _same_on_every_wire(sensors)
+    different = [name for name in firmware_protocols.formats()
+                 if _wire(name, sensors["ENU"]) != _wire(name, sensors["NED"])]
+    assert not different, f"ENU and NED scenes differ on {different}"
     fields = "common:quaternion,yawpitchroll,accel,angularrate"
     decoded = {frame: firmware_protocols.create_decoder("vectornav-binary").feed(
         firmware_protocols.create_encoder("vectornav-binary", fields=fields).encode(samples).data)
@@ -349,15 +322,14 @@ def noisy(tmp_path_factory):
 
 def test_enu_and_ned_scenes_with_random_errors_give_the_same_bytes_on_every_wire(noisy):
     """Noise, bias instability (flicker poles and a Gauss-Markov bias), random walk, turn-on bias and random
-    vibration (linear and angular PSD) with one seed: the same forward-right-down samples (to the last bits of a
-    double: _same_on_every_wire), and the same bytes on every wire (the attitude, turned by the angular vibration, compared as above)."""
+    vibration (linear and angular PSD lines) with one seed: the same forward-right-down samples, to the last bit,
+    and the same bytes on every wire (the attitude, turned by the angular vibration, compared as above)."""
     frd = {frame: _stream_samples(scene, block, 0, device=True) for frame, (scene, block) in noisy.items()}
     (_, enu), (_, ned) = noisy["ENU"], noisy["NED"]
     # the errors are there: the realized biases are far from 0 and differ per axis
     assert np.all(np.abs(ned.truth["gyro_bias"][0]).max(axis=0) > 1e-4)
-    for name in ("accel", "gyro", "delta_theta", "delta_velocity"):   # to the last bits (see _same_on_every_wire)
-        np.testing.assert_allclose(getattr(frd["ENU"], name), getattr(frd["NED"], name), rtol=0, atol=1e-12,
-                                   err_msg=name)
+    for name in ("accel", "gyro", "delta_theta", "delta_velocity"):
+        np.testing.assert_array_equal(getattr(frd["ENU"], name), getattr(frd["NED"], name), err_msg=name)
     # the realized biases too, the scene's axes being FLU and FRD
     for name in ("gyro_bias", "accel_bias"):
         np.testing.assert_array_equal(enu.truth[name] * [1.0, -1.0, -1.0], ned.truth[name], err_msg=name)
@@ -366,7 +338,9 @@ def test_enu_and_ned_scenes_with_random_errors_give_the_same_bytes_on_every_wire
     assert angle.max() < 1e-12
     sensors = {frame: dataclasses.replace(samples, quat=None, euler=None, attitude_change=None)
                for frame, samples in frd.items()}
-    _same_on_every_wire(sensors)
+    different = [name for name in firmware_protocols.formats()
+                 if _wire(name, sensors["ENU"]) != _wire(name, sensors["NED"])]
+    assert not different, f"ENU and NED scenes differ on {different}"
     # MAVLink HIL_SENSOR through pymavlink: the NED scene's values (FRD already), decoded
     data = firmware_protocols.create_encoder("mavlink-hil-sensor").encode(sensors["ENU"]).data
     messages = mavlink2.MAVLink(None).parse_buffer(data)

@@ -238,6 +238,27 @@ def test_phases_exponents_and_zeros_of_expressions_stay_structure():
     assert linear != key(5.0, 0.2, 1.5, 3.0, 0.05, yaw="0.06*t")       # the yaw angle is a phase
     assert key(5.0, 0.2, 1.5, 3.0, 0.05, yaw="0.05*t**3") != key(5.0, 0.2, 1.5, 3.0, 0.05, yaw="0.05*t**2")
     assert key(5.0, 0.2, 1.5, 3.0, 0.05, yaw="0.05*t**3") == key(5.0, 0.2, 1.5, 3.0, 0.05, yaw="0.9*t**3")
+    # a time-free part holding pi stays: sympy turns sin(pi/2 - x) into cos(x) only when it sees pi/2
+    assert key(5.0, 0.2, 1.5, 3.0, 0.05, yaw="pi/2 - 0.05*t**3") != key(5.0, 0.2, 1.5, 3.0, 0.05,
+                                                                        yaw="pi/3 - 0.05*t**3")
+    assert key(5.0, 0.2, 1.5, 3.0, 0.05, yaw="pi/2 - 0.05*t**3") == key(5.0, 0.2, 1.5, 3.0, 0.05,
+                                                                        yaw="pi/2 - 0.9*t**3")
+
+
+def test_a_multiple_of_pi_keeps_sympys_exact_identities():
+    """sin(pi/2 - x) = cos(x): with pi/2 kept whole, the kernel of yaw = pi/2 - x takes cos(x), the same operations
+    as an angle written the other way (an ENU and a NED scene of one motion: test_axes_at_the_wire)."""
+    import ast
+
+    import sympy
+    from imu_emulator.numerics.expressions import lift, to_sympy
+    t = sympy.Symbol("t", real=True)
+    tree = ast.parse("pi/2 - (0.6*t + 0.2*t**3)", mode="eval")
+    structure, values = lift(tree, {}, phase=True)
+    assert values == [0.6, 0.2] and "pi" in structure
+    c = [sympy.Symbol(f"c{i}", real=True) for i in range(len(values))]
+    angle = to_sympy(tree, {}, t, lifted=[str(x) for x in c], phase=True)
+    assert sympy.sin(angle) == sympy.cos(c[0] * t + c[1] * t**3)
 
 
 # --- one kernel for every choice of outputs: measured, not used (issue 25 (b)) ---------------------------------

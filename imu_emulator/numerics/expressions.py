@@ -195,7 +195,10 @@ def uses_time(tree: ast.Expression) -> bool:
 # - an exponent stays (t**2 differentiates to 2*t and prints as a multiplication; t**c would be pow() calls);
 # - a zero stays, and a time-free part that is zero (as an effect's zero removes its line, and t/0 or t/(2 - 2) is
 #   refused when generated, not at run time), and a time-free function call (tan(pi/2) is refused, sqrt(4) is 2);
-# - pi and e stay (the same in every scene). Every other number, and every [params] value, is lifted.
+# - pi and e stay (the same in every scene), and so does a time-free part holding pi (pi/2, 2*pi/3): sympy's
+#   exact identities need it (sin(pi/2 - x) is cos(x), the same operations as the scene written the other way,
+#   so an ENU and a NED version of one attitude give the same bits). Every other number, and every [params]
+#   value, is lifted.
 _CONST, _LINEAR, _OTHER = 0, 1, 2
 PHASE_FUNCTIONS = ("sin", "cos", "tan")
 
@@ -254,7 +257,8 @@ def _fold(tree: ast.Expression, constant, name, call, lift=None):
             return -operand if isinstance(node.op, ast.USub) else operand
         if lift is not None and not keep and isinstance(node, (ast.BinOp, ast.Call)) and _degree(node) == _CONST:
             # a time-free call (tan(pi/2): sympy's zoo, refused when generated) or a time-free zero (t/(2 - 2))
-            keep = isinstance(node, ast.Call) or _constant_parts(node, lift[0], "", "") == 0.0
+            keep = (isinstance(node, ast.Call) or _constant_parts(node, lift[0], "", "") == 0.0
+                    or any(isinstance(n, ast.Name) and n.id == "pi" for n in ast.walk(node)))
         if isinstance(node, ast.BinOp):
             op = type(node.op)
             a, b = walk(node.left, keep), walk(node.right, keep or op is ast.Pow)
