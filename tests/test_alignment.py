@@ -210,6 +210,13 @@ def test_cli_plain_logs_at_different_rates_with_json(tmp_path, capsys):
     assert "roll 10.000000" in out and "pitch -25.000000" in out and "yaw 137.000000" in out
 
 
+def test_report_prints_no_sign_on_a_value_that_rounds_to_zero():
+    """An offset of -1e-13 ms is printed 0.000000, as +1e-13 is (the parquet run of the test below gave -0.000000)."""
+    from imu_emulator.commands.align import _fixed
+    assert _fixed(-1e-13, 6) == _fixed(1e-13, 6) == "0.000000"
+    assert _fixed(-0.0000005001, 6) == "-0.000001" and _fixed(-2.5, 1) == "-2.5"
+
+
 @pytest.mark.parametrize("suffix", [".csv", ".npz", ".parquet"])
 def test_cli_one_emulator_file_with_two_imus(tmp_path, capsys, suffix):
     # Same file for A and B: the emulator's CSV (an imu column) or NPZ (imu_names), IMUs picked by name.

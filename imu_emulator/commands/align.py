@@ -61,19 +61,26 @@ def cmd_align(args) -> int:
     return 0
 
 
+def _fixed(value: float, digits: int) -> str:
+    """value with `digits` decimals, and no sign on a value that rounds to zero there (-1e-13 s is 0.000000,
+    not -0.000000: a sign the digits cannot back)."""
+    text = f"{value:.{digits}f}"
+    return text[1:] if text.startswith("-") and float(text) == 0.0 else text
+
+
 def report(result, label_a: str, label_b: str) -> str:
     obs, sig = result.observable, result.sigma
     lines = [f"B = {label_b} relative to A = {label_a}: {result.n_rows} samples over {result.overlap_s:.3f} s "
              f"(common base: {result.base}'s stamps)"]
     angles = []
     for i, name in enumerate(("roll", "pitch", "yaw")):
-        angles.append(f"{name} {result.euler_deg[i]:.6f} ± {sig['euler_deg'][i]:.2g}°" if obs[name]
+        angles.append(f"{name} {_fixed(result.euler_deg[i], 6)} ± {sig['euler_deg'][i]:.2g}°" if obs[name]
                       else f"{name} unobservable")
     lines.append("rotation B -> A (z-y-x, = B's mounting_rpy_deg when A is unrotated): " + ", ".join(angles))
     w, x, y, z = result.quaternion_wxyz
     lines.append(f"quaternion (w, x, y, z): {w:.9f}, {x:.9f}, {y:.9f}, {z:.9f}")
     lines.append("DCM: " + "; ".join(" ".join(f"{v:+.9f}" for v in row) for row in result.C))
-    offset = (f"{result.time_offset_s * 1e3:.6f} ± {sig['time_offset_s'] * 1e3:.2g} ms" if obs["time_offset_s"]
+    offset = (f"{_fixed(result.time_offset_s * 1e3, 6)} ± {sig['time_offset_s'] * 1e3:.2g} ms" if obs["time_offset_s"]
               else "unobservable")
     coarse = "not searched" if result.coarse_offset_s is None else f"coarse {result.coarse_offset_s * 1e3:.3f} ms"
     lines.append(f"time offset t_B - t_A: {offset} ({coarse})"
