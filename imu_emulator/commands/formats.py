@@ -15,7 +15,8 @@ def register(subparsers) -> None:
     p.set_defaults(func=cmd_formats)
 
 
-def _size(info) -> str:
+def size_per_sample(info) -> str:
+    """What one sample costs its link with the default options: bytes (serial) or frames and worst-case bits (CAN)."""
     from firmware_protocols.base import can_bits_worst_case
     if info.kind == "serial":
         return f"{info.bytes_per_sample} B/sample"
@@ -65,7 +66,7 @@ def cmd_formats(args) -> int:
         known = {args.details: known[args.details]}
     for name, info in known.items():
         talks = " [device]" if info.device is not None else ""
-        print(f"{name:24} {info.kind:6} {_size(info):40} {info.description}{talks}")
+        print(f"{name:24} {info.kind:6} {size_per_sample(info):40} {info.description}{talks}")
         for preset, (options, text) in info.presets.items():
             print(f"{'':24} preset={preset}: {text}")
         if args.details is None:
