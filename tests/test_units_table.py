@@ -128,12 +128,16 @@ PROSE = {"6 s per 60 000"}      # a comment's words in quotes, not a value
 
 
 def _documented_values() -> list[str]:
-    """Every quoted "NUMBER unit..." of the README, the example scenes and the presets."""
-    files = [ROOT / "README.md", *sorted((ROOT / "examples").glob("*.toml")),
+    """Every quoted "NUMBER unit..." of the README, the docs site's pages and the tables it generates from the
+    effect and companion records, the example scenes and the presets."""
+    from imu_emulator.companions import documentation_table as companion_table
+    from imu_emulator.effects import documentation_table as effect_table
+    files = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md")), *sorted((ROOT / "examples").glob("*.toml")),
              *sorted((ROOT / "imu_emulator" / "scene" / "presets").glob("*.toml"))]
+    texts = [path.read_text() for path in files] + [effect_table(), companion_table()]
     found = set()
-    for path in files:
-        found |= set(re.findall(r'"(-?[0-9][0-9.eE+-]* *[^"0-9 ,=][^"]*)"', path.read_text()))
+    for text in texts:
+        found |= set(re.findall(r'"(-?[0-9][0-9.eE+-]* *[^"0-9 ,=][^"]*)"', text))
     return sorted(found - PROSE)
 
 
