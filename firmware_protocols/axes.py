@@ -8,7 +8,7 @@ definition (cited beside the declaration):
     reference   the frame its attitude and navigation fields refer to ("NED", "ENU", ...), None when it has none
 
 A format whose body axes are not FRD calls `to_body_axes` once, on entry to `encode`; nothing else in it knows.
-`declarations()` gathers the table (`imu-emulator formats --details` prints it; README "Conventions at the wire").
+`declarations()` gathers the table (`imu-emulator formats --details` prints it; docs/concepts.md, "At the wire").
 """
 from __future__ import annotations
 

@@ -5,7 +5,7 @@ Python API:
     samples = simulate(scene)                      # SampleBlock: t_s, accel, gyro (n_imu, n, 3), quat
     sim = Simulation(scene); sim.block(k0, n)      # block-wise, for long or live runs
 
-The package's layers, in the order data flows (README "Project layout"; the import contract in
+The package's layers, in the order data flows (docs/architecture.md; the import contract in
 pyproject.toml checks that imports run this one way):
     scene -> motion -> codegen -> runtime -> output -> live -> analysis -> commands -> cli
 with companions (sensors beside the IMU's triads, which scene validation reads and runtime runs), effects, geo,

@@ -1,4 +1,4 @@
-"""The package's dependency rule (pyproject.toml [tool.importlinter], README "Project layout"), checked by
+"""The package's dependency rule (pyproject.toml [tool.importlinter], docs/architecture.md), checked by
 import-linter, which counts imports made inside functions too."""
 import shutil
 import subprocess

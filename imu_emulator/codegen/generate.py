@@ -73,7 +73,7 @@ def generate_source(scene: Scene, attitude: bool, truth: bool, increments: int =
     outputs, 0 for none). `switched`: every output's lines, each written only when the caller passes its arrays
     (not empty), so that one kernel could serve generate, generate --truth and stream (`attitude` and `truth` are
     then ignored). The cache does not use it: it cost 3-7 % per sample against each choice's own kernel
-    (tools/bench_parametric.py; README "How the kernel pays only for what the scene names"); it stays for that
+    (tools/bench_parametric.py; docs/kernel.md); it stays for that
     benchmark to measure again. No user text reaches the source except validated numbers as repr."""
     from imu_emulator.motion.code import motion_code
 

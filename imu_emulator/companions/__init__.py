@@ -29,7 +29,7 @@ def named(scene) -> set[str]:
 
 
 def documentation_table() -> str:
-    """The Markdown table of companion sensors and their parameters (README "Companion sensors" holds it; a test
+    """The Markdown table of companion sensors and their parameters (docs/companions.md is generated from it; a test
     checks they agree)."""
     rows = ["| sensor | parameter | unit (plain numbers) | default | datasheet forms | what |",
             "|---|---|---|---|---|---|"]

@@ -26,7 +26,7 @@ def all_params() -> list[tuple[Effect, Param]]:
 
 
 def documentation_table() -> str:
-    """The Markdown table of effects and parameters (README "Sensor errors" is generated from it)."""
+    """The Markdown table of effects and parameters (the docs site's effects table, docs/sensor-errors.md, is generated from it)."""
     rows = ["| effect | stage | parameter | unit (plain numbers) | datasheet forms | what |", "|---|---|---|---|---|---|"]
     for effect in EFFECTS.values():
         stage = f"{STAGE_TITLES[effect.stage]} ({effect.order})"

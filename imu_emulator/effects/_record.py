@@ -3,7 +3,7 @@
 An effect is one module in this package holding `EFFECT = Effect(...)`. Everything else reads the records:
 scene validation (which [effects] names, which [[imu]] / [imu.gyro] / [imu.accel] keys, their units), the
 "parameter given but effect off" warnings, the kernel's stages, the cache key (the modules' bytes) and the
-documentation table (`imu-emulator kernel --effects`, README). Records import nothing of the scene.
+documentation table (`imu-emulator kernel --effects`, docs/sensor-errors.md). Records import nothing of the scene.
 """
 from __future__ import annotations
 

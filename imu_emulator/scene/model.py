@@ -13,7 +13,7 @@ import numpy as np
 
 FRAMES = ("ENU", "NED", "ECEF", "ECI")
 ATTITUDE_MODES = ("euler", "tangent", "file")
-DEFAULT_DERIVATIVE = "spline5c"   # see README "What accuracy costs in time"
+DEFAULT_DERIVATIVE = "spline5c"   # see docs/performance.md, "Accuracy"
 SEED_LIMIT = 2 ** 64      # [scene] seed: an integer 0 <= seed < 2**64
 
 # Ranges of the scene's numbers; errors state the bound. Wide enough for any vehicle, narrow enough that no
