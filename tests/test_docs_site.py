@@ -98,3 +98,15 @@ def test_no_page_links_outside_the_repository():
     for path in [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]:
         text = path.read_text()
         assert "shared/specs" not in text and "](../../" not in text, path
+
+
+def test_a_page_asking_for_an_unknown_table_fails_the_build_naming_it():
+    sys.path.insert(0, str(ROOT / "tools"))
+    try:
+        import docs_tables
+    finally:
+        sys.path.remove(str(ROOT / "tools"))
+    with pytest.raises(ValueError, match=r"guide\.md: unknown generated table 'efects'"):
+        docs_tables.fill("text\n<!-- generated: efects -->\n", "guide.md")
+    # a cell holding '|' stays one cell: the escaped bar is what Markdown tables take
+    assert docs_tables._table(("a", "b"), [("x|y", "z")]).splitlines()[-1] == "| x\\|y | z |"
