@@ -18,7 +18,7 @@ import math
 import os
 import subprocess
 import sys
-import tomllib
+from imu_emulator.scene.load import tomllib
 from pathlib import Path
 
 import numpy as np

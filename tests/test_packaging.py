@@ -18,7 +18,7 @@ import os
 import shutil
 import subprocess
 import sys
-import tomllib
+from imu_emulator.scene.load import tomllib
 import zipfile
 from pathlib import Path
 
