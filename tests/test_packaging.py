@@ -18,12 +18,14 @@ import os
 import shutil
 import subprocess
 import sys
-from imu_emulator.scene.load import tomllib
+import tarfile
 import zipfile
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+from imu_emulator.scene.load import tomllib
 
 REPO = Path(__file__).resolve().parent.parent
 PYPROJECT = tomllib.loads((REPO / "pyproject.toml").read_text())
@@ -94,6 +96,13 @@ def test_sdist_and_wheel_are_named_by_the_one_version_and_carry_the_licence_and_
     metadata = zipfile.ZipFile(wheels[0]).read(f"{info}/METADATA").decode()
     assert "License-Expression: Apache-2.0" in metadata.splitlines()
     assert not any(n.startswith("tests/") for n in names)
+    sdist = tarfile.open(next(dist.glob("*.tar.gz")))
+    top = f"imu_emulator-{VERSION}/"
+    members = {m.name.removeprefix(top) for m in sdist.getmembers()}
+    examples = {f"examples/{p.name}" for p in (REPO / "examples").glob("*.toml")}
+    assert examples and examples <= members
+    assert {"CHANGELOG.md", "LICENSE", "README.md", "install.sh", "pyproject.toml"} <= members
+    assert not any(m.startswith("tests/") for m in members)
 
 
 @pytest.mark.parametrize("python", PYTHONS)
