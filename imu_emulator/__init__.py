@@ -25,7 +25,19 @@ _API = {
 }
 
 
+def _version() -> str:
+    """The installed distribution's version: pyproject.toml writes it once, the metadata carries it (read only
+    when asked: importlib.metadata costs ~10 ms of start-up)."""
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        return version("imu-emulator")
+    except PackageNotFoundError:  # run from a source tree that was never installed
+        return "unknown (not installed)"
+
+
 def __getattr__(name):
+    if name == "__version__":
+        return _version()
     if name in _API:
         import importlib
         module = importlib.import_module(_API[name])
@@ -33,5 +45,5 @@ def __getattr__(name):
     raise AttributeError(f"module 'imu_emulator' has no attribute {name!r}")
 
 
-__all__ = ["DataError", "ImuEmulatorError", "SampleBlock", "Scene", "SceneError", "Simulation", "TargetError",
-           "load_scene", "scene_from_dict", "simulate"]
+__all__ = ["__version__", "DataError", "ImuEmulatorError", "SampleBlock", "Scene", "SceneError", "Simulation",
+           "TargetError", "load_scene", "scene_from_dict", "simulate"]

@@ -20,6 +20,18 @@ def test_version_is_the_installed_distributions():
     assert out.stdout.split() == ["imu-emulator", version("imu-emulator")]
 
 
+def test_package_version_is_the_metadatas_and_says_when_there_is_none(monkeypatch):
+    import importlib.metadata
+
+    import imu_emulator
+    assert imu_emulator.__version__ == version("imu-emulator")
+
+    def not_installed(name):
+        raise importlib.metadata.PackageNotFoundError(name)
+    monkeypatch.setattr(importlib.metadata, "version", not_installed)
+    assert imu_emulator.__version__ == "unknown (not installed)"
+
+
 @pytest.mark.parametrize("name", list(fp.formats()))
 def test_details_list_exactly_what_the_encoder_accepts(name):
     """Every declared option is a keyword of the encoder with the default the listing prints; every keyword of the
