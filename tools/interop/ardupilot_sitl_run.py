@@ -13,7 +13,10 @@ Build SITL per ArduPilot's own instructions (BUILD.md); this script builds nothi
    --model JSON, --home at the scene's origin, --defaults COPTER_PARM,WORK/emulated.parm (ardupilot_params.py),
    --serialN=uart:WORK/device:BAUD (libraries/AP_HAL_SITL/UARTDriver.cpp: "uart:PATH:BAUD").
 3. pymavlink on tcp:127.0.0.1:5760 records STATUSTEXT, SYS_STATUS (pre-arm bit), EKF_STATUS_REPORT, ATTITUDE and
-   GLOBAL_POSITION_INT; once the pre-arm checks pass it arms (STABILIZE, throttle low) and stays armed.
+   GLOBAL_POSITION_INT. Once ArduPilot is up ("ArduPilot Ready") it runs the simple accelerometer calibration the
+   unit's new IMU needs; from ARM_FROM_S scene time on (or once the pre-arm checks pass) it asks to arm
+   (STABILIZE, throttle low) every ARM_EVERY_S until armed: a refused request makes ArduPilot state why, and the
+   report lists every pre-arm / arm failure text it gave.
 4. The report: the stack's estimate against the scene's truth (sitl_report.py), docs/sitl/<stack>-<device>.md/png.
 
 The scene's motion is scripted: SITL's own vehicle is not flown along it. With an external AHRS the attitude and
@@ -47,9 +50,9 @@ def emulator_command(scene: Path, device: str, work: Path) -> list[str]:
             "--stats-json", str(work / "stream.json")]
     if device == "json":
         return base + ["--format", "ardupilot-json", "--to", f"ardupilot:9002,record={work / 'servos.csv'}"]
-    _, fmt, options, _ = ardupilot_params.DEVICES[device]
-    return base + ["--format", fmt, "--to", "pty", "--link", str(work / "device")] + \
-        [arg for option in options for arg in ("--option", option)]
+    unit = ardupilot_params.DEVICES[device]
+    return base + ["--format", unit.format, "--to", "pty", "--link", str(work / "device")] + \
+        [arg for option in unit.options for arg in ("--option", option)]
 
 
 def sitl_command(arducopter: Path, defaults: list[Path], device: str, work: Path, origin) -> list[str]:
@@ -62,12 +65,34 @@ def sitl_command(arducopter: Path, defaults: list[Path], device: str, work: Path
                   f"--serial{ardupilot_params.SERIAL_PORT}=uart:{work / 'device'}:{ardupilot_params.BAUD}"]
 
 
-def scene_truth(scene_path: Path) -> sitl_report.Truth:
-    from imu_emulator.runtime.simulation import Simulation
+#: when the runner starts asking ArduPilot to arm (scene time, s; the scene's take-off is at 40 s) and how often
+ARM_FROM_S, ARM_EVERY_S = 20.0, 10.0
+#: the STATUSTEXT AP_Vehicle::setup sends once init_ardupilot is done (AP_Vehicle.cpp:529, 265753db8b)
+READY_TEXT = "ArduPilot Ready"
+
+
+def load(scene_path: Path):
     from imu_emulator.scene.load import load_scene
     scene = load_scene(scene_path)
     if scene.frame != "NED":
         raise SystemExit(f"{scene_path}: the report compares in NED; give the scene frame = \"NED\"")
+    return scene
+
+
+def compass_offsets_mgauss(scene) -> tuple[float, float, float]:
+    """The unit's compass calibration as ArduPilot's COMPASS_OFS_X/Y/Z: minus the first IMU's magnetometer hard
+    iron (gauss -> milligauss); ArduPilot adds the offsets to the field (AP_Compass_Backend.cpp:84-85). The
+    scene's sensor axes are the vehicle's (a mounting rotation would turn them: refused)."""
+    imu = scene.imus[0]
+    if any(imu.mounting_rpy_deg):
+        raise SystemExit(f"IMU {imu.name!r}: mounted rotated {imu.mounting_rpy_deg} deg; the compass calibration "
+                         "written for ArduPilot assumes sensor axes = body axes")
+    hard_iron = imu.companions.get("magnetometer", {}).get("hard_iron", (0.0, 0.0, 0.0))
+    return tuple(-1000.0 * float(h) for h in hard_iron)
+
+
+def scene_truth(scene) -> sitl_report.Truth:
+    from imu_emulator.runtime.simulation import Simulation
     block = Simulation(scene, truth=True).block(0, scene.n_samples)
     # time since the scene's first sample, as the stream's started_unix_ns counts (its first sample's deadline)
     return sitl_report.Truth(t=block.t_s - block.t_s[0], position_ned=block.truth["position"],
@@ -77,7 +102,8 @@ def scene_truth(scene_path: Path) -> sitl_report.Truth:
 class Recorder:
     """Every message of interest with its wall receive time; STATUSTEXT lines kept as text."""
 
-    KINDS = ("ATTITUDE", "GLOBAL_POSITION_INT", "EKF_STATUS_REPORT", "SYS_STATUS", "STATUSTEXT", "HEARTBEAT")
+    KINDS = ("ATTITUDE", "GLOBAL_POSITION_INT", "EKF_STATUS_REPORT", "SYS_STATUS", "STATUSTEXT", "HEARTBEAT",
+             "COMMAND_ACK")
 
     def __init__(self):
         self.rows = {k: [] for k in self.KINDS}
@@ -86,6 +112,37 @@ class Recorder:
         kind = msg.get_type()
         if kind in self.rows:
             self.rows[kind].append((received, msg.to_dict()))
+
+    def texts(self) -> list[tuple[float, str]]:
+        return [(w, r["text"]) for w, r in self.rows["STATUSTEXT"]]
+
+
+def wait_until_ready(link, rec: Recorder, seconds: float = 120.0) -> float:
+    """Record messages until ArduPilot has finished initialising; returns the wall time it said so.
+
+    Until then a command may run inside init: MAVLink is served from the delay callback of whatever init step
+    is waiting (AP_Vehicle::scheduler_delay_callback -> GCS::update_receive), e.g. AP_Baro::calibrate's delays
+    (AP_Baro.cpp:330), before ins.init (ArduCopter/system.cpp:138 then 219). A simple accel cal taken there waits
+    in AP_InertialSensor::wait_for_sample for a sample no IMU can give yet (AP_InertialSensor.cpp:2109-2117), and
+    ArduPilot stays at "Calibrating barometer" for good: the GQ7 run of 2026-12-01, whose driver spends 5 s in
+    its constructor first (AP_ExternalAHRS_MicroStrain7.cpp:75), took the runner's calibration request (sent a
+    fixed 5 s after connecting) there. Ready = the READY_TEXT STATUSTEXT, or an ATTITUDE, which is sent only
+    from the main loop (GCS_MAVLINK::should_send_message_in_delay_callback, GCS_Common.cpp:1218-1233)."""
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        msg = link.recv_match(blocking=True, timeout=0.5)
+        if msg is None:
+            continue
+        received = time.time()
+        rec.add(msg, received)
+        if msg.get_type() == "STATUSTEXT":
+            print(f"SITL: {msg.text}", flush=True)
+            if msg.text == READY_TEXT:
+                return received
+        elif msg.get_type() == "ATTITUDE":
+            return received
+    last = rec.texts()[-1][1] if rec.rows["STATUSTEXT"] else "no STATUSTEXT at all"
+    raise SystemExit(f"ArduPilot did not finish initialising within {seconds:.0f} s (last text: {last!r})")
 
 
 def wait_for(path: Path, seconds: float, proc: subprocess.Popen, what: str) -> None:
@@ -121,18 +178,26 @@ def connect(sitl: subprocess.Popen, work: Path, seconds: float = 90.0):
 def run(args) -> dict:
     from pymavlink import mavutil
     work = Path(tempfile.mkdtemp(prefix=f"sitl-{args.device}-"))
-    truth = scene_truth(args.scene)
+    scene = load(args.scene)
+    truth = scene_truth(scene)
     duration = float(truth.t[-1] - truth.t[0])
-    params = {**ardupilot_params.device_params(args.device, sensors=args.sensors), **dict(args.param)}
+    offsets = compass_offsets_mgauss(scene) if args.device != "json" else None
+    try:
+        params = {**ardupilot_params.device_params(args.device, sensors=args.sensors, compass_offsets_mgauss=offsets),
+                  **dict(args.param)}
+    except ValueError as exc:
+        raise SystemExit(f"{args.scene}: {exc}") from None
     parm = ardupilot_params.write_params(work / "emulated.parm", params)
     env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     emu_cmd = emulator_command(args.scene, args.device, work)
     sitl_cmd = sitl_command(args.arducopter, [args.defaults, parm], args.device, work, truth.origin)
     emu_log, sitl_log = open(work / "stream.log", "w"), open(work / "sitl.log", "w")
     emu = subprocess.Popen(emu_cmd, stdout=emu_log, stderr=subprocess.STDOUT, env=env, cwd=REPO)
+    emu_started = time.time()      # ARM_FROM_S counts from here (the stream's own first deadline comes a bit later)
     sitl = None
     rec = Recorder()
-    armed_at = None
+    armed_at = disarmed_at = None
+    arm_requests = []
     try:
         if args.device != "json":
             wait_for(work / "device", 120, emu, "imu-emulator stream")
@@ -141,11 +206,11 @@ def run(args) -> dict:
         for msg_id, hz in ((30, 25), (33, 10), (193, 5), (1, 2)):   # ATTITUDE, GLOBAL_POSITION_INT, EKF_STATUS, SYS
             link.mav.command_long_send(link.target_system, link.target_component,
                                        mavutil.mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0, msg_id, 1e6 / hz, 0, 0, 0, 0, 0)
+        wait_until_ready(link, rec)
         if args.device != "json":
             # The unit's IMU is a new accelerometer to ArduPilot, never calibrated: ArduPilot's own test of these
             # drivers (Tools/autotest/arduplane.py fly_external_AHRS) runs the simple accel cal (param5 = 4)
-            # 5 s after boot, before waiting for the pre-arm checks; so does this.
-            time.sleep(5.0)
+            # once the vehicle is up, before waiting for the pre-arm checks; so does this.
             link.mav.command_long_send(link.target_system, link.target_component,
                                        mavutil.mavlink.MAV_CMD_PREFLIGHT_CALIBRATION, 0, 0, 0, 0, 0, 4, 0, 0)
         end = time.monotonic() + duration + 5
@@ -154,18 +219,24 @@ def run(args) -> dict:
             msg = link.recv_match(blocking=True, timeout=0.5)
             if msg is None:
                 continue
-            rec.add(msg, time.time())
+            now = time.time()
+            rec.add(msg, now)
             if msg.get_type() == "STATUSTEXT":
                 print(f"SITL: {msg.text}", flush=True)
             if msg.get_type() == "HEARTBEAT" and msg.get_srcSystem() == link.target_system:
                 armed = bool(msg.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
                 if armed and armed_at is None:
-                    armed_at = time.time()
+                    armed_at = now
                     print("armed", flush=True)
-            prearm = [r for _, r in rec.rows["SYS_STATUS"]
-                      if r["onboard_control_sensors_health"] & sitl_report.PREARM_CHECK]
-            if args.arm and armed_at is None and prearm and time.monotonic() - last_arm_try > 5:
+                elif not armed and armed_at is not None and disarmed_at is None:
+                    disarmed_at = now
+                    print("disarmed", flush=True)
+            prearm = any(r["onboard_control_sensors_health"] & sitl_report.PREARM_CHECK
+                         for _, r in rec.rows["SYS_STATUS"][-1:])
+            due = prearm or now - emu_started >= ARM_FROM_S
+            if args.arm and armed_at is None and due and time.monotonic() - last_arm_try > ARM_EVERY_S:
                 last_arm_try = time.monotonic()
+                arm_requests.append(now)
                 link.set_mode("STABILIZE")
                 link.mav.command_long_send(link.target_system, link.target_component,
                                            mavutil.mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
@@ -183,7 +254,8 @@ def run(args) -> dict:
         sitl_log.close()
     stream = json.loads((work / "stream.json").read_text()) if (work / "stream.json").exists() else {}
     return {"work": work, "rec": rec, "stream": stream, "truth": truth, "armed_at": armed_at,
-            "commands": [emu_cmd, sitl_cmd], "params": params}
+            "disarmed_at": disarmed_at, "arm_requests": arm_requests, "commands": [emu_cmd, sitl_cmd],
+            "params": params}
 
 
 def estimates(rec: Recorder, started_s: float) -> sitl_report.Estimates:
@@ -229,6 +301,14 @@ def write_report(out: Path, args, outcome: dict, ardupilot_commit: str) -> Path:
     save_figure(fig, out / f"{name}.png", dpi=90)
     texts = [r["text"] for _, r in rec.rows["STATUSTEXT"]]
     armed = f"{outcome['armed_at'] - started:.1f} s" if outcome["armed_at"] else "never"
+    if outcome.get("disarmed_at"):
+        armed += f", disarmed at {outcome['disarmed_at'] - started:.1f} s"
+    failures = sitl_report.failure_summary([w - started for w, _ in rec.texts()], texts)
+    requests = outcome.get("arm_requests", [])
+    # the answers to the arm requests, named by pymavlink's MAV_RESULT table
+    from pymavlink.dialects.v20 import ardupilotmega as mav
+    acks = [mav.enums["MAV_RESULT"][r["result"]].name for _, r in rec.rows["COMMAND_ACK"]
+            if r["command"] == mav.MAV_CMD_COMPONENT_ARM_DISARM]
 
     def when(x):
         return f"{x:.1f} s" if x is not None else "never"
@@ -244,9 +324,15 @@ scene: the motion is scripted. Statistics count from the first healthy EKF_STATU
 - pre-arm checks passed (SYS_STATUS pre-arm bit first set): {when(result['prearm_passed_s'])} scene time
 - EKF healthy (attitude, velocity, absolute position flags; not constant-position mode): {when(result['ekf_healthy_s'])}
 - armed: {armed}
+- arm requests: {len(requests)}{' (first at ' + when(requests[0] - started) + ')' if requests else ''}; \
+answers: {', '.join(acks) or 'none'}
 - emulator stream: {outcome['stream'].get('samples', 0)} samples, dropped {outcome['stream'].get('dropped', '?')}
 
 {sitl_report.markdown_table(result)}
+
+Pre-arm and arm failures ArduPilot stated (scene time):
+
+{sitl_report.failure_table(failures)}
 
 ![errors]({name}.png)
 

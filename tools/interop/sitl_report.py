@@ -179,3 +179,33 @@ def plot(result: dict, title: str):
     ax.legend(fontsize=8)
     ax.set_title("height")
     return fig
+
+
+#: how ArduPilot's arming checks word a failure: "PreArm: " from the periodic pre-arm display, "Arm: " when an
+#: arming request is refused (AP_Arming::check_failed, libraries/AP_Arming/AP_Arming.cpp:301-308, 265753db8b)
+FAILURE_PREFIXES = ("PreArm: ", "Arm: ")
+
+
+def failure_summary(t, texts) -> list[dict]:
+    """Every distinct arming-check failure among STATUSTEXT `texts` (stamped `t`), in order of first appearance:
+    {"check": the text without its prefix, numbers as '#' (one row for "Main loop slow (284Hz < 400Hz)" and
+    "(281Hz < 400Hz)"), "example": its last wording, "count", "first", "last": the times}."""
+    import re
+    rows: dict[str, dict] = {}
+    for when, text in zip(t, texts):
+        prefix = next((p for p in FAILURE_PREFIXES if text.startswith(p)), None)
+        if prefix is None:
+            continue
+        body = text[len(prefix):]
+        row = rows.setdefault(re.sub(r"\d+(\.\d+)?", "#", body),
+                              {"count": 0, "first": float(when), "last": float(when)})
+        row.update(count=row["count"] + 1, last=float(when), example=text)
+    return [{"check": key, **row} for key, row in rows.items()]
+
+
+def failure_table(rows: list[dict]) -> str:
+    if not rows:
+        return "No pre-arm or arm failure was reported."
+    lines = ["| check failed (last wording) | times | first, s | last, s |", "|---|---|---|---|"]
+    lines += [f"| {r['example']} | {r['count']} | {r['first']:.1f} | {r['last']:.1f} |" for r in rows]
+    return "\n".join(lines)
