@@ -49,9 +49,10 @@ def test_defaults_file_reads_back_with_pymavlink(tmp_path, device):
         assert [params[f"SIM_MAG{i}_DEVID"] for i in range(1, 7)] == [0] * 6
         assert (params["COMPASS_OFS_X"], params["COMPASS_OFS_Y"], params["COMPASS_OFS_Z"]) == OFFSETS
         assert params["COMPASS_DEV_ID"] == params["COMPASS_PRIO1_ID"] == _bus_id_by_c_layout(6, 4, 0, 0)
-        # the main loop waits for the unit's IMU: its rate, VN-300 as EAHRS_RATE asks it (400 / divisor),
-        # GQ7 as the preset streams it (the preset's 0x80 decimation of the scene's 200 Hz)
-        assert params["SCHED_LOOP_RATE"] == {"vn300": 100, "gq7": 50}[device]
+        # the main loop waits for the unit's IMU: half its rate, at least ArduPilot's 50 Hz floor; VN-300 at
+        # 100 Hz as EAHRS_RATE asks it (400 / divisor 4), GQ7 at the preset's 50 Hz
+        assert params["SCHED_LOOP_RATE"] == 50
+        assert [params[f"INS_ACC{n}{k}_{a}"] for n in (2, 3) for k in ("OFFS", "SCAL") for a in "XYZ"] == [0] * 12
         assert params.get("EAHRS_RATE") == {"vn300": 100, "gq7": None}[device]
 
 
@@ -92,6 +93,7 @@ def test_only_the_units_registered_sensors_replace_sitls():
         ardupilot_params.device_params("vn300")
     with pytest.raises(ValueError, match="SCHED_LOOP_RATE"):
         ardupilot_params.sole_sensor_params(2, 4, 25.0, OFFSETS)
+    assert ardupilot_params.sole_sensor_params(2, 4, 400.0, OFFSETS)["SCHED_LOOP_RATE"] == 200
 
 
 def test_compass_calibration_is_minus_the_scenes_hard_iron():
@@ -304,6 +306,21 @@ def test_stack_clock_to_scene_time_by_the_quickest_delivery():
     started = 1003.0
     scene_t = sitl_report.wall_to_scene(boot, boot + 1000.0 + delay, started)
     np.testing.assert_allclose(scene_t, boot - 3.0, atol=1e-9)
+
+
+def test_stack_clock_running_slow_maps_to_the_wall_clock():
+    """SITL on a loaded machine: its clock runs at 80 % of the wall clock (received = 1000 + boot / 0.8 + delay),
+    the delay zero now and then (every 5th message at 25 Hz, several per 2 s window). Lag is linear in boot time,
+    so the envelope through each window's quickest message, anchored where it occurs, is exact: scene time =
+    boot / 0.8 + 1000 - start. (Anchored at window middles it would be up to 0.25 s off: a quarter of the lag's
+    growth over a window.)"""
+    rng = np.random.default_rng(2)
+    boot = np.arange(0.0, 60.0, 0.04)
+    delay = rng.uniform(0.002, 0.05, boot.size)
+    delay[::5] = 0.0
+    started = 1003.0
+    scene_t = sitl_report.wall_to_scene(boot, 1000.0 + boot / 0.8 + delay, started, window_s=2.0)
+    np.testing.assert_allclose(scene_t, boot / 0.8 + 1000.0 - started, atol=1e-9)
 
 
 def test_stream_states_the_wall_clock_of_its_first_deadline(tmp_path):

@@ -84,6 +84,10 @@ BUS_TYPE_SERIAL = 6
 SITL_MAGS_WITH_DEVID = 6
 
 
+#: SCHED_LOOP_RATE's floor (AP_Scheduler.cpp:110-111)
+MIN_LOOP_HZ = 50
+
+
 def serial_bus_id(port: int, address: int = 0, devtype: int = 0) -> int:
     """AP_HAL::Device::make_bus_id(BUS_TYPE_SERIAL, port, address, devtype) (Device.cpp:222-229): the bitfields
     bus_type:3, bus:5, address:8, devtype:8 of DeviceStructure (Device.h:371-376), lowest first."""
@@ -98,9 +102,15 @@ def sole_sensor_params(mask: int, serial_port: int, imu_hz: float,
 
     IMU: SIM_IMU_COUNT 0 (SITL.cpp:548; AP_InertialSensor.cpp:1199-1210 adds the external AHRS's IMU first, then
     SIM_IMU_COUNT simulated ones). With no other IMU, wait_for_sample waits for the unit's next sample every loop
-    (AP_InertialSensor.cpp:2109-2116 leaves the loop only once a gyro and an accel sample are there), so the main
-    loop runs at the unit's IMU rate: SCHED_LOOP_RATE = imu_hz, else "Main loop slow" (AP_Arming.cpp:1085-1091,
-    90 % of SCHED_LOOP_RATE). A serial IMU is exempt from the gyro-rate check (AP_InertialSensor.cpp:1486).
+    (AP_InertialSensor.cpp:2109-2117 leaves only once a gyro and an accel sample are there), so the main loop
+    runs no faster than the unit's IMU, and a loop without a new sample marks the gyro unhealthy
+    (AP_InertialSensor.cpp:1904, 791-798). SCHED_LOOP_RATE = half the IMU rate (the scheduler's floor, 50 Hz,
+    AP_Scheduler.cpp:110-111, at least): two samples per loop, so packets that arrive bunched on a loaded machine
+    do not slow the loop below the 90 % "Main loop slow" fails at (AP_Arming.cpp:1085-1091). A serial IMU is
+    exempt from the gyro-rate check (AP_InertialSensor.cpp:1486).
+    The calibration values of accelerometers 2 and 3 (a defaults file may hold them for SITL's simulated IMUs,
+    as copter.parm does) are cleared: with no such accelerometer they fail "3D Accel calibration needed"
+    (AP_InertialSensor.cpp:1656-1665); simple_accel_cal clears them the same way when it passes (:2666-2671).
     Baro: SIM_BARO_COUNT 0 (SITL.cpp:568; AP_Baro.cpp:556 creates that many simulated ones, :570-573 the
     unit's). AP_Baro::calibrate then returns at once (AP_Baro.cpp:302-304) and the unit's baro takes its first
     pressure as the ground pressure (AP_Baro.cpp:825-828).
@@ -113,9 +123,11 @@ def sole_sensor_params(mask: int, serial_port: int, imu_hz: float,
     field (AP_Compass_Backend.cpp:84-85), so they are minus the magnetometer's hard iron."""
     params: dict[str, float] = {}
     if mask & SENSOR_BITS["imu"]:
-        if not (50 <= imu_hz <= 2000):
-            raise ValueError(f"IMU rate {imu_hz:g} Hz: SCHED_LOOP_RATE must be 50-2000 (AP_Scheduler.cpp:110-113)")
-        params.update({"SIM_IMU_COUNT": 0, "SCHED_LOOP_RATE": imu_hz})
+        if not (MIN_LOOP_HZ <= imu_hz <= 4000):
+            raise ValueError(f"IMU rate {imu_hz:g} Hz: the main loop it paces must run at {MIN_LOOP_HZ}-2000 Hz "
+                             "(SCHED_LOOP_RATE, AP_Scheduler.cpp:110-113)")
+        params.update({"SIM_IMU_COUNT": 0, "SCHED_LOOP_RATE": max(MIN_LOOP_HZ, imu_hz / 2)})
+        params.update({f"INS_ACC{n}{kind}_{axis}": 0 for n in (2, 3) for kind in ("OFFS", "SCAL") for axis in "XYZ"})
     if mask & SENSOR_BITS["baro"]:
         params["SIM_BARO_COUNT"] = 0
     if mask & SENSOR_BITS["compass"]:

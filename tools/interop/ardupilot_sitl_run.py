@@ -117,6 +117,23 @@ class Recorder:
         return [(w, r["text"]) for w, r in self.rows["STATUSTEXT"]]
 
 
+#: the windows the stack's clock is mapped to the wall clock in (sitl_report.wall_to_scene): short, since SITL's
+#: clock drifts from the wall clock as fast as the machine's load changes; long enough to hold many ATTITUDE and
+#: GLOBAL_POSITION_INT messages (25 and 10 Hz requested below), some of them delivered at once
+CLOCK_WINDOW_S = 2.0
+
+#: how many times the simple accel cal is asked for when ArduPilot does not accept it
+CAL_TRIES = 3
+
+
+def calibrate(link, requests: list) -> None:
+    """The simple accelerometer calibration (MAV_CMD_PREFLIGHT_CALIBRATION param5 = 4, GCS_Common.cpp:4873-4875)."""
+    from pymavlink import mavutil
+    requests.append(time.time())
+    link.mav.command_long_send(link.target_system, link.target_component,
+                               mavutil.mavlink.MAV_CMD_PREFLIGHT_CALIBRATION, 0, 0, 0, 0, 0, 4, 0, 0)
+
+
 def wait_until_ready(link, rec: Recorder, seconds: float = 120.0) -> float:
     """Record messages until ArduPilot has finished initialising; returns the wall time it said so.
 
@@ -197,7 +214,7 @@ def run(args) -> dict:
     sitl = None
     rec = Recorder()
     armed_at = disarmed_at = None
-    arm_requests = []
+    arm_requests, cal_requests = [], []
     try:
         if args.device != "json":
             wait_for(work / "device", 120, emu, "imu-emulator stream")
@@ -211,10 +228,10 @@ def run(args) -> dict:
             # The unit's IMU is a new accelerometer to ArduPilot, never calibrated: ArduPilot's own test of these
             # drivers (Tools/autotest/arduplane.py fly_external_AHRS) runs the simple accel cal (param5 = 4)
             # once the vehicle is up, before waiting for the pre-arm checks; so does this.
-            link.mav.command_long_send(link.target_system, link.target_component,
-                                       mavutil.mavlink.MAV_CMD_PREFLIGHT_CALIBRATION, 0, 0, 0, 0, 0, 4, 0, 0)
+            calibrate(link, cal_requests)
         end = time.monotonic() + duration + 5
         last_arm_try = 0.0
+        cal_retry_at = None
         while time.monotonic() < end and emu.poll() is None and sitl.poll() is None:
             msg = link.recv_match(blocking=True, timeout=0.5)
             if msg is None:
@@ -223,6 +240,15 @@ def run(args) -> dict:
             rec.add(msg, now)
             if msg.get_type() == "STATUSTEXT":
                 print(f"SITL: {msg.text}", flush=True)
+            if msg.get_type() == "COMMAND_ACK":
+                print(f"COMMAND_ACK {msg.command} result {msg.result}", flush=True)
+                # simple_accel_cal refuses a second request within 5 s (AP_InertialSensor.cpp:2535): retry later
+                if (msg.command == mavutil.mavlink.MAV_CMD_PREFLIGHT_CALIBRATION and args.device != "json"
+                        and msg.result != mavutil.mavlink.MAV_RESULT_ACCEPTED and len(cal_requests) < CAL_TRIES):
+                    cal_retry_at = time.monotonic() + 6.0
+            if cal_retry_at is not None and time.monotonic() >= cal_retry_at:
+                cal_retry_at = None
+                calibrate(link, cal_requests)
             if msg.get_type() == "HEARTBEAT" and msg.get_srcSystem() == link.target_system:
                 armed = bool(msg.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
                 if armed and armed_at is None:
@@ -252,9 +278,12 @@ def run(args) -> dict:
                     proc.kill()
         emu_log.close()
         sitl_log.close()
+    # every message kept, for a report made again later (write_report reads only these and the stream's figures)
+    (work / "mavlink.json").write_text(json.dumps(rec.rows))
     stream = json.loads((work / "stream.json").read_text()) if (work / "stream.json").exists() else {}
     return {"work": work, "rec": rec, "stream": stream, "truth": truth, "armed_at": armed_at,
-            "disarmed_at": disarmed_at, "arm_requests": arm_requests, "commands": [emu_cmd, sitl_cmd],
+            "disarmed_at": disarmed_at, "arm_requests": arm_requests, "cal_requests": cal_requests,
+            "commands": [emu_cmd, sitl_cmd],
             "params": params}
 
 
@@ -266,7 +295,7 @@ def estimates(rec: Recorder, started_s: float) -> sitl_report.Estimates:
         if not rows:
             return np.zeros(0), np.zeros((0, len(keys)))
         boot = np.array([r["time_boot_ms"] for _, r in rows]) / 1e3
-        t = sitl_report.wall_to_scene(boot, np.array([w for w, _ in rows]), started_s)
+        t = sitl_report.wall_to_scene(boot, np.array([w for w, _ in rows]), started_s, window_s=CLOCK_WINDOW_S)
         return t, np.array([[r[k] for k in keys] for _, r in rows], dtype=float)
 
     ta, att = series("ATTITUDE", ("roll", "pitch", "yaw"))
@@ -307,8 +336,9 @@ def write_report(out: Path, args, outcome: dict, ardupilot_commit: str) -> Path:
     requests = outcome.get("arm_requests", [])
     # the answers to the arm requests, named by pymavlink's MAV_RESULT table
     from pymavlink.dialects.v20 import ardupilotmega as mav
-    acks = [mav.enums["MAV_RESULT"][r["result"]].name for _, r in rec.rows["COMMAND_ACK"]
-            if r["command"] == mav.MAV_CMD_COMPONENT_ARM_DISARM]
+    def answers(command):
+        return ", ".join(mav.enums["MAV_RESULT"][r["result"]].name for _, r in rec.rows["COMMAND_ACK"]
+                         if r["command"] == command) or "none"
 
     def when(x):
         return f"{x:.1f} s" if x is not None else "never"
@@ -318,14 +348,16 @@ def write_report(out: Path, args, outcome: dict, ardupilot_commit: str) -> Path:
 
 What is compared: ArduPilot's ATTITUDE and GLOBAL_POSITION_INT, i.e. {what}, against the scene's truth at the
 same scene time (ATTITUDE / GLOBAL_POSITION_INT time_boot_ms mapped to the wall clock by the quickest delivery in
-each 10 s window, then to scene time by the stream's `started_unix_ns`). SITL's own vehicle is not flown along the
+each {CLOCK_WINDOW_S:g} s window, then to scene time by the stream's `started_unix_ns`). SITL's own vehicle is not flown along the
 scene: the motion is scripted. Statistics count from the first healthy EKF_STATUS_REPORT on.
 
 - pre-arm checks passed (SYS_STATUS pre-arm bit first set): {when(result['prearm_passed_s'])} scene time
 - EKF healthy (attitude, velocity, absolute position flags; not constant-position mode): {when(result['ekf_healthy_s'])}
 - armed: {armed}
+- simple accelerometer calibration requests: {len(outcome.get('cal_requests', []))}; answers: \
+{answers(mav.MAV_CMD_PREFLIGHT_CALIBRATION)}
 - arm requests: {len(requests)}{' (first at ' + when(requests[0] - started) + ')' if requests else ''}; \
-answers: {', '.join(acks) or 'none'}
+answers: {answers(mav.MAV_CMD_COMPONENT_ARM_DISARM)}
 - emulator stream: {outcome['stream'].get('samples', 0)} samples, dropped {outcome['stream'].get('dropped', '?')}
 
 {sitl_report.markdown_table(result)}

@@ -35,20 +35,29 @@ def first_time(t, condition) -> float | None:
 def wall_to_scene(boot_s, received_s, started_s, window_s: float = 10.0) -> np.ndarray:
     """Scene time of messages stamped `boot_s` (the stack's time since boot) and received at wall time `received_s`.
 
-    The stack's clock is mapped to the wall clock by the lower envelope of (received - boot) over windows of
-    `window_s`: the quickest delivery in each window is the least delayed, and a stack that fell behind the wall
-    clock (a loaded machine) moves the envelope, window by window. Scene time = that wall time - `started_s` (the
-    stream's first sample deadline, the emulator's `started_unix_ns`)."""
+    The stack's clock is mapped to the wall clock by the lower envelope of lag = received - boot: in each window
+    of `window_s` the quickest delivery is the least delayed, and the envelope is interpolated between those
+    messages at their own boot times. A stack whose clock runs slow (SITL on a loaded machine: its simulated time
+    falls behind the wall clock) makes the lag grow within a window; anchoring each window's minimum where it
+    occurs, not at the window's middle, follows that drift (exactly, while it is linear between anchors). Scene
+    time = that wall time - `started_s` (the stream's first sample deadline, the emulator's `started_unix_ns`)."""
     boot_s, received_s = np.asarray(boot_s, float), np.asarray(received_s, float)
     lag = received_s - boot_s
     edges = np.arange(boot_s.min(), boot_s.max() + window_s, window_s)
-    centers, floors = [], []
+    anchors, floors = [], []
     for lo in edges:
-        inside = (boot_s >= lo) & (boot_s < lo + window_s)
-        if inside.any():
-            centers.append(float(np.mean(boot_s[inside])))
-            floors.append(float(lag[inside].min()))
-    return boot_s + np.interp(boot_s, centers, floors) - started_s
+        inside = np.flatnonzero((boot_s >= lo) & (boot_s < lo + window_s))
+        if inside.size:
+            quickest = inside[np.argmin(lag[inside])]
+            anchors.append(float(boot_s[quickest]))
+            floors.append(float(lag[quickest]))
+    anchors, floors = np.asarray(anchors), np.asarray(floors)
+    lag_at = np.interp(boot_s, anchors, floors)
+    if anchors.size > 1:        # beyond the first / last anchor the drift goes on as between the two nearest
+        before, after = boot_s < anchors[0], boot_s > anchors[-1]
+        lag_at[before] = floors[0] + (boot_s[before] - anchors[0]) * (floors[1] - floors[0]) / (anchors[1] - anchors[0])
+        lag_at[after] = floors[-1] + (boot_s[after] - anchors[-1]) * (floors[-1] - floors[-2]) / (anchors[-1] - anchors[-2])
+    return boot_s + lag_at - started_s
 
 
 @dataclass
