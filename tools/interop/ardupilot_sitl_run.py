@@ -134,6 +134,18 @@ def calibrate(link, requests: list) -> None:
                                mavutil.mavlink.MAV_CMD_PREFLIGHT_CALIBRATION, 0, 0, 0, 0, 0, 4, 0, 0)
 
 
+def receive(link, rec: Recorder):
+    """The next message (None after half a second without one) and its wall receive time, recorded; STATUSTEXT
+    printed as it comes."""
+    msg = link.recv_match(blocking=True, timeout=0.5)
+    received = time.time()
+    if msg is not None:
+        rec.add(msg, received)
+        if msg.get_type() == "STATUSTEXT":
+            print(f"SITL: {msg.text}", flush=True)
+    return msg, received
+
+
 def wait_until_ready(link, rec: Recorder, seconds: float = 120.0) -> float:
     """Record messages until ArduPilot has finished initialising; returns the wall time it said so.
 
@@ -147,16 +159,10 @@ def wait_until_ready(link, rec: Recorder, seconds: float = 120.0) -> float:
     from the main loop (GCS_MAVLINK::should_send_message_in_delay_callback, GCS_Common.cpp:1218-1233)."""
     end = time.monotonic() + seconds
     while time.monotonic() < end:
-        msg = link.recv_match(blocking=True, timeout=0.5)
+        msg, received = receive(link, rec)
         if msg is None:
             continue
-        received = time.time()
-        rec.add(msg, received)
-        if msg.get_type() == "STATUSTEXT":
-            print(f"SITL: {msg.text}", flush=True)
-            if msg.text == READY_TEXT:
-                return received
-        elif msg.get_type() == "ATTITUDE":
+        if (msg.get_type() == "STATUSTEXT" and msg.text == READY_TEXT) or msg.get_type() == "ATTITUDE":
             return received
     last = rec.texts()[-1][1] if rec.rows["STATUSTEXT"] else "no STATUSTEXT at all"
     raise SystemExit(f"ArduPilot did not finish initialising within {seconds:.0f} s (last text: {last!r})")
@@ -233,13 +239,9 @@ def run(args) -> dict:
         last_arm_try = 0.0
         cal_retry_at = None
         while time.monotonic() < end and emu.poll() is None and sitl.poll() is None:
-            msg = link.recv_match(blocking=True, timeout=0.5)
+            msg, now = receive(link, rec)
             if msg is None:
                 continue
-            now = time.time()
-            rec.add(msg, now)
-            if msg.get_type() == "STATUSTEXT":
-                print(f"SITL: {msg.text}", flush=True)
             if msg.get_type() == "COMMAND_ACK":
                 print(f"COMMAND_ACK {msg.command} result {msg.result}", flush=True)
                 # simple_accel_cal refuses a second request within 5 s (AP_InertialSensor.cpp:2535): retry later
@@ -348,8 +350,8 @@ def write_report(out: Path, args, outcome: dict, ardupilot_commit: str) -> Path:
 
 What is compared: ArduPilot's ATTITUDE and GLOBAL_POSITION_INT, i.e. {what}, against the scene's truth at the
 same scene time (ATTITUDE / GLOBAL_POSITION_INT time_boot_ms mapped to the wall clock by the quickest delivery in
-each {CLOCK_WINDOW_S:g} s window, then to scene time by the stream's `started_unix_ns`). SITL's own vehicle is not flown along the
-scene: the motion is scripted. Statistics count from the first healthy EKF_STATUS_REPORT on.
+each {CLOCK_WINDOW_S:g} s window, then to scene time by the stream's `started_unix_ns`). SITL's own vehicle is not
+flown along the scene: the motion is scripted. Statistics count from the first healthy EKF_STATUS_REPORT on.
 
 - pre-arm checks passed (SYS_STATUS pre-arm bit first set): {when(result['prearm_passed_s'])} scene time
 - EKF healthy (attitude, velocity, absolute position flags; not constant-position mode): {when(result['ekf_healthy_s'])}

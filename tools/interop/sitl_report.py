@@ -55,8 +55,10 @@ def wall_to_scene(boot_s, received_s, started_s, window_s: float = 10.0) -> np.n
     lag_at = np.interp(boot_s, anchors, floors)
     if anchors.size > 1:        # beyond the first / last anchor the drift goes on as between the two nearest
         before, after = boot_s < anchors[0], boot_s > anchors[-1]
-        lag_at[before] = floors[0] + (boot_s[before] - anchors[0]) * (floors[1] - floors[0]) / (anchors[1] - anchors[0])
-        lag_at[after] = floors[-1] + (boot_s[after] - anchors[-1]) * (floors[-1] - floors[-2]) / (anchors[-1] - anchors[-2])
+        first = (floors[1] - floors[0]) / (anchors[1] - anchors[0])
+        last = (floors[-1] - floors[-2]) / (anchors[-1] - anchors[-2])
+        lag_at[before] = floors[0] + (boot_s[before] - anchors[0]) * first
+        lag_at[after] = floors[-1] + (boot_s[after] - anchors[-1]) * last
     return boot_s + lag_at - started_s
 
 
