@@ -174,6 +174,40 @@ def test_calibration_waits_for_the_end_of_ardupilots_init():
         ardupilot_sitl_run.wait_until_ready(_ScriptedLink(boot[:3]), ardupilot_sitl_run.Recorder(), seconds=1.5)
 
 
+def test_calibration_is_retried_and_settled_before_arming():
+    """The VN-300 run of 2026-12-02 had its first accel-cal request refused (TEMPORARILY_REJECTED) and armed before
+    the retry, which the armed vehicle then refused ("Disarm to allow calibration", GCS_Common.cpp:4903-4906).
+    Now: a refusal is retried CAL_RETRY_S later, arming waits until the calibration is taken, refused CAL_TRIES
+    times or unanswered for CAL_SETTLE_S, then comes once the pre-arm checks pass (or from ARM_FROM_S) every
+    ARM_EVERY_S."""
+    run = ardupilot_sitl_run
+    steps = run.Sequence(calibrating=True, stream_started=0.0)
+    steps.calibration_sent(10.0)
+    steps.calibration_answer(False, 10.5)                       # refused
+    assert not steps.calibration_due(10.5 + run.CAL_RETRY_S - 0.01) and steps.calibration_due(10.5 + run.CAL_RETRY_S)
+    assert not steps.arm_due(12.0, prearm_passed=True)           # the pre-arm checks pass: still not before the cal
+    steps.calibration_sent(16.5)
+    steps.calibration_answer(True, 18.0)                        # taken
+    assert not steps.calibration_due(100.0)
+    assert not steps.arm_due(18.0, prearm_passed=False)          # neither pre-arm nor ARM_FROM_S yet
+    assert steps.arm_due(18.0, prearm_passed=True)
+    steps.arm_sent(18.0)
+    assert not steps.arm_due(18.0 + run.ARM_EVERY_S - 0.01, prearm_passed=True)
+    assert steps.arm_due(18.0 + run.ARM_EVERY_S, prearm_passed=False)   # past ARM_FROM_S: asked anyway
+
+    refused = run.Sequence(calibrating=True, stream_started=0.0)
+    for k in range(run.CAL_TRIES):
+        refused.calibration_sent(10.0 * k)
+        refused.calibration_answer(False, 10.0 * k + 1)
+    assert not refused.calibration_due(1000.0) and refused.arm_due(run.ARM_FROM_S + 30, prearm_passed=False)
+
+    silent = run.Sequence(calibrating=True, stream_started=0.0)
+    silent.calibration_sent(5.0)
+    assert not silent.arm_due(5.0 + run.CAL_SETTLE_S, prearm_passed=True)
+    assert silent.arm_due(5.0 + run.CAL_SETTLE_S + 0.01, prearm_passed=True)
+    assert run.Sequence(calibrating=False, stream_started=0.0).arm_due(run.ARM_FROM_S, prearm_passed=False)
+
+
 def test_failure_summary_groups_each_check_across_its_numbers():
     texts = ["EKF3 IMU0 initialised", "PreArm: Gyros not healthy", "PreArm: Main loop slow (284Hz < 400Hz)",
              "PreArm: Gyros not healthy", "Arm: Gyros not healthy", "PreArm: Main loop slow (281Hz < 400Hz)",

@@ -122,8 +122,10 @@ class Recorder:
 #: GLOBAL_POSITION_INT messages (25 and 10 Hz requested below), some of them delivered at once
 CLOCK_WINDOW_S = 2.0
 
-#: how many times the simple accel cal is asked for when ArduPilot does not accept it
-CAL_TRIES = 3
+#: how many times the simple accel cal is asked for when ArduPilot does not accept it, how long after a refusal,
+#: and how long an unanswered request may hold arming back (the calibration itself takes ~1-10 s,
+#: AP_InertialSensor.cpp:2593-2596)
+CAL_TRIES, CAL_RETRY_S, CAL_SETTLE_S = 3, 6.0, 30.0
 
 
 def calibrate(link, requests: list) -> None:
@@ -132,6 +134,43 @@ def calibrate(link, requests: list) -> None:
     requests.append(time.time())
     link.mav.command_long_send(link.target_system, link.target_component,
                                mavutil.mavlink.MAV_CMD_PREFLIGHT_CALIBRATION, 0, 0, 0, 0, 0, 4, 0, 0)
+
+
+class Sequence:
+    """When the runner asks for the accel cal again and when it asks to arm (times in seconds, one clock).
+
+    A refused calibration is asked for again CAL_RETRY_S later (simple_accel_cal refuses a request within 5 s of
+    the last, AP_InertialSensor.cpp:2535), at most CAL_TRIES requests. Arming waits until the calibration is
+    settled: taken, refused CAL_TRIES times, or unanswered for CAL_SETTLE_S (an armed vehicle refuses it:
+    GCS_Common.cpp:4903-4906). Then it is asked for once the pre-arm checks pass or from ARM_FROM_S after the
+    stream started, every ARM_EVERY_S until armed."""
+
+    def __init__(self, calibrating: bool, stream_started: float):
+        self.settled, self.stream_started = not calibrating, stream_started
+        self.cal_sent, self.retry_at, self.last_arm = [], None, None
+
+    def calibration_sent(self, now: float) -> None:
+        self.cal_sent.append(now)
+        self.retry_at = None
+
+    def calibration_answer(self, accepted: bool, now: float) -> None:
+        if accepted or len(self.cal_sent) >= CAL_TRIES:
+            self.settled, self.retry_at = True, None
+        else:
+            self.retry_at = now + CAL_RETRY_S
+
+    def calibration_due(self, now: float) -> bool:
+        return self.retry_at is not None and now >= self.retry_at
+
+    def arm_due(self, now: float, prearm_passed: bool) -> bool:
+        if not self.settled and self.retry_at is None and self.cal_sent and now - self.cal_sent[-1] > CAL_SETTLE_S:
+            self.settled = True
+        if not self.settled or not (prearm_passed or now - self.stream_started >= ARM_FROM_S):
+            return False
+        return self.last_arm is None or now - self.last_arm >= ARM_EVERY_S
+
+    def arm_sent(self, now: float) -> None:
+        self.last_arm = now
 
 
 def receive(link, rec: Recorder):
@@ -230,27 +269,25 @@ def run(args) -> dict:
             link.mav.command_long_send(link.target_system, link.target_component,
                                        mavutil.mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0, msg_id, 1e6 / hz, 0, 0, 0, 0, 0)
         wait_until_ready(link, rec)
+        steps = Sequence(calibrating=args.device != "json", stream_started=emu_started)
         if args.device != "json":
             # The unit's IMU is a new accelerometer to ArduPilot, never calibrated: ArduPilot's own test of these
             # drivers (Tools/autotest/arduplane.py fly_external_AHRS) runs the simple accel cal (param5 = 4)
             # once the vehicle is up, before waiting for the pre-arm checks; so does this.
             calibrate(link, cal_requests)
+            steps.calibration_sent(cal_requests[-1])
         end = time.monotonic() + duration + 5
-        last_arm_try = 0.0
-        cal_retry_at = None
         while time.monotonic() < end and emu.poll() is None and sitl.poll() is None:
             msg, now = receive(link, rec)
             if msg is None:
                 continue
             if msg.get_type() == "COMMAND_ACK":
                 print(f"COMMAND_ACK {msg.command} result {msg.result}", flush=True)
-                # simple_accel_cal refuses a second request within 5 s (AP_InertialSensor.cpp:2535): retry later
-                if (msg.command == mavutil.mavlink.MAV_CMD_PREFLIGHT_CALIBRATION and args.device != "json"
-                        and msg.result != mavutil.mavlink.MAV_RESULT_ACCEPTED and len(cal_requests) < CAL_TRIES):
-                    cal_retry_at = time.monotonic() + 6.0
-            if cal_retry_at is not None and time.monotonic() >= cal_retry_at:
-                cal_retry_at = None
+                if msg.command == mavutil.mavlink.MAV_CMD_PREFLIGHT_CALIBRATION:
+                    steps.calibration_answer(msg.result == mavutil.mavlink.MAV_RESULT_ACCEPTED, now)
+            if steps.calibration_due(now):
                 calibrate(link, cal_requests)
+                steps.calibration_sent(cal_requests[-1])
             if msg.get_type() == "HEARTBEAT" and msg.get_srcSystem() == link.target_system:
                 armed = bool(msg.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
                 if armed and armed_at is None:
@@ -261,9 +298,8 @@ def run(args) -> dict:
                     print("disarmed", flush=True)
             prearm = any(r["onboard_control_sensors_health"] & sitl_report.PREARM_CHECK
                          for _, r in rec.rows["SYS_STATUS"][-1:])
-            due = prearm or now - emu_started >= ARM_FROM_S
-            if args.arm and armed_at is None and due and time.monotonic() - last_arm_try > ARM_EVERY_S:
-                last_arm_try = time.monotonic()
+            if args.arm and armed_at is None and steps.arm_due(now, prearm):
+                steps.arm_sent(now)
                 arm_requests.append(now)
                 link.set_mode("STABILIZE")
                 link.mav.command_long_send(link.target_system, link.target_component,
