@@ -27,9 +27,12 @@ import sitl_report  # noqa: E402
 ORIGIN = (-35.363262, 149.165237, 584.0)
 
 
+OFFSETS = (-40.0, 25.0, -60.0)
+
+
 @pytest.mark.parametrize("device", ["vn300", "gq7", "json"])
 def test_defaults_file_reads_back_with_pymavlink(tmp_path, device):
-    params = ardupilot_params.device_params(device)
+    params = ardupilot_params.device_params(device, compass_offsets_mgauss=None if device == "json" else OFFSETS)
     path = ardupilot_params.write_params(tmp_path / "emulated.parm", params)
     from pymavlink import mavparm
     read = mavparm.MAVParmDict()
@@ -40,6 +43,65 @@ def test_defaults_file_reads_back_with_pymavlink(tmp_path, device):
         assert params["SERIAL4_PROTOCOL"] == 36 and params["AHRS_EKF_TYPE"] == 11 and params["GPS1_TYPE"] == 21
         assert params["EAHRS_TYPE"] == {"vn300": 1, "gq7": 7}[device]
         assert params["EAHRS_SENSORS"] == 0xF          # the parameter's default: GPS, IMU, baro, compass
+        # the unit's sensors the only ones: SITL.cpp SIM_IMU_COUNT / SIM_BARO_COUNT, SIM_MAG1..6_DEVID (the
+        # simulated compasses with non-zero default dev ids, SITL.cpp:777-809)
+        assert params["SIM_IMU_COUNT"] == 0 and params["SIM_BARO_COUNT"] == 0
+        assert [params[f"SIM_MAG{i}_DEVID"] for i in range(1, 7)] == [0] * 6
+        assert (params["COMPASS_OFS_X"], params["COMPASS_OFS_Y"], params["COMPASS_OFS_Z"]) == OFFSETS
+        assert params["COMPASS_DEV_ID"] == params["COMPASS_PRIO1_ID"] == _bus_id_by_c_layout(6, 4, 0, 0)
+        # the main loop waits for the unit's IMU: half its rate, at least ArduPilot's 50 Hz floor; VN-300 at
+        # 100 Hz as EAHRS_RATE asks it (400 / divisor 4), GQ7 at the preset's 50 Hz
+        assert params["SCHED_LOOP_RATE"] == 50
+        assert [params[f"INS_ACC{n}{k}_{a}"] for n in (2, 3) for k in ("OFFS", "SCAL") for a in "XYZ"] == [0] * 12
+        assert params.get("EAHRS_RATE") == {"vn300": 100, "gq7": None}[device]
+
+
+def _bus_id_by_c_layout(bus_type, bus, address, devtype):
+    """AP_HAL::Device's DeviceId union (libraries/AP_HAL/Device.h:371-381, ArduPilot 265753db8b) laid out by ctypes
+    as the C compiler lays out the bitfields: enum BusType bus_type:3; uint8_t bus:5; uint8_t address, devtype."""
+    import ctypes
+
+    class DeviceStructure(ctypes.LittleEndianStructure):
+        _fields_ = [("bus_type", ctypes.c_uint8, 3), ("bus", ctypes.c_uint8, 5), ("address", ctypes.c_uint8),
+                    ("devtype", ctypes.c_uint8)]
+
+    class DeviceId(ctypes.Union):
+        _fields_ = [("devid_s", DeviceStructure), ("devid", ctypes.c_uint32)]
+    d = DeviceId()
+    d.devid_s.bus_type, d.devid_s.bus, d.devid_s.address, d.devid_s.devtype = bus_type, bus, address, devtype
+    return d.devid
+
+
+@pytest.mark.parametrize("port, address, devtype", [(4, 0, 0), (4, 1, 0x31), (31, 255, 255), (0, 0, 0)])
+def test_serial_bus_id_is_make_bus_id(port, address, devtype):
+    """AP_HAL::Device::make_bus_id (Device.cpp:222-229) with BUS_TYPE_SERIAL = 6 (Device.h:42)."""
+    assert ardupilot_params.serial_bus_id(port, address, devtype) == _bus_id_by_c_layout(6, port, address, devtype)
+    with pytest.raises(ValueError, match="out of range"):
+        ardupilot_params.serial_bus_id(32)
+
+
+def test_only_the_units_registered_sensors_replace_sitls():
+    """A sensor the unit does not register (EAHRS_SENSORS) stays SITL's simulated one: removing it would leave
+    ArduPilot without any."""
+    gps_only = ardupilot_params.device_params("vn300", sensors="gps")
+    assert not {"SIM_IMU_COUNT", "SIM_BARO_COUNT", "SIM_MAG1_DEVID", "SCHED_LOOP_RATE", "COMPASS_OFS_X"} & set(gps_only)
+    imu_baro = ardupilot_params.device_params("gq7", sensors="imu,baro")
+    assert imu_baro["SIM_IMU_COUNT"] == 0 and imu_baro["SIM_BARO_COUNT"] == 0 and "SIM_MAG1_DEVID" not in imu_baro
+    with pytest.raises(ValueError, match="uncalibrated"):
+        ardupilot_params.device_params("vn300", compass_offsets_mgauss=(0.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match="compass_offsets_mgauss"):
+        ardupilot_params.device_params("vn300")
+    with pytest.raises(ValueError, match="SCHED_LOOP_RATE"):
+        ardupilot_params.sole_sensor_params(2, 4, 25.0, OFFSETS)
+    assert ardupilot_params.sole_sensor_params(2, 4, 400.0, OFFSETS)["SCHED_LOOP_RATE"] == 200
+
+
+def test_compass_calibration_is_minus_the_scenes_hard_iron():
+    import tomllib
+    path = ROOT / "examples" / "sitl_flight.toml"
+    hard_iron = tomllib.loads(path.read_text())["imu"][0]["magnetometer"]["hard_iron"]
+    offsets = ardupilot_sitl_run.compass_offsets_mgauss(ardupilot_sitl_run.load(path))
+    assert offsets == pytest.approx([-1000.0 * h for h in hard_iron], abs=1e-9)
 
 
 def test_sensor_mask_is_ardupilots_bitmask():
@@ -69,6 +131,93 @@ def test_sitl_serial_argument_parses_as_uartdriver_reads_it(tmp_path):
     assert (devtype, path, int(baud)) == ("uart", str(tmp_path / "device"), 230400)
     assert cmd[cmd.index("--defaults") + 1] == "a.parm,b.parm"
     assert cmd[cmd.index("--home") + 1] == "-35.363262,149.165237,584.0,0"
+
+
+class _ScriptedLink:
+    """pymavlink messages in the order a SITL sends them, then nothing (recv_match's timeout answer)."""
+
+    def __init__(self, messages):
+        self.messages = list(messages)
+        self.taken = 0
+
+    def recv_match(self, blocking=True, timeout=None):
+        if self.taken < len(self.messages):
+            self.taken += 1
+            return self.messages[self.taken - 1]
+        return None
+
+
+def _statustext(text):
+    from pymavlink.dialects.v20 import ardupilotmega as m
+    return m.MAVLink_statustext_message(6, text.encode())
+
+
+def test_calibration_waits_for_the_end_of_ardupilots_init():
+    """The GQ7 run of 2026-12-01 hung at "Calibrating barometer": the accel-cal request, sent during init, ran from
+    AP_Baro::calibrate's delay callback before any IMU existed. The runner now waits for the text AP_Vehicle::setup
+    sends when init is over ("ArduPilot Ready", AP_Vehicle.cpp:529 at 265753db8b) or an ATTITUDE (main loop only,
+    GCS_Common.cpp:1218-1233); the messages before it are kept."""
+    from pymavlink.dialects.v20 import ardupilotmega as m
+    boot = [_statustext("MicroStrain7 ExternalAHRS: initialised."), _statustext("Calibrating barometer"),
+            m.MAVLink_heartbeat_message(2, 3, 0, 0, 0, 3), _statustext("Barometer 1 calibration complete")]
+    after = [_statustext("GPS 1: detected ExternalAHRS"), m.MAVLink_attitude_message(1, 0, 0, 0, 0, 0, 0)]
+    link = _ScriptedLink(boot + [_statustext("ArduPilot Ready")] + after)
+    rec = ardupilot_sitl_run.Recorder()
+    ardupilot_sitl_run.wait_until_ready(link, rec, seconds=5)
+    assert link.taken == len(boot) + 1
+    assert [t for _, t in rec.texts()] == ["MicroStrain7 ExternalAHRS: initialised.", "Calibrating barometer",
+                                           "Barometer 1 calibration complete", "ArduPilot Ready"]
+    link = _ScriptedLink(boot + after)                      # the text missed: the first ATTITUDE ends the wait
+    ardupilot_sitl_run.wait_until_ready(link, ardupilot_sitl_run.Recorder(), seconds=5)
+    assert link.taken == len(boot) + 2
+    with pytest.raises(SystemExit, match="'Calibrating barometer'"):
+        ardupilot_sitl_run.wait_until_ready(_ScriptedLink(boot[:3]), ardupilot_sitl_run.Recorder(), seconds=1.5)
+
+
+def test_calibration_is_retried_and_settled_before_arming():
+    """The VN-300 run of 2026-12-02 had its first accel-cal request refused (TEMPORARILY_REJECTED) and armed before
+    the retry, which the armed vehicle then refused ("Disarm to allow calibration", GCS_Common.cpp:4903-4906).
+    Now: a refusal is retried CAL_RETRY_S later, arming waits until the calibration is taken, refused CAL_TRIES
+    times or unanswered for CAL_SETTLE_S, then comes once the pre-arm checks pass (or from ARM_FROM_S) every
+    ARM_EVERY_S."""
+    run = ardupilot_sitl_run
+    steps = run.Sequence(calibrating=True, stream_started=0.0)
+    steps.calibration_sent(10.0)
+    steps.calibration_answer(False, 10.5)                       # refused
+    assert not steps.calibration_due(10.5 + run.CAL_RETRY_S - 0.01) and steps.calibration_due(10.5 + run.CAL_RETRY_S)
+    assert not steps.arm_due(12.0, prearm_passed=True)           # the pre-arm checks pass: still not before the cal
+    steps.calibration_sent(16.5)
+    steps.calibration_answer(True, 18.0)                        # taken
+    assert not steps.calibration_due(100.0)
+    assert not steps.arm_due(18.0, prearm_passed=False)          # neither pre-arm nor ARM_FROM_S yet
+    assert steps.arm_due(18.0, prearm_passed=True)
+    steps.arm_sent(18.0)
+    assert not steps.arm_due(18.0 + run.ARM_EVERY_S - 0.01, prearm_passed=True)
+    assert steps.arm_due(18.0 + run.ARM_EVERY_S, prearm_passed=False)   # past ARM_FROM_S: asked anyway
+
+    refused = run.Sequence(calibrating=True, stream_started=0.0)
+    for k in range(run.CAL_TRIES):
+        refused.calibration_sent(10.0 * k)
+        refused.calibration_answer(False, 10.0 * k + 1)
+    assert not refused.calibration_due(1000.0) and refused.arm_due(run.ARM_FROM_S + 30, prearm_passed=False)
+
+    silent = run.Sequence(calibrating=True, stream_started=0.0)
+    silent.calibration_sent(5.0)
+    assert not silent.arm_due(5.0 + run.CAL_SETTLE_S, prearm_passed=True)
+    assert silent.arm_due(5.0 + run.CAL_SETTLE_S + 0.01, prearm_passed=True)
+    assert run.Sequence(calibrating=False, stream_started=0.0).arm_due(run.ARM_FROM_S, prearm_passed=False)
+
+
+def test_failure_summary_groups_each_check_across_its_numbers():
+    texts = ["EKF3 IMU0 initialised", "PreArm: Gyros not healthy", "PreArm: Main loop slow (284Hz < 400Hz)",
+             "PreArm: Gyros not healthy", "Arm: Gyros not healthy", "PreArm: Main loop slow (281Hz < 400Hz)",
+             "PreArm: Compass not calibrated", "Barometer 1 calibration complete"]
+    rows = sitl_report.failure_summary([1.0, 2.0, 2.5, 32.0, 35.0, 62.5, 63.0, 70.0], texts)
+    assert [(r["check"], r["count"], r["first"], r["last"], r["example"]) for r in rows] == [
+        ("Gyros not healthy", 3, 2.0, 35.0, "Arm: Gyros not healthy"),
+        ("Main loop slow (#Hz < #Hz)", 2, 2.5, 62.5, "PreArm: Main loop slow (281Hz < 400Hz)"),
+        ("Compass not calibrated", 1, 63.0, 63.0, "PreArm: Compass not calibrated")]
+    assert sitl_report.failure_table([]) == "No pre-arm or arm failure was reported."
 
 
 def _truth():
@@ -134,7 +283,11 @@ def test_report_from_mavlink_messages_states_the_closed_form_errors(tmp_path):
         health = m.MAV_SYS_STATUS_PREARM_CHECK if t >= 6 else 0
         rec.add(m.MAVLink_sys_status_message(0, 0, health, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0), started + t)
     rec.add(m.MAVLink_statustext_message(6, b"EAHRS: VectorNav VN-300-CR"), started + 1)
+    rec.add(m.MAVLink_statustext_message(3, b"PreArm: Compass not calibrated"), started + 2)
+    rec.add(m.MAVLink_command_ack_message(m.MAV_CMD_COMPONENT_ARM_DISARM, m.MAV_RESULT_FAILED), started + 4)
+    rec.add(m.MAVLink_command_ack_message(m.MAV_CMD_COMPONENT_ARM_DISARM, m.MAV_RESULT_ACCEPTED), started + 6.9)
     outcome = {"work": tmp_path, "rec": rec, "truth": truth, "armed_at": started + 7.0,
+               "arm_requests": [started + 4, started + 6.9],
                "stream": {"started_unix_ns": int(started * 1e9), "samples": 4000, "dropped": 0},
                "commands": [["imu-emulator", "stream"], ["arducopter"]], "params": {"EAHRS_TYPE": 1}}
     args = argparse.Namespace(device="vn300", scene=Path("examples/sitl_flight.toml"))
@@ -152,6 +305,8 @@ def test_report_from_mavlink_messages_states_the_closed_form_errors(tmp_path):
     assert "EKF healthy (attitude, velocity, absolute position flags; not constant-position mode): 5.0 s" in text
     assert "pre-arm checks passed (SYS_STATUS pre-arm bit first set): 6.0 s" in text
     assert "- armed: 7.0 s" in text and "EAHRS: VectorNav VN-300-CR" in text
+    assert "- arm requests: 2 (first at 4.0 s); answers: MAV_RESULT_FAILED, MAV_RESULT_ACCEPTED" in text
+    assert "| PreArm: Compass not calibrated | 1 | 2.0 | 2.0 |" in text
 
 
 def test_attitude_error_is_the_rotation_angle_for_random_attitudes():
@@ -185,6 +340,21 @@ def test_stack_clock_to_scene_time_by_the_quickest_delivery():
     started = 1003.0
     scene_t = sitl_report.wall_to_scene(boot, boot + 1000.0 + delay, started)
     np.testing.assert_allclose(scene_t, boot - 3.0, atol=1e-9)
+
+
+def test_stack_clock_running_slow_maps_to_the_wall_clock():
+    """SITL on a loaded machine: its clock runs at 80 % of the wall clock (received = 1000 + boot / 0.8 + delay),
+    the delay zero now and then (every 5th message at 25 Hz, several per 2 s window). Lag is linear in boot time,
+    so the envelope through each window's quickest message, anchored where it occurs, is exact: scene time =
+    boot / 0.8 + 1000 - start. (Anchored at window middles it would be up to 0.25 s off: a quarter of the lag's
+    growth over a window.)"""
+    rng = np.random.default_rng(2)
+    boot = np.arange(0.0, 60.0, 0.04)
+    delay = rng.uniform(0.002, 0.05, boot.size)
+    delay[::5] = 0.0
+    started = 1003.0
+    scene_t = sitl_report.wall_to_scene(boot, 1000.0 + boot / 0.8 + delay, started, window_s=2.0)
+    np.testing.assert_allclose(scene_t, boot / 0.8 + 1000.0 - started, atol=1e-9)
 
 
 def test_stream_states_the_wall_clock_of_its_first_deadline(tmp_path):

@@ -13,7 +13,10 @@ Build SITL per ArduPilot's own instructions (BUILD.md); this script builds nothi
    --model JSON, --home at the scene's origin, --defaults COPTER_PARM,WORK/emulated.parm (ardupilot_params.py),
    --serialN=uart:WORK/device:BAUD (libraries/AP_HAL_SITL/UARTDriver.cpp: "uart:PATH:BAUD").
 3. pymavlink on tcp:127.0.0.1:5760 records STATUSTEXT, SYS_STATUS (pre-arm bit), EKF_STATUS_REPORT, ATTITUDE and
-   GLOBAL_POSITION_INT; once the pre-arm checks pass it arms (STABILIZE, throttle low) and stays armed.
+   GLOBAL_POSITION_INT. Once ArduPilot is up ("ArduPilot Ready") it runs the simple accelerometer calibration the
+   unit's new IMU needs; from ARM_FROM_S scene time on (or once the pre-arm checks pass) it asks to arm
+   (STABILIZE, throttle low) every ARM_EVERY_S until armed: a refused request makes ArduPilot state why, and the
+   report lists every pre-arm / arm failure text it gave.
 4. The report: the stack's estimate against the scene's truth (sitl_report.py), docs/sitl/<stack>-<device>.md/png.
 
 The scene's motion is scripted: SITL's own vehicle is not flown along it. With an external AHRS the attitude and
@@ -47,9 +50,9 @@ def emulator_command(scene: Path, device: str, work: Path) -> list[str]:
             "--stats-json", str(work / "stream.json")]
     if device == "json":
         return base + ["--format", "ardupilot-json", "--to", f"ardupilot:9002,record={work / 'servos.csv'}"]
-    _, fmt, options, _ = ardupilot_params.DEVICES[device]
-    return base + ["--format", fmt, "--to", "pty", "--link", str(work / "device")] + \
-        [arg for option in options for arg in ("--option", option)]
+    unit = ardupilot_params.DEVICES[device]
+    return base + ["--format", unit.format, "--to", "pty", "--link", str(work / "device")] + \
+        [arg for option in unit.options for arg in ("--option", option)]
 
 
 def sitl_command(arducopter: Path, defaults: list[Path], device: str, work: Path, origin) -> list[str]:
@@ -62,12 +65,34 @@ def sitl_command(arducopter: Path, defaults: list[Path], device: str, work: Path
                   f"--serial{ardupilot_params.SERIAL_PORT}=uart:{work / 'device'}:{ardupilot_params.BAUD}"]
 
 
-def scene_truth(scene_path: Path) -> sitl_report.Truth:
-    from imu_emulator.runtime.simulation import Simulation
+#: when the runner starts asking ArduPilot to arm (scene time, s; the scene's take-off is at 40 s) and how often
+ARM_FROM_S, ARM_EVERY_S = 20.0, 10.0
+#: the STATUSTEXT AP_Vehicle::setup sends once init_ardupilot is done (AP_Vehicle.cpp:529, 265753db8b)
+READY_TEXT = "ArduPilot Ready"
+
+
+def load(scene_path: Path):
     from imu_emulator.scene.load import load_scene
     scene = load_scene(scene_path)
     if scene.frame != "NED":
         raise SystemExit(f"{scene_path}: the report compares in NED; give the scene frame = \"NED\"")
+    return scene
+
+
+def compass_offsets_mgauss(scene) -> tuple[float, float, float]:
+    """The unit's compass calibration as ArduPilot's COMPASS_OFS_X/Y/Z: minus the first IMU's magnetometer hard
+    iron (gauss -> milligauss); ArduPilot adds the offsets to the field (AP_Compass_Backend.cpp:84-85). The
+    scene's sensor axes are the vehicle's (a mounting rotation would turn them: refused)."""
+    imu = scene.imus[0]
+    if any(imu.mounting_rpy_deg):
+        raise SystemExit(f"IMU {imu.name!r}: mounted rotated {imu.mounting_rpy_deg} deg; the compass calibration "
+                         "written for ArduPilot assumes sensor axes = body axes")
+    hard_iron = imu.companions.get("magnetometer", {}).get("hard_iron", (0.0, 0.0, 0.0))
+    return tuple(-1000.0 * float(h) for h in hard_iron)
+
+
+def scene_truth(scene) -> sitl_report.Truth:
+    from imu_emulator.runtime.simulation import Simulation
     block = Simulation(scene, truth=True).block(0, scene.n_samples)
     # time since the scene's first sample, as the stream's started_unix_ns counts (its first sample's deadline)
     return sitl_report.Truth(t=block.t_s - block.t_s[0], position_ned=block.truth["position"],
@@ -77,7 +102,8 @@ def scene_truth(scene_path: Path) -> sitl_report.Truth:
 class Recorder:
     """Every message of interest with its wall receive time; STATUSTEXT lines kept as text."""
 
-    KINDS = ("ATTITUDE", "GLOBAL_POSITION_INT", "EKF_STATUS_REPORT", "SYS_STATUS", "STATUSTEXT", "HEARTBEAT")
+    KINDS = ("ATTITUDE", "GLOBAL_POSITION_INT", "EKF_STATUS_REPORT", "SYS_STATUS", "STATUSTEXT", "HEARTBEAT",
+             "COMMAND_ACK")
 
     def __init__(self):
         self.rows = {k: [] for k in self.KINDS}
@@ -86,6 +112,99 @@ class Recorder:
         kind = msg.get_type()
         if kind in self.rows:
             self.rows[kind].append((received, msg.to_dict()))
+
+    def texts(self) -> list[tuple[float, str]]:
+        return [(w, r["text"]) for w, r in self.rows["STATUSTEXT"]]
+
+
+#: the windows the stack's clock is mapped to the wall clock in (sitl_report.wall_to_scene): short, since SITL's
+#: clock drifts from the wall clock as fast as the machine's load changes; long enough to hold many ATTITUDE and
+#: GLOBAL_POSITION_INT messages (25 and 10 Hz requested below), some of them delivered at once
+CLOCK_WINDOW_S = 2.0
+
+#: how many times the simple accel cal is asked for when ArduPilot does not accept it, how long after a refusal,
+#: and how long an unanswered request may hold arming back (the calibration itself takes ~1-10 s,
+#: AP_InertialSensor.cpp:2593-2596)
+CAL_TRIES, CAL_RETRY_S, CAL_SETTLE_S = 3, 6.0, 30.0
+
+
+def calibrate(link, requests: list) -> None:
+    """The simple accelerometer calibration (MAV_CMD_PREFLIGHT_CALIBRATION param5 = 4, GCS_Common.cpp:4873-4875)."""
+    from pymavlink import mavutil
+    requests.append(time.time())
+    link.mav.command_long_send(link.target_system, link.target_component,
+                               mavutil.mavlink.MAV_CMD_PREFLIGHT_CALIBRATION, 0, 0, 0, 0, 0, 4, 0, 0)
+
+
+class Sequence:
+    """When the runner asks for the accel cal again and when it asks to arm (times in seconds, one clock).
+
+    A refused calibration is asked for again CAL_RETRY_S later (simple_accel_cal refuses a request within 5 s of
+    the last, AP_InertialSensor.cpp:2535), at most CAL_TRIES requests. Arming waits until the calibration is
+    settled: taken, refused CAL_TRIES times, or unanswered for CAL_SETTLE_S (an armed vehicle refuses it:
+    GCS_Common.cpp:4903-4906). Then it is asked for once the pre-arm checks pass or from ARM_FROM_S after the
+    stream started, every ARM_EVERY_S until armed."""
+
+    def __init__(self, calibrating: bool, stream_started: float):
+        self.settled, self.stream_started = not calibrating, stream_started
+        self.cal_sent, self.retry_at, self.last_arm = [], None, None
+
+    def calibration_sent(self, now: float) -> None:
+        self.cal_sent.append(now)
+        self.retry_at = None
+
+    def calibration_answer(self, accepted: bool, now: float) -> None:
+        if accepted or len(self.cal_sent) >= CAL_TRIES:
+            self.settled, self.retry_at = True, None
+        else:
+            self.retry_at = now + CAL_RETRY_S
+
+    def calibration_due(self, now: float) -> bool:
+        return self.retry_at is not None and now >= self.retry_at
+
+    def arm_due(self, now: float, prearm_passed: bool) -> bool:
+        if not self.settled and self.retry_at is None and self.cal_sent and now - self.cal_sent[-1] > CAL_SETTLE_S:
+            self.settled = True
+        if not self.settled or not (prearm_passed or now - self.stream_started >= ARM_FROM_S):
+            return False
+        return self.last_arm is None or now - self.last_arm >= ARM_EVERY_S
+
+    def arm_sent(self, now: float) -> None:
+        self.last_arm = now
+
+
+def receive(link, rec: Recorder):
+    """The next message (None after half a second without one) and its wall receive time, recorded; STATUSTEXT
+    printed as it comes."""
+    msg = link.recv_match(blocking=True, timeout=0.5)
+    received = time.time()
+    if msg is not None:
+        rec.add(msg, received)
+        if msg.get_type() == "STATUSTEXT":
+            print(f"SITL: {msg.text}", flush=True)
+    return msg, received
+
+
+def wait_until_ready(link, rec: Recorder, seconds: float = 120.0) -> float:
+    """Record messages until ArduPilot has finished initialising; returns the wall time it said so.
+
+    Until then a command may run inside init: MAVLink is served from the delay callback of whatever init step
+    is waiting (AP_Vehicle::scheduler_delay_callback -> GCS::update_receive), e.g. AP_Baro::calibrate's delays
+    (AP_Baro.cpp:330), before ins.init (ArduCopter/system.cpp:138 then 219). A simple accel cal taken there waits
+    in AP_InertialSensor::wait_for_sample for a sample no IMU can give yet (AP_InertialSensor.cpp:2109-2117), and
+    ArduPilot stays at "Calibrating barometer" for good: the GQ7 run of 2026-12-01, whose driver spends 5 s in
+    its constructor first (AP_ExternalAHRS_MicroStrain7.cpp:75), took the runner's calibration request (sent a
+    fixed 5 s after connecting) there. Ready = the READY_TEXT STATUSTEXT, or an ATTITUDE, which is sent only
+    from the main loop (GCS_MAVLINK::should_send_message_in_delay_callback, GCS_Common.cpp:1218-1233)."""
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        msg, received = receive(link, rec)
+        if msg is None:
+            continue
+        if (msg.get_type() == "STATUSTEXT" and msg.text == READY_TEXT) or msg.get_type() == "ATTITUDE":
+            return received
+    last = rec.texts()[-1][1] if rec.rows["STATUSTEXT"] else "no STATUSTEXT at all"
+    raise SystemExit(f"ArduPilot did not finish initialising within {seconds:.0f} s (last text: {last!r})")
 
 
 def wait_for(path: Path, seconds: float, proc: subprocess.Popen, what: str) -> None:
@@ -121,18 +240,26 @@ def connect(sitl: subprocess.Popen, work: Path, seconds: float = 90.0):
 def run(args) -> dict:
     from pymavlink import mavutil
     work = Path(tempfile.mkdtemp(prefix=f"sitl-{args.device}-"))
-    truth = scene_truth(args.scene)
+    scene = load(args.scene)
+    truth = scene_truth(scene)
     duration = float(truth.t[-1] - truth.t[0])
-    params = {**ardupilot_params.device_params(args.device, sensors=args.sensors), **dict(args.param)}
+    offsets = compass_offsets_mgauss(scene) if args.device != "json" else None
+    try:
+        params = {**ardupilot_params.device_params(args.device, sensors=args.sensors, compass_offsets_mgauss=offsets),
+                  **dict(args.param)}
+    except ValueError as exc:
+        raise SystemExit(f"{args.scene}: {exc}") from None
     parm = ardupilot_params.write_params(work / "emulated.parm", params)
     env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     emu_cmd = emulator_command(args.scene, args.device, work)
     sitl_cmd = sitl_command(args.arducopter, [args.defaults, parm], args.device, work, truth.origin)
     emu_log, sitl_log = open(work / "stream.log", "w"), open(work / "sitl.log", "w")
     emu = subprocess.Popen(emu_cmd, stdout=emu_log, stderr=subprocess.STDOUT, env=env, cwd=REPO)
+    emu_started = time.time()      # ARM_FROM_S counts from here (the stream's own first deadline comes a bit later)
     sitl = None
     rec = Recorder()
-    armed_at = None
+    armed_at = disarmed_at = None
+    arm_requests, cal_requests = [], []
     try:
         if args.device != "json":
             wait_for(work / "device", 120, emu, "imu-emulator stream")
@@ -141,31 +268,39 @@ def run(args) -> dict:
         for msg_id, hz in ((30, 25), (33, 10), (193, 5), (1, 2)):   # ATTITUDE, GLOBAL_POSITION_INT, EKF_STATUS, SYS
             link.mav.command_long_send(link.target_system, link.target_component,
                                        mavutil.mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0, msg_id, 1e6 / hz, 0, 0, 0, 0, 0)
+        wait_until_ready(link, rec)
+        steps = Sequence(calibrating=args.device != "json", stream_started=emu_started)
         if args.device != "json":
             # The unit's IMU is a new accelerometer to ArduPilot, never calibrated: ArduPilot's own test of these
             # drivers (Tools/autotest/arduplane.py fly_external_AHRS) runs the simple accel cal (param5 = 4)
-            # 5 s after boot, before waiting for the pre-arm checks; so does this.
-            time.sleep(5.0)
-            link.mav.command_long_send(link.target_system, link.target_component,
-                                       mavutil.mavlink.MAV_CMD_PREFLIGHT_CALIBRATION, 0, 0, 0, 0, 0, 4, 0, 0)
+            # once the vehicle is up, before waiting for the pre-arm checks; so does this.
+            calibrate(link, cal_requests)
+            steps.calibration_sent(cal_requests[-1])
         end = time.monotonic() + duration + 5
-        last_arm_try = 0.0
         while time.monotonic() < end and emu.poll() is None and sitl.poll() is None:
-            msg = link.recv_match(blocking=True, timeout=0.5)
+            msg, now = receive(link, rec)
             if msg is None:
                 continue
-            rec.add(msg, time.time())
-            if msg.get_type() == "STATUSTEXT":
-                print(f"SITL: {msg.text}", flush=True)
+            if msg.get_type() == "COMMAND_ACK":
+                print(f"COMMAND_ACK {msg.command} result {msg.result}", flush=True)
+                if msg.command == mavutil.mavlink.MAV_CMD_PREFLIGHT_CALIBRATION:
+                    steps.calibration_answer(msg.result == mavutil.mavlink.MAV_RESULT_ACCEPTED, now)
+            if steps.calibration_due(now):
+                calibrate(link, cal_requests)
+                steps.calibration_sent(cal_requests[-1])
             if msg.get_type() == "HEARTBEAT" and msg.get_srcSystem() == link.target_system:
                 armed = bool(msg.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
                 if armed and armed_at is None:
-                    armed_at = time.time()
+                    armed_at = now
                     print("armed", flush=True)
-            prearm = [r for _, r in rec.rows["SYS_STATUS"]
-                      if r["onboard_control_sensors_health"] & sitl_report.PREARM_CHECK]
-            if args.arm and armed_at is None and prearm and time.monotonic() - last_arm_try > 5:
-                last_arm_try = time.monotonic()
+                elif not armed and armed_at is not None and disarmed_at is None:
+                    disarmed_at = now
+                    print("disarmed", flush=True)
+            prearm = any(r["onboard_control_sensors_health"] & sitl_report.PREARM_CHECK
+                         for _, r in rec.rows["SYS_STATUS"][-1:])
+            if args.arm and armed_at is None and steps.arm_due(now, prearm):
+                steps.arm_sent(now)
+                arm_requests.append(now)
                 link.set_mode("STABILIZE")
                 link.mav.command_long_send(link.target_system, link.target_component,
                                            mavutil.mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
@@ -181,9 +316,13 @@ def run(args) -> dict:
                     proc.kill()
         emu_log.close()
         sitl_log.close()
+    # every message kept, for a report made again later (write_report reads only these and the stream's figures)
+    (work / "mavlink.json").write_text(json.dumps(rec.rows))
     stream = json.loads((work / "stream.json").read_text()) if (work / "stream.json").exists() else {}
     return {"work": work, "rec": rec, "stream": stream, "truth": truth, "armed_at": armed_at,
-            "commands": [emu_cmd, sitl_cmd], "params": params}
+            "disarmed_at": disarmed_at, "arm_requests": arm_requests, "cal_requests": cal_requests,
+            "commands": [emu_cmd, sitl_cmd],
+            "params": params}
 
 
 def estimates(rec: Recorder, started_s: float) -> sitl_report.Estimates:
@@ -194,7 +333,7 @@ def estimates(rec: Recorder, started_s: float) -> sitl_report.Estimates:
         if not rows:
             return np.zeros(0), np.zeros((0, len(keys)))
         boot = np.array([r["time_boot_ms"] for _, r in rows]) / 1e3
-        t = sitl_report.wall_to_scene(boot, np.array([w for w, _ in rows]), started_s)
+        t = sitl_report.wall_to_scene(boot, np.array([w for w, _ in rows]), started_s, window_s=CLOCK_WINDOW_S)
         return t, np.array([[r[k] for k in keys] for _, r in rows], dtype=float)
 
     ta, att = series("ATTITUDE", ("roll", "pitch", "yaw"))
@@ -229,6 +368,15 @@ def write_report(out: Path, args, outcome: dict, ardupilot_commit: str) -> Path:
     save_figure(fig, out / f"{name}.png", dpi=90)
     texts = [r["text"] for _, r in rec.rows["STATUSTEXT"]]
     armed = f"{outcome['armed_at'] - started:.1f} s" if outcome["armed_at"] else "never"
+    if outcome.get("disarmed_at"):
+        armed += f", disarmed at {outcome['disarmed_at'] - started:.1f} s"
+    failures = sitl_report.failure_summary([w - started for w, _ in rec.texts()], texts)
+    requests = outcome.get("arm_requests", [])
+    # the answers to the arm requests, named by pymavlink's MAV_RESULT table
+    from pymavlink.dialects.v20 import ardupilotmega as mav
+    def answers(command):
+        return ", ".join(mav.enums["MAV_RESULT"][r["result"]].name for _, r in rec.rows["COMMAND_ACK"]
+                         if r["command"] == command) or "none"
 
     def when(x):
         return f"{x:.1f} s" if x is not None else "never"
@@ -238,15 +386,23 @@ def write_report(out: Path, args, outcome: dict, ardupilot_commit: str) -> Path:
 
 What is compared: ArduPilot's ATTITUDE and GLOBAL_POSITION_INT, i.e. {what}, against the scene's truth at the
 same scene time (ATTITUDE / GLOBAL_POSITION_INT time_boot_ms mapped to the wall clock by the quickest delivery in
-each 10 s window, then to scene time by the stream's `started_unix_ns`). SITL's own vehicle is not flown along the
-scene: the motion is scripted. Statistics count from the first healthy EKF_STATUS_REPORT on.
+each {CLOCK_WINDOW_S:g} s window, then to scene time by the stream's `started_unix_ns`). SITL's own vehicle is not
+flown along the scene: the motion is scripted. Statistics count from the first healthy EKF_STATUS_REPORT on.
 
 - pre-arm checks passed (SYS_STATUS pre-arm bit first set): {when(result['prearm_passed_s'])} scene time
 - EKF healthy (attitude, velocity, absolute position flags; not constant-position mode): {when(result['ekf_healthy_s'])}
 - armed: {armed}
+- simple accelerometer calibration requests: {len(outcome.get('cal_requests', []))}; answers: \
+{answers(mav.MAV_CMD_PREFLIGHT_CALIBRATION)}
+- arm requests: {len(requests)}{' (first at ' + when(requests[0] - started) + ')' if requests else ''}; \
+answers: {answers(mav.MAV_CMD_COMPONENT_ARM_DISARM)}
 - emulator stream: {outcome['stream'].get('samples', 0)} samples, dropped {outcome['stream'].get('dropped', '?')}
 
 {sitl_report.markdown_table(result)}
+
+Pre-arm and arm failures ArduPilot stated (scene time):
+
+{sitl_report.failure_table(failures)}
 
 ![errors]({name}.png)
 

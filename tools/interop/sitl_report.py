@@ -35,20 +35,31 @@ def first_time(t, condition) -> float | None:
 def wall_to_scene(boot_s, received_s, started_s, window_s: float = 10.0) -> np.ndarray:
     """Scene time of messages stamped `boot_s` (the stack's time since boot) and received at wall time `received_s`.
 
-    The stack's clock is mapped to the wall clock by the lower envelope of (received - boot) over windows of
-    `window_s`: the quickest delivery in each window is the least delayed, and a stack that fell behind the wall
-    clock (a loaded machine) moves the envelope, window by window. Scene time = that wall time - `started_s` (the
-    stream's first sample deadline, the emulator's `started_unix_ns`)."""
+    The stack's clock is mapped to the wall clock by the lower envelope of lag = received - boot: in each window
+    of `window_s` the quickest delivery is the least delayed, and the envelope is interpolated between those
+    messages at their own boot times. A stack whose clock runs slow (SITL on a loaded machine: its simulated time
+    falls behind the wall clock) makes the lag grow within a window; anchoring each window's minimum where it
+    occurs, not at the window's middle, follows that drift (exactly, while it is linear between anchors). Scene
+    time = that wall time - `started_s` (the stream's first sample deadline, the emulator's `started_unix_ns`)."""
     boot_s, received_s = np.asarray(boot_s, float), np.asarray(received_s, float)
     lag = received_s - boot_s
     edges = np.arange(boot_s.min(), boot_s.max() + window_s, window_s)
-    centers, floors = [], []
+    anchors, floors = [], []
     for lo in edges:
-        inside = (boot_s >= lo) & (boot_s < lo + window_s)
-        if inside.any():
-            centers.append(float(np.mean(boot_s[inside])))
-            floors.append(float(lag[inside].min()))
-    return boot_s + np.interp(boot_s, centers, floors) - started_s
+        inside = np.flatnonzero((boot_s >= lo) & (boot_s < lo + window_s))
+        if inside.size:
+            quickest = inside[np.argmin(lag[inside])]
+            anchors.append(float(boot_s[quickest]))
+            floors.append(float(lag[quickest]))
+    anchors, floors = np.asarray(anchors), np.asarray(floors)
+    lag_at = np.interp(boot_s, anchors, floors)
+    if anchors.size > 1:        # beyond the first / last anchor the drift goes on as between the two nearest
+        before, after = boot_s < anchors[0], boot_s > anchors[-1]
+        first = (floors[1] - floors[0]) / (anchors[1] - anchors[0])
+        last = (floors[-1] - floors[-2]) / (anchors[-1] - anchors[-2])
+        lag_at[before] = floors[0] + (boot_s[before] - anchors[0]) * first
+        lag_at[after] = floors[-1] + (boot_s[after] - anchors[-1]) * last
+    return boot_s + lag_at - started_s
 
 
 @dataclass
@@ -179,3 +190,33 @@ def plot(result: dict, title: str):
     ax.legend(fontsize=8)
     ax.set_title("height")
     return fig
+
+
+#: how ArduPilot's arming checks word a failure: "PreArm: " from the periodic pre-arm display, "Arm: " when an
+#: arming request is refused (AP_Arming::check_failed, libraries/AP_Arming/AP_Arming.cpp:301-308, 265753db8b)
+FAILURE_PREFIXES = ("PreArm: ", "Arm: ")
+
+
+def failure_summary(t, texts) -> list[dict]:
+    """Every distinct arming-check failure among STATUSTEXT `texts` (stamped `t`), in order of first appearance:
+    {"check": the text without its prefix, numbers as '#' (one row for "Main loop slow (284Hz < 400Hz)" and
+    "(281Hz < 400Hz)"), "example": its last wording, "count", "first", "last": the times}."""
+    import re
+    rows: dict[str, dict] = {}
+    for when, text in zip(t, texts):
+        prefix = next((p for p in FAILURE_PREFIXES if text.startswith(p)), None)
+        if prefix is None:
+            continue
+        body = text[len(prefix):]
+        row = rows.setdefault(re.sub(r"\d+(\.\d+)?", "#", body),
+                              {"count": 0, "first": float(when), "last": float(when)})
+        row.update(count=row["count"] + 1, last=float(when), example=text)
+    return [{"check": key, **row} for key, row in rows.items()]
+
+
+def failure_table(rows: list[dict]) -> str:
+    if not rows:
+        return "No pre-arm or arm failure was reported."
+    lines = ["| check failed (last wording) | times | first, s | last, s |", "|---|---|---|---|"]
+    lines += [f"| {r['example']} | {r['count']} | {r['first']:.1f} | {r['last']:.1f} |" for r in rows]
+    return "\n".join(lines)

@@ -27,10 +27,10 @@ import socket
 import struct
 import time
 
-from imu_emulator.errors import TargetError
 from imu_emulator.live.transport.base import TargetOptions, Transport, error_name
 from imu_emulator.live.transport.spec import TargetSpec
-from imu_emulator.live.transport.stack_link import ActuatorRecord, LockstepTimeout, note, record_path, timeout_of
+from imu_emulator.live.transport.stack_link import (ActuatorRecord, LockstepTimeout, bind, note, record_path,
+                                                   timeout_of)
 
 # magic -> pwm channels
 SERVO_MAGIC = {18458: 16, 29569: 32}
@@ -56,13 +56,7 @@ class ArduPilotJsonTransport(Transport):
         self.host, self.port = spec.path, spec.port
         self.lockstep = options.blocking
         self.timeout = timeout_of(spec)
-        try:
-            family, kind, proto, _, address = socket.getaddrinfo(self.host, self.port, type=socket.SOCK_DGRAM,
-                                                                 flags=socket.AI_PASSIVE)[0]
-            self.sock = socket.socket(family, kind, proto)
-            self.sock.bind(address)
-        except OSError as exc:
-            raise TargetError(f"ardupilot:{self.host}:{self.port}: {exc.strerror or exc}") from None
+        self.sock = bind("ardupilot", self.host, self.port, socket.SOCK_DGRAM)
         self.sock.setblocking(False)
         self.record = ActuatorRecord(record_path(spec), _COLUMNS, spec.text)
         self.peer = None

@@ -28,10 +28,10 @@ import time
 from types import SimpleNamespace
 
 from firmware_protocols.wire_formats.mavlink import MavlinkDecoder
-from imu_emulator.errors import TargetError
 from imu_emulator.live.transport.base import TargetOptions, Transport, error_name
 from imu_emulator.live.transport.spec import TargetSpec
-from imu_emulator.live.transport.stack_link import ActuatorRecord, LockstepTimeout, note, record_path, timeout_of
+from imu_emulator.live.transport.stack_link import (ActuatorRecord, LockstepTimeout, bind, note, record_path,
+                                                   timeout_of)
 
 HIL_ACTUATOR_CONTROLS = 93
 # common.xml as pymavlink generates it: time_usec u64, flags u64, controls f32[16], mode u8 (CRC_EXTRA 47)
@@ -63,15 +63,7 @@ class Px4SimTransport(Transport):
         self.host, self.port = spec.path, spec.port
         self.lockstep = options.blocking
         self.timeout = timeout_of(spec)
-        try:
-            family, kind, proto, _, address = socket.getaddrinfo(self.host, self.port, type=socket.SOCK_STREAM,
-                                                                 flags=socket.AI_PASSIVE)[0]
-            self.server = socket.socket(family, kind, proto)
-            self.server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            self.server.bind(address)
-            self.server.listen(1)
-        except OSError as exc:
-            raise TargetError(f"px4:{self.host}:{self.port}: {exc.strerror or exc}") from None
+        self.server = bind("px4", self.host, self.port, socket.SOCK_STREAM)
         self.record = ActuatorRecord(record_path(spec), _COLUMNS, spec.text)
         self.conn = None
         self._input = bytearray()          # what the stack sent, for the stream's device (COMMAND_LONG)

@@ -3,6 +3,7 @@ actuator outputs the stack sends (kept, never obeyed: the scene's motion is scri
 from __future__ import annotations
 
 import csv
+import socket
 import sys
 
 from imu_emulator.errors import TargetError
@@ -54,3 +55,19 @@ def timeout_of(spec, default: float = DEFAULT_TIMEOUT_S) -> float:
 
 def record_path(spec) -> str | None:
     return dict(spec.params).get("record")
+
+
+def bind(kind: str, host: str, port: int, socktype: int) -> socket.socket:
+    """A socket bound to host:port for the stack to reach: UDP as it is, TCP listening for one connection (address
+    reuse on, so a restarted run takes its port again at once). An OSError is a TargetError naming kind:host:port."""
+    try:
+        family, kind_, proto, _, address = socket.getaddrinfo(host, port, type=socktype, flags=socket.AI_PASSIVE)[0]
+        sock = socket.socket(family, kind_, proto)
+        if socktype == socket.SOCK_STREAM:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind(address)
+        if socktype == socket.SOCK_STREAM:
+            sock.listen(1)
+    except OSError as exc:
+        raise TargetError(f"{kind}:{host}:{port}: {exc.strerror or exc}") from None
+    return sock

@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 
 from imu_emulator.errors import TargetError
-from imu_emulator.live.transport.spec import TargetSpec
+from imu_emulator.live.transport.spec import TargetKind, TargetSpec
 
 PARAMS = ("record", "timeout")
 
@@ -35,3 +35,18 @@ def parse_stack_spec(kind: str, syntax: str, text: str, rest: str, default_port:
     if not port.isdigit() or not 0 < int(port) < 65536:
         raise TargetError(f"{text}: expected {syntax} with a port between 1 and 65535")
     return TargetSpec(kind, text, path=host, port=int(port), params=tuple(sorted(params.items())))
+
+
+def stack_kind(name: str, order: int, default_port: int, help: str, transport) -> TargetKind:
+    """The TargetKind of a flight-stack target `name:[HOST:]PORT[,record=PATH][,timeout=S]`; `transport()` gives
+    its Transport class (imported when a target is opened, not when the kinds are listed)."""
+    syntax = f"{name}:[HOST:]PORT[,record=PATH][,timeout=S]"
+
+    def parse(text: str, rest: str) -> TargetSpec:
+        return parse_stack_spec(name, syntax, text, rest, default_port)
+
+    def open_(spec: TargetSpec, format_kind: str, options):
+        return transport()(spec, options)
+
+    return TargetKind(name=name, order=order, syntax=syntax, help=help, carries="serial", parse=parse, open=open_,
+                      takes_argument=False)
