@@ -4,8 +4,8 @@ and a long `generate` to Parquet (wall time, peak RSS).
     .venv/bin/python tools/bench_batch.py [--runs 32] [--minutes 10] [--repeat 2] [--generate-hours 24]
 
 Batch: a one-IMU figure-eight scene with sensor noise and bias instability at 1 kHz; `imu_emulator.analysis.batch.run`
-on the CLI's local cluster (analysis.batch.LocalBatchCluster: one thread per worker process, on Linux forked after
-this process loaded the kernel) started before the clock starts. The first trial uses an empty kernel cache (its
+on the CLI's local workers (analysis.batch.LocalBatchPool: a process pool, on Linux forked after this process loaded
+the kernel) started before the clock starts. The first trial uses an empty kernel cache (its
 kernel load is a compile); the trials alternate 1 and 2 workers so machine load falls on both alike. Wall time,
 and the CPU seconds the realizations took on the workers' threads (time.thread_time), are printed per trial.
 Generate: four IMUs at 1 kHz for --generate-hours to a Parquet file in --dir (deleted after; a 24 h run needs
@@ -57,13 +57,13 @@ def scene_text(duration_s: float, imus: int) -> str:
 
 
 def batch_trial(scene: Path, runs: int, workers: int, out: Path) -> dict:
-    # the CLI's local cluster: on Linux its workers fork from this process after it loaded the kernel (the
-    # trial's "before fork" load; a later trial finds it here), elsewhere each worker loads it ("per worker")
-    cluster = batch.LocalBatchCluster(workers, warm=batch.tasks_for(scene, runs, 1, out)[0])
-    with cluster as client:
-        client.wait_for_workers(workers)
+    # the CLI's local workers: on Linux they fork from this process after it loaded the kernel (the trial's
+    # "before fork" load; a later trial finds it here), elsewhere each worker loads it ("per worker")
+    cluster = batch.LocalBatchPool(workers, warm=batch.tasks_for(scene, runs, 1, out)[0])
+    with cluster as executor:
+        executor.submit(os.getpid).result()      # the workers start before the clock (forked: all at the first call)
         start = time.perf_counter()
-        result = batch.run(scene, runs, 1, out, executor=client)
+        result = batch.run(scene, runs, 1, out, executor=executor)
         wall = time.perf_counter() - start
     assert result.ok, result.failures
     loads = [r["kernel_load_s"] for r in result.rows if r["kernel_load_s"] is not None]
