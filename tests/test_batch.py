@@ -168,6 +168,29 @@ def test_spawned_local_workers_give_the_in_process_batch(tmp_path, cache, monkey
         assert sum(load is not None for load in loads) == 1, (worker, loads)
 
 
+@pytest.mark.skipif(not batch.fork_workers(), reason="the replaced realize reaches the workers by fork")
+def test_a_worker_that_dies_fails_its_realizations_and_none_is_lost(tmp_path, cache, monkeypatch):
+    """A local worker killed mid-batch (here: realization 3 ends its process, as the kernel's OOM killer would)
+    breaks the pool: every realization is still answered, a row or a failure naming the broken pool, and the
+    batch ends instead of waiting for the dead worker."""
+    real = batch.realize
+
+    def realize(task):
+        if task.index == 3:
+            os._exit(9)
+        return real(task)
+    monkeypatch.setattr(batch, "realize", realize)
+    scene = _scene(tmp_path, duration=0.05)
+    with batch.LocalBatchPool(2) as executor:
+        result = batch.run(scene, 16, ROOT_SEED, tmp_path / "out", executor=executor)
+    assert sorted([r["index"] for r in result.rows] + [f["index"] for f in result.failures]) == list(range(16))
+    assert 3 in {f["index"] for f in result.failures}
+    assert all(f["error"].startswith("BrokenProcessPool: ") for f in result.failures), result.failures
+    rows = pq.read_table(tmp_path / "out" / "summary.parquet").to_pylist()
+    assert [r["status"] == "failed" for r in rows] == [i in {f["index"] for f in result.failures}
+                                                      for i in range(16)]
+
+
 def test_dashboard_runs_a_dask_local_cluster_with_the_same_batch(tmp_path, cache, capsys):
     """--dashboard keeps Dask for the local workers (its dashboard shows them): the link is printed, the workers
     have the profiler off (LOCAL_DASK_CONFIG), the batch is that of --workers 0; with --workers 0 there is no
