@@ -210,6 +210,25 @@ def test_dashboard_runs_a_dask_local_cluster_with_the_same_batch(tmp_path, cache
     assert err == "error: batch: --dashboard shows Dask worker processes; --workers 0 has none", err
 
 
+def test_local_workers_need_no_dask_and_dask_options_say_they_do(tmp_path, cache, capsys, monkeypatch):
+    """Without Dask importable (None in sys.modules: `import distributed` raises ImportError), local workers
+    still run the batch; --dashboard and a scheduler address, which need Dask, are refused in one line."""
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    scene = _scene(tmp_path, duration=0.05)
+    options = ["batch", str(scene), "--runs", "3", "--seed", str(ROOT_SEED), "--quiet"]
+    assert main([*options, "-o", str(tmp_path / "pool"), "--workers", "2"]) == 0
+    assert main([*options, "-o", str(tmp_path / "serial"), "--workers", "0"]) == 0
+    _same_batch(tmp_path / "pool", tmp_path / "serial", 3)
+    capsys.readouterr()
+    monkeypatch.setenv("DASK_SCHEDULER_ADDRESS", "tcp://127.0.0.1:1")
+    for extra, needs in ([], "$DASK_SCHEDULER_ADDRESS"), (["--scheduler", "tcp://127.0.0.1:1"], "--scheduler"), (
+            ["--workers", "2", "--dashboard"], "--dashboard"):
+        assert main([*options, "-o", str(tmp_path / "x"), *extra]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err == (f"error: batch: {needs} needs Dask, which is not installed (pip install "
+                       "'imu-emulator[batch]'); the default local workers need none"), err
+
+
 def test_preload_leaves_a_refused_draw_to_its_realization(tmp_path):
     """The load before the workers fork uses realization 0's own draws; when the scene refuses them (a noise
     density below zero: the scene's own check) nothing is loaded and the batch goes on, that realization

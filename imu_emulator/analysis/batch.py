@@ -200,17 +200,18 @@ LOCAL_DASK_CONFIG = {
 
 def fork_workers() -> bool:
     """Whether local workers are forked from the driver (Linux): they inherit its imports (numba, the runtime,
-    pyarrow, distributed) and its loaded kernel instead of importing and loading them again, which is most of
+    pyarrow) and its loaded kernel instead of importing and loading them again, which is most of
     what a spawned worker costs. Elsewhere fork is unsafe (macOS) or absent (Windows): Dask's default, spawn."""
     return sys.platform.startswith("linux")
 
 
 class LocalBatchCluster:
-    """A Dask LocalCluster for a batch, as a context manager giving its Client: `workers` single-threaded worker
-    processes (the kernel is single-threaded; numba's compile is not something to run twice in one process at
-    once), no dashboard unless asked (it imports bokeh and serves a page nobody may open), LOCAL_DASK_CONFIG,
-    and on Linux workers forked after `warm` (a Task) has its kernel loaded here, so they share one load.
-    `preload_s`: the seconds that load took (None: none was needed or the kernel was here)."""
+    """A Dask LocalCluster for a batch (the CLI's with --dashboard; LocalBatchPool otherwise), as a context
+    manager giving its Client: `workers` single-threaded worker processes (the kernel is single-threaded;
+    numba's compile is not something to run twice in one process at once), no dashboard unless asked (it
+    imports bokeh and serves a page nobody may open), LOCAL_DASK_CONFIG, and on Linux workers forked after
+    `warm` (a Task) has its kernel loaded here, so they share one load. `preload_s`: the seconds that load took
+    (None: none was needed or the kernel was here)."""
 
     def __init__(self, workers: int, dashboard: bool = False, warm: Task | None = None):
         self.workers, self.dashboard, self.warm = workers, dashboard, warm

@@ -101,8 +101,10 @@ class _executor:
         try:
             from distributed import Client
         except ImportError:
-            raise ImuEmulatorError("batch: Dask is not installed (pip install 'imu-emulator[batch]'); "
-                                   f"{'--scheduler' if address else '--dashboard'} needs it") from None
+            needs = ("--dashboard" if not address else "--scheduler" if self.args.scheduler
+                     else "$DASK_SCHEDULER_ADDRESS")
+            raise ImuEmulatorError(f"batch: {needs} needs Dask, which is not installed (pip install "
+                                   "'imu-emulator[batch]'); the default local workers need none") from None
         if address:
             self.client = Client(address)
         else:
