@@ -101,24 +101,32 @@ def test_serial_and_two_worker_cluster_give_identical_files(tmp_path, cache):
     assert summary[7]["imu0.gx.std"] == pytest.approx(gx.std(ddof=1), rel=1e-12)
 
 
+def _parent_pid(pid: int) -> int:
+    # field 4 of /proc/PID/stat, after the command name in parentheses (which may hold spaces)
+    return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
+
+
+def _worker_pids(rows) -> set[int]:
+    return {int(row["worker"].rsplit(":", 1)[1]) for row in rows}
+
+
 @pytest.mark.skipif(not batch.fork_workers(), reason="local workers fork only on Linux")
 def test_local_workers_fork_with_the_kernel_and_give_the_serial_files(tmp_path, cache, capsys):
-    """The CLI's local cluster (LocalBatchCluster): worker processes forked from this one after it loaded the
-    kernel, so none loads it again (counted: kernel_load_s, and a load asked of each worker finds it there), with
-    the profiler off; their files are those of --workers 0, with one worker and with two."""
-    import dask
+    """The CLI's local workers (LocalBatchPool): processes forked from this one after it loaded the kernel, so
+    none loads it again (counted: kernel_load_s, and a load asked of a worker finds it there); their files are
+    those of --workers 0, with one worker and with two."""
     scene = _scene(tmp_path)
     vary = ["imu0.gyro.noise_density=uniform(0.005,0.02) deg/s/sqrt(Hz)"]
     serial = batch.run(scene, 8, ROOT_SEED, tmp_path / "serial", vary=vary)
     assert serial.ok
     tasks = batch.tasks_for(scene, 8, ROOT_SEED, tmp_path / "two", vary=vary)
-    with batch.LocalBatchCluster(2, warm=tasks[0]) as client:
-        client.wait_for_workers(2)
-        assert set(client.run(os.getppid).values()) == {os.getpid()}
-        assert list(client.run(batch.preload, tasks[5]).values()) == [None, None]     # loaded: nothing to do
-        assert set(client.run(dask.config.get, "distributed.worker.profile.enabled").values()) == {False}
-        two = batch.run(scene, 8, ROOT_SEED, tmp_path / "two", executor=client, vary=vary)
-    assert two.ok and len({row["worker"] for row in two.rows}) == 2
+    pool = batch.LocalBatchPool(2, warm=tasks[0])
+    with pool as executor:
+        two = batch.run(scene, 8, ROOT_SEED, tmp_path / "two", executor=executor, vary=vary)
+        assert {_parent_pid(pid) for pid in _worker_pids(two.rows)} == {os.getpid()}
+        assert executor.submit(batch.preload, tasks[5]).result() is None     # loaded: nothing to do
+    assert pool.method == "fork"
+    assert two.ok and len(_worker_pids(two.rows)) == 2
     assert [row["kernel_load_s"] for row in two.rows] == [None] * 8
     assert main(["batch", str(scene), "--runs", "8", "--seed", str(ROOT_SEED), "-o", str(tmp_path / "one"),
                  "--workers", "1", "--vary", vary[0]]) == 0
@@ -129,6 +137,96 @@ def test_local_workers_fork_with_the_kernel_and_give_the_serial_files(tmp_path, 
         name = batch.run_file(Path("."), i).name
         assert _same_file(tmp_path / "two" / name, tmp_path / "serial" / name), name
         assert _same_file(tmp_path / "one" / name, tmp_path / "serial" / name), name
+
+
+def _same_batch(a: Path, b: Path, runs: int) -> None:
+    """Every run file equal, and the summaries equal but for who computed what and how long it took."""
+    for i in range(runs):
+        name = batch.run_file(Path("."), i).name
+        assert _same_file(a / name, b / name), name
+    where = ["worker", "kernel_load_s", "cpu_s"]
+    assert (pq.read_table(a / "summary.parquet").drop_columns(where)
+            .equals(pq.read_table(b / "summary.parquet").drop_columns(where)))
+
+
+def test_spawned_local_workers_give_the_in_process_batch(tmp_path, cache, monkeypatch):
+    """The start where fork is unsafe or absent (macOS, Windows), forced here: spawned workers import the
+    package and each loads the kernel once, on its first realization (this process had the kernel loaded by
+    the --workers 0 run: a forked worker would have inherited it and reported no load), and the batch is bit
+    for bit the --workers 0 one."""
+    monkeypatch.setattr(batch, "fork_workers", lambda: False)
+    scene = _scene(tmp_path)
+    options = ["batch", str(scene), "--runs", "12", "--seed", str(ROOT_SEED), "--quiet",
+               "--vary", "imu0.accel.bias=normal(0,0.05)"]
+    assert main([*options, "-o", str(tmp_path / "serial"), "--workers", "0"]) == 0
+    assert main([*options, "-o", str(tmp_path / "spawned"), "--workers", "2"]) == 0
+    _same_batch(tmp_path / "spawned", tmp_path / "serial", 12)
+    rows = pq.read_table(tmp_path / "spawned" / "summary.parquet").to_pylist()
+    assert os.getpid() not in _worker_pids(rows)
+    for worker in {r["worker"] for r in rows}:
+        loads = [r["kernel_load_s"] for r in rows if r["worker"] == worker]
+        assert sum(load is not None for load in loads) == 1, (worker, loads)
+
+
+@pytest.mark.skipif(not batch.fork_workers(), reason="the replaced realize reaches the workers by fork")
+def test_a_worker_that_dies_fails_its_realizations_and_none_is_lost(tmp_path, cache, monkeypatch):
+    """A local worker killed mid-batch (here: realization 3 ends its process, as the kernel's OOM killer would)
+    breaks the pool: every realization is still answered, a row or a failure naming the broken pool, and the
+    batch ends instead of waiting for the dead worker."""
+    real = batch.realize
+
+    def realize(task):
+        if task.index == 3:
+            os._exit(9)
+        return real(task)
+    monkeypatch.setattr(batch, "realize", realize)
+    scene = _scene(tmp_path, duration=0.05)
+    with batch.LocalBatchPool(2) as executor:
+        result = batch.run(scene, 16, ROOT_SEED, tmp_path / "out", executor=executor)
+    assert sorted([r["index"] for r in result.rows] + [f["index"] for f in result.failures]) == list(range(16))
+    assert 3 in {f["index"] for f in result.failures}
+    assert all(f["error"].startswith("BrokenProcessPool: ") for f in result.failures), result.failures
+    rows = pq.read_table(tmp_path / "out" / "summary.parquet").to_pylist()
+    assert [r["status"] == "failed" for r in rows] == [i in {f["index"] for f in result.failures}
+                                                      for i in range(16)]
+
+
+def test_dashboard_runs_a_dask_local_cluster_with_the_same_batch(tmp_path, cache, capsys):
+    """--dashboard keeps Dask for the local workers (its dashboard shows them): the link is printed, the workers
+    have the profiler off (LOCAL_DASK_CONFIG), the batch is that of --workers 0; with --workers 0 there is no
+    cluster to show, which is refused."""
+    scene = _scene(tmp_path)
+    options = ["batch", str(scene), "--runs", "6", "--seed", str(ROOT_SEED)]
+    assert main([*options, "-o", str(tmp_path / "serial"), "--workers", "0", "--quiet"]) == 0
+    assert main([*options, "-o", str(tmp_path / "dask"), "--workers", "2", "--dashboard"]) == 0
+    err = capsys.readouterr().err
+    assert "dask dashboard: http://" in err, err
+    _same_batch(tmp_path / "dask", tmp_path / "serial", 6)
+    with batch.LocalBatchCluster(1) as client:
+        import dask
+        assert set(client.run(dask.config.get, "distributed.worker.profile.enabled").values()) == {False}
+    assert main([*options, "-o", str(tmp_path / "none"), "--workers", "0", "--dashboard"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "error: batch: --dashboard shows Dask worker processes; --workers 0 has none", err
+
+
+def test_local_workers_need_no_dask_and_dask_options_say_they_do(tmp_path, cache, capsys, monkeypatch):
+    """Without Dask importable (None in sys.modules: `import distributed` raises ImportError), local workers
+    still run the batch; --dashboard and a scheduler address, which need Dask, are refused in one line."""
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    scene = _scene(tmp_path, duration=0.05)
+    options = ["batch", str(scene), "--runs", "3", "--seed", str(ROOT_SEED), "--quiet"]
+    assert main([*options, "-o", str(tmp_path / "pool"), "--workers", "2"]) == 0
+    assert main([*options, "-o", str(tmp_path / "serial"), "--workers", "0"]) == 0
+    _same_batch(tmp_path / "pool", tmp_path / "serial", 3)
+    capsys.readouterr()
+    monkeypatch.setenv("DASK_SCHEDULER_ADDRESS", "tcp://127.0.0.1:1")
+    for extra, needs in ([], "$DASK_SCHEDULER_ADDRESS"), (["--scheduler", "tcp://127.0.0.1:1"], "--scheduler"), (
+            ["--workers", "2", "--dashboard"], "--dashboard"):
+        assert main([*options, "-o", str(tmp_path / "x"), *extra]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err == (f"error: batch: {needs} needs Dask, which is not installed (pip install "
+                       "'imu-emulator[batch]'); the default local workers need none"), err
 
 
 def test_preload_leaves_a_refused_draw_to_its_realization(tmp_path):

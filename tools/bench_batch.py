@@ -1,11 +1,12 @@
-"""Monte Carlo and long-run figures: realizations per second with 1 and 2 Dask workers, each worker's kernel load,
+"""Monte Carlo and long-run figures: realizations per second with 1 and 2 local workers, each worker's kernel load,
 and a long `generate` to Parquet (wall time, peak RSS).
 
     .venv/bin/python tools/bench_batch.py [--runs 32] [--minutes 10] [--repeat 2] [--generate-hours 24]
+        [--start-method fork|spawn]
 
 Batch: a one-IMU figure-eight scene with sensor noise and bias instability at 1 kHz; `imu_emulator.analysis.batch.run`
-on the CLI's local cluster (analysis.batch.LocalBatchCluster: one thread per worker process, on Linux forked after
-this process loaded the kernel) started before the clock starts. The first trial uses an empty kernel cache (its
+on the CLI's local workers (analysis.batch.LocalBatchPool: a process pool, on Linux forked after this process loaded
+the kernel) started before the clock starts. The first trial uses an empty kernel cache (its
 kernel load is a compile); the trials alternate 1 and 2 workers so machine load falls on both alike. Wall time,
 and the CPU seconds the realizations took on the workers' threads (time.thread_time), are printed per trial.
 Generate: four IMUs at 1 kHz for --generate-hours to a Parquet file in --dir (deleted after; a 24 h run needs
@@ -56,14 +57,14 @@ def scene_text(duration_s: float, imus: int) -> str:
     return SCENE.format(duration=duration_s, imus="\n".join(IMU.format(m=m) for m in range(imus)))
 
 
-def batch_trial(scene: Path, runs: int, workers: int, out: Path) -> dict:
-    # the CLI's local cluster: on Linux its workers fork from this process after it loaded the kernel (the
-    # trial's "before fork" load; a later trial finds it here), elsewhere each worker loads it ("per worker")
-    cluster = batch.LocalBatchCluster(workers, warm=batch.tasks_for(scene, runs, 1, out)[0])
-    with cluster as client:
-        client.wait_for_workers(workers)
+def batch_trial(scene: Path, runs: int, workers: int, out: Path, method: str | None) -> dict:
+    # the CLI's local workers: on Linux they fork from this process after it loaded the kernel (the trial's
+    # "before fork" load; a later trial finds it here), elsewhere each worker loads it ("per worker")
+    cluster = batch.LocalBatchPool(workers, warm=batch.tasks_for(scene, runs, 1, out)[0], method=method)
+    with cluster as executor:
+        executor.submit(os.getpid).result()      # the workers start before the clock (forked: all at the first call)
         start = time.perf_counter()
-        result = batch.run(scene, runs, 1, out, executor=client)
+        result = batch.run(scene, runs, 1, out, executor=executor)
         wall = time.perf_counter() - start
     assert result.ok, result.failures
     loads = [r["kernel_load_s"] for r in result.rows if r["kernel_load_s"] is not None]
@@ -94,6 +95,9 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=32)
     parser.add_argument("--minutes", type=float, default=10.0, help="duration of each realization")
     parser.add_argument("--repeat", type=int, default=2, help="trials per worker count (interleaved)")
+    parser.add_argument("--start-method", choices=("fork", "spawn"), default=None, help="how the workers start "
+                        "(default: the CLI's, fork on Linux); spawn: each worker loads the kernel itself, and all but the first "
+                        "start once the clock runs (a pool spawns on demand)")
     parser.add_argument("--generate-hours", type=float, default=24.0, help="0 skips the long generate")
     parser.add_argument("--dir", default=None, help="where the long generate writes (default: a temporary dir)")
     args = parser.parse_args()
@@ -108,7 +112,7 @@ def main() -> None:
             trials = []
             for r in range(args.repeat):
                 for workers in (1, 2):
-                    trial = batch_trial(scene, args.runs, workers, tmp / f"out-{r}-{workers}")
+                    trial = batch_trial(scene, args.runs, workers, tmp / f"out-{r}-{workers}", args.start_method)
                     trials.append(trial)
                     first = "cold cache: compile" if len(trials) == 1 else "warm cache: load"
                     print(f"{args.runs} x {args.minutes:g} min at 1 kHz, {workers} worker(s): {trial['wall']:.1f} s "

@@ -1,12 +1,13 @@
-"""What scale-out costs (issue 25): the `batch` command run with --workers 0 (in its own process), 1 and 2 (a
-local Dask cluster), each a fresh process as a user runs it, in a warm kernel cache. CPU is the whole process
+"""What scale-out costs (issue 25): the `batch` command run with --workers 0 (in its own process), 1 and 2 (its
+local workers: a process pool, or a Dask LocalCluster in trees up to 1483ea4), each a fresh process as a user
+runs it, in a warm kernel cache. CPU is the whole process
 tree's (the command, the scheduler and client in it, its worker processes, reaped before it exits: os.wait4's
 rusage), so imports, cluster start-up, event loops and kernel loads all count. Each worker's first kernel load
 comes from the summary's kernel_load_s, the load done once in the command before its workers fork from its
-final line. With --base DIR (another checkout, e.g. `git worktree add /tmp/base c83e86f`) both trees run,
+final line. With --base DIR (another checkout, e.g. `git worktree add /tmp/base 1483ea4`) both trees run,
 interleaved (base 0, 1, 2, this 0, 1, 2, base 0, ...): on a shared machine only ratios inside one run mean
-something. --idle instead prints what an idle one-worker cluster costs per second, Dask's defaults against
-analysis.batch.LOCAL_DASK_CONFIG.
+something. --idle instead prints what an idle one-worker Dask cluster (the command's with --dashboard) costs
+per second, Dask's defaults against analysis.batch.LOCAL_DASK_CONFIG.
 
     PYTHONPATH=. python tools/bench_batch_workers.py [--scene examples/drone_imu.toml] [--runs 96] [--rounds 3]
         [--duration S] [--base DIR] [--idle]

@@ -12,7 +12,8 @@ same seed and draws). A failed realization is a row with its seed and error; the
 
 Executors: `executor=None` runs in this process; anything with `submit` (a dask.distributed Client, a
 concurrent.futures executor) runs the realizations there. The CLI (imu_emulator.commands.batch) makes the
-Dask client.
+executor: a Dask client for a given scheduler, a Dask LocalCluster when the dashboard is asked for, else a
+process pool (LocalBatchPool).
 """
 from __future__ import annotations
 
@@ -199,17 +200,18 @@ LOCAL_DASK_CONFIG = {
 
 def fork_workers() -> bool:
     """Whether local workers are forked from the driver (Linux): they inherit its imports (numba, the runtime,
-    pyarrow, distributed) and its loaded kernel instead of importing and loading them again, which is most of
+    pyarrow) and its loaded kernel instead of importing and loading them again, which is most of
     what a spawned worker costs. Elsewhere fork is unsafe (macOS) or absent (Windows): Dask's default, spawn."""
     return sys.platform.startswith("linux")
 
 
 class LocalBatchCluster:
-    """A Dask LocalCluster for a batch, as a context manager giving its Client: `workers` single-threaded worker
-    processes (the kernel is single-threaded; numba's compile is not something to run twice in one process at
-    once), no dashboard unless asked (it imports bokeh and serves a page nobody may open), LOCAL_DASK_CONFIG,
-    and on Linux workers forked after `warm` (a Task) has its kernel loaded here, so they share one load.
-    `preload_s`: the seconds that load took (None: none was needed or the kernel was here)."""
+    """A Dask LocalCluster for a batch (the CLI's with --dashboard; LocalBatchPool otherwise), as a context
+    manager giving its Client: `workers` single-threaded worker processes (the kernel is single-threaded;
+    numba's compile is not something to run twice in one process at once), no dashboard unless asked (it
+    imports bokeh and serves a page nobody may open), LOCAL_DASK_CONFIG, and on Linux workers forked after
+    `warm` (a Task) has its kernel loaded here, so they share one load. `preload_s`: the seconds that load took
+    (None: none was needed or the kernel was here)."""
 
     def __init__(self, workers: int, dashboard: bool = False, warm: Task | None = None):
         self.workers, self.dashboard, self.warm = workers, dashboard, warm
@@ -242,6 +244,37 @@ class LocalBatchCluster:
     def __exit__(self, *exc):
         self.client.close()
         self.cluster.close()
+
+
+def start_method() -> str:
+    """How local workers start: "fork" where fork_workers(), else "spawn"."""
+    return "fork" if fork_workers() else "spawn"
+
+
+class LocalBatchPool:
+    """The batch command's local workers without Dask (issue 25: one Dask worker cost 1.35x the CPU of --workers
+    0, most of it importing distributed, its scheduler and the event loops' ticks, none of which a batch on one
+    machine needs): a concurrent.futures process pool of `workers` processes, started with `method` (default
+    start_method()), as a context manager giving the executor. Forked workers start after `warm` (a Task) has
+    its kernel loaded here and share that load (`preload_s`, as LocalBatchCluster); spawned ones each load a
+    structure's kernel once, on their first realization of it (KERNEL_LOADS). Each worker writes its files; only
+    chunks of tasks and summary rows pass through the pipes to and from this process."""
+
+    def __init__(self, workers: int, warm: Task | None = None, method: str | None = None):
+        self.workers, self.warm, self.method = workers, warm, method or start_method()
+        self.executor = self.preload_s = None
+
+    def __enter__(self):
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+        if self.method == "fork" and self.warm is not None:
+            self.preload_s = preload(self.warm)
+        self.executor = ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context(self.method))
+        return self.executor
+
+    def __exit__(self, exc_type, *exc):
+        # after an error or ^C, the chunks not yet started are not started
+        self.executor.shutdown(wait=True, cancel_futures=exc_type is not None)
 
 
 

@@ -1,4 +1,4 @@
-"""`imu-emulator batch`: Monte Carlo realizations of a scene on a Dask cluster (a local one by default)."""
+"""`imu-emulator batch`: Monte Carlo realizations of a scene on local worker processes or a Dask cluster."""
 from __future__ import annotations
 
 import os
@@ -13,7 +13,7 @@ ORDER = 20     # place in `imu-emulator --help`
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("batch", help="Monte Carlo: N realizations of a scene (seeds, drawn parameters) on "
-                              "Dask, one Parquet file each and a summary table")
+                              "local worker processes or Dask, one Parquet file each and a summary table")
     p.add_argument("scene", help="scene file (TOML)")
     p.add_argument("--runs", required=True, type=number(1, 10_000_000, integer=True), help="realizations")
     p.add_argument("-o", "--output", required=True, help="output directory (created if missing; a rerun skips "
@@ -29,11 +29,13 @@ def register(subparsers) -> None:
                    metavar="I", help="run realization I only (repeatable): the same file as in the whole batch")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
-                       help="an existing Dask scheduler (default: $DASK_SCHEDULER_ADDRESS, else a local cluster)")
+                       help="an existing Dask scheduler (default: $DASK_SCHEDULER_ADDRESS, else local worker "
+                       "processes)")
     where.add_argument("--workers", type=number(0, 4096, integer=True), default=None,
-                       help="local cluster's worker processes (default: the machine's cores); 0 runs in this process")
-    p.add_argument("--dashboard", action="store_true", help="serve the local cluster's Dask dashboard (bokeh) and "
-                   "print its link")
+                       help="local worker processes (default: the machine's cores); 0 runs in this process")
+    p.add_argument("--dashboard", action="store_true", help="run the local workers on a Dask LocalCluster and serve "
+                   "its dashboard (bokeh), printing its link; without it they are a plain process pool, which "
+                   "costs less CPU (no scheduler, no event loops)")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     p.set_defaults(func=cmd_batch)
 
@@ -74,32 +76,41 @@ def cmd_batch(args) -> int:
 
 
 class _executor:
-    """The Dask client for the batch (and its local cluster), or None for --workers 0; closed on exit."""
+    """Where the realizations run, closed on exit: None (--workers 0: this process), a Dask client (--scheduler or
+    $DASK_SCHEDULER_ADDRESS; a Dask LocalCluster with --dashboard) or a process pool (analysis.batch.
+    LocalBatchPool, the default)."""
 
     def __init__(self, args, warm):
         self.args = args
-        self.warm = warm           # a task whose kernel local workers inherit (analysis.batch.LocalBatchCluster)
+        self.warm = warm           # a task whose kernel local workers inherit (analysis.batch.LocalBatchPool)
         self.client = self.local = None
 
     def __enter__(self):
+        from imu_emulator.analysis import batch
+        from imu_emulator.errors import ImuEmulatorError
         address = self.args.scheduler or (None if self.args.workers is not None
                                           else os.environ.get("DASK_SCHEDULER_ADDRESS"))
         if self.args.workers == 0:
+            if self.args.dashboard:
+                raise ImuEmulatorError("batch: --dashboard shows Dask worker processes; --workers 0 has none")
             return None
+        workers = self.args.workers or os.cpu_count() or 1
+        if not address and not self.args.dashboard:
+            self.local = batch.LocalBatchPool(workers, warm=self.warm)
+            return self.local.__enter__()
         try:
             from distributed import Client
         except ImportError:
-            from imu_emulator.errors import ImuEmulatorError
-            raise ImuEmulatorError("batch: Dask is not installed (pip install 'imu-emulator[batch]'), or run "
-                                   "in this process with --workers 0") from None
+            needs = ("--dashboard" if not address else "--scheduler" if self.args.scheduler
+                     else "$DASK_SCHEDULER_ADDRESS")
+            raise ImuEmulatorError(f"batch: {needs} needs Dask, which is not installed (pip install "
+                                   "'imu-emulator[batch]'); the default local workers need none") from None
         if address:
             self.client = Client(address)
         else:
-            from imu_emulator.analysis.batch import LocalBatchCluster
-            self.local = LocalBatchCluster(self.args.workers or os.cpu_count() or 1, dashboard=self.args.dashboard,
-                                           warm=self.warm)
+            self.local = batch.LocalBatchCluster(workers, dashboard=True, warm=self.warm)
             self.client = self.local.__enter__()
-        if not self.args.quiet and (address or self.args.dashboard):
+        if not self.args.quiet:
             print(f"dask dashboard: {self.client.dashboard_link}", file=sys.stderr, flush=True)
         return self.client
 
