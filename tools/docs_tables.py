@@ -112,14 +112,20 @@ def ardupilot_params() -> str:
     import importlib.util
     spec = importlib.util.spec_from_file_location("ardupilot_params", ROOT / "tools" / "interop" / "ardupilot_params.py")
     module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module      # its dataclasses look their module up there
     spec.loader.exec_module(module)
-    devices = {name: (what, fmt, options) for name, (what, fmt, options, _) in module.DEVICES.items()}
-    devices["json"] = ("ArduPilot's own EKF3 on the emulator's IMU (JSON physics backend)", "ardupilot-json", [])
+    devices = {name: (unit.what, unit.format, unit.options) for name, unit in module.DEVICES.items()}
+    devices["json"] = ("ArduPilot's own EKF3 on the emulator's IMU (JSON physics backend)", "ardupilot-json", ())
     rows = []
     for name, (what, fmt, options) in devices.items():
-        params = ", ".join(f"`{k} {v:g}`" for k, v in module.device_params(name).items())
+        # the compass calibration depends on the scene (minus its hard iron): said once, not as made-up numbers
+        params = {k: v for k, v in module.device_params(name, compass_offsets_mgauss=(1.0, 1.0, 1.0)).items()
+                  if not k.startswith("COMPASS_OFS_")}
+        cells = [f"`{k} {v:g}`" for k, v in params.items()]
+        if name != "json":
+            cells.append("`COMPASS_OFS_X/Y/Z` = minus the scene's magnetometer hard iron, in mGauss")
         emulator = f"`--format {fmt}`" + "".join(f" `--option {o}`" for o in options)
-        rows.append((f"`{name}`", what, emulator, params))
+        rows.append((f"`{name}`", what, emulator, ", ".join(cells)))
     return _table(("device", "what", "emulator", "ArduPilot parameters"), rows)
 
 
