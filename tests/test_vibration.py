@@ -390,20 +390,41 @@ def test_hermite_interpolants_reproduce_polynomials_of_their_degree():
             np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12)
 
 
-@pytest.mark.parametrize("taps, orders", [(16, 2), (17, 3), (40, 3)])
+@pytest.mark.parametrize("n", [2, 4, 64, 1024])
+def test_fft_is_numpys_dft(n):
+    # The in-place radix-2 transform against numpy.fft.fft on random complex input; round-off of a radix-2 FFT
+    # grows as eps log2 n times the input's RMS per output (Higham, Accuracy and Stability, sec. 24.1), so 1e-14
+    # of the largest output bounds it with room for n up to 2^20
+    from imu_emulator.numerics.shaped_noise import fft, twiddles
+    x = np.random.default_rng(n).normal(size=(2, n))
+    state = np.concatenate([[3.0], x[0], x[1]])          # after an unrelated slot
+    prm = np.array([5.0] + twiddles(n))
+    fft(state, 1, 1 + n, n, prm, 1)
+    want = np.fft.fft(x[0] + 1j * x[1])
+    np.testing.assert_allclose(state[1:1 + n] + 1j * state[1 + n:], want, rtol=0, atol=1e-14 * np.abs(want).max())
+    assert state[0] == 3.0
+
+
+@pytest.mark.parametrize("taps, orders", [(16, 2), (17, 3), (256, 3), (1000, 2)])
 def test_fill_chunk_is_the_convolution_of_the_streams_normals(taps, orders):
     # Row r of chunk c is sample c * size - 1 + r of sum_i h_o[i] w[j - i], w_j = normal(key, j + taps): numpy's
-    # convolution of counter_rng.normals as the oracle (even and odd tap counts, 2 and 3 orders).
+    # direct convolution of counter_rng.normals as the oracle (even and odd tap counts, 2 and 3 orders: one
+    # inverse transform carries two orders, the third one alone). fill_chunk convolves by FFT, whose round-off is
+    # about eps log2 n of the output's scale (test above): 1e-13 of the largest row.
     from imu_emulator.numerics.counter_rng import normals
-    from imu_emulator.numerics.shaped_noise import fill_chunk
-    size, chunk, key = 32, 3, 987654321
-    rng = np.random.default_rng(1)
-    h = rng.normal(size=(orders, taps))
-    prm = np.concatenate([[7.0], h[:, ::-1].ravel()])       # reversed taps, after an unrelated parameter
-    state = np.zeros(5 + (size + 1) * orders + size + taps)
-    fill_chunk(np.uint64(key), chunk, size, taps, orders, prm, 1, state, 5, 5 + (size + 1) * orders)
+    from imu_emulator.numerics.shaped_noise import correlation_spectrum, fft_size, fill_chunk, twiddles
+    n = fft_size(taps)
+    size, chunk, key = n - taps, 3, 987654321
+    h = np.random.default_rng(1).normal(size=(orders, taps))
+    tw = twiddles(n)
+    # an unrelated parameter, the twiddles, the spectra of the reversed taps
+    prm = np.array([7.0] + tw + [x for o in range(orders) for x in correlation_spectrum(h[o, ::-1], n)])
+    state = np.zeros(5 + (size + 1) * orders + 4 * n)
+    fill_chunk(np.uint64(key), chunk, size, taps, orders, prm, 1 + len(tw), 1, state, 5, 5 + (size + 1) * orders)
     first = chunk * size - 1                                 # the run sample of row 0
     w = normals(key, first - taps + 1 + taps, size + taps)   # w_j for j = first - taps + 1 .. first + size
+    assert not state[:5].any()                               # nothing written before out_base
     for o in range(orders):
         want = np.convolve(w, h[o], mode="valid")             # samples first .. first + size
-        np.testing.assert_allclose(state[5 + o: 5 + (size + 1) * orders: orders], want, rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(state[5 + o: 5 + (size + 1) * orders: orders], want, rtol=0,
+                                   atol=1e-13 * np.abs(want).max())

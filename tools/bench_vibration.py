@@ -1,8 +1,10 @@
 """Random vibration's cost: M samples/s of the circle scene (1 kHz, lever arm) with a linear PSD on 3 axes at
 psd_lines = 256, and the kinematics alone, for this checkout and another one (--against: e.g. a worktree of an
-older commit, whose PSD was a sum of 256 sinusoids per axis), interleaved.
+older commit: one whose PSD was a direct-form FIR of 256 taps per axis, before the FFT convolution), interleaved.
 
-    .venv/bin/python tools/bench_vibration.py --against /work/wt/psd-base [--rounds 5] [--seconds 60]
+    .venv/bin/python tools/bench_vibration.py --against /tmp/psd-base [--rounds 5] [--seconds 60]
+
+(e.g. `git archive 1483ea4 | tar -x -C /tmp/psd-base` for the direct FIR)
 
 Each measurement is a child process (the two checkouts are two versions of one package): it builds and warms the
 simulation (compile or cache load, not timed), then times --seconds of samples in process CPU time
@@ -81,9 +83,18 @@ def main() -> None:
         c = np.array(cpu[label])
         print(f"  {label:40} {c.min():8.1f} {np.median(c):8.1f} {c.max():8.1f}   wall {np.median(wall[label]):8.1f}"
               f"   {1e3 / np.median(c):7.3f} M/s")
+    extra = {}
     for name, _ in checkouts:
-        extra = np.median(cpu[f"{name}: + PSD 3 axes x 256"]) - np.median(cpu[f"{name}: kinematics only"])
-        print(f"  {name}: the PSD's own cost {extra:.1f} ns/sample = {1e3 / extra:.2f} M samples/s")
+        extra[name] = np.median(cpu[f"{name}: + PSD 3 axes x 256"]) - np.median(cpu[f"{name}: kinematics only"])
+        print(f"  {name}: the PSD's own cost {extra[name]:.1f} ns/sample = {1e3 / extra[name]:.2f} M samples/s")
+    if args.against:
+        # per round, so that a load change between rounds falls on both sides of each ratio
+        ratios = [(cpu["--against: + PSD 3 axes x 256"][r] - cpu["--against: kinematics only"][r])
+                  / (cpu["this checkout: + PSD 3 axes x 256"][r] - cpu["this checkout: kinematics only"][r])
+                  for r in range(args.rounds)]
+        print(f"  the PSD's own cost, --against / this checkout: {extra['--against'] / extra['this checkout']:.2f} "
+              f"(of the medians; per round min / median / max {min(ratios):.2f} / {np.median(ratios):.2f} / "
+              f"{max(ratios):.2f})")
 
 
 if __name__ == "__main__":

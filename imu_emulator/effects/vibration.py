@@ -64,11 +64,6 @@ def psd_level(table, f: float) -> float:
     return table[-1][1]
 
 
-#: samples per chunk of filtered noise at least (the chunk is max(CHUNK, taps): a chunk draws size + taps - 1
-#: normals, so at most two per sample)
-CHUNK = 256
-
-
 def folded_level(table, f: float, rate_hz: float) -> float:
     """The table's one-sided level folded into [0, rate_hz / 2] at f: the sum over the frequencies that sample
     to f (|f + m rate_hz|, m whole), as a part without anti-alias filter samples them (module doc)."""
@@ -146,7 +141,10 @@ def _filtered_noise(ctx, psd, taps: int, linear_vars, angular_vars) -> list[str]
     """Lines adding each PSD axis's filtered noise (linear: a, v, d; angular: rate, angle) at this instant: the
     sample's rows of its chunk, or between the run samples s - 1 and s (the increments' quadrature nodes) the
     Hermite interpolant of those two rows."""
-    size = max(CHUNK, taps)
+    from imu_emulator.numerics.shaped_noise import correlation_spectrum, fft_size, twiddles
+    n = fft_size(taps)
+    size = n - taps      # rows per chunk: the transform's length less the filter's reach
+    tw = ctx.constant("TW", twiddles(n))     # one table for every axis of this IMU
     u, row, chunk = ctx.var("u"), ctx.var("row"), ctx.var("chunk")
     # where this instant sits between the samples s - 1 (u = 0) and s (u = 1): the quadrature's nodes lie inside,
     # the sample itself at 1 (to rounding, which the clamp and the exact branch below take out)
@@ -159,12 +157,14 @@ def _filtered_noise(ctx, psd, taps: int, linear_vars, angular_vars) -> list[str]
         for axis, weight in per_axis.items():
             a = AXES[axis]
             # drawn on the part's forward-right-down axis: the sign into the scene's body axes
-            # (EmitContext.frd_sign) rides on the taps, so an ENU and a NED scene vibrate alike
-            h = ctx.constant(f"H{kind}{a}", [ctx.frd_sign(axis) * x for order in shaping_taps(
+            # (EmitContext.frd_sign) rides on the spectra, an exact negation through every product and sum, so an
+            # ENU and a NED scene vibrate alike to the bit
+            sign = ctx.frd_sign(axis)
+            h = ctx.constant(f"H{kind}{a}", [sign * x for order in shaping_taps(
                 ctx.value(f"imu.vibration.{('psd', 'angular_psd')[kind]}"), taps, ctx.scene.rate_hz, weight,
-                orders) for x in order])
+                orders) for x in correlation_spectrum(order, n)])
             block = ctx.state_block(STATES[kind], [lambda draw: -1.0] + [lambda draw: 0.0] * (
-                (size + 1) * orders + size + taps))
+                (size + 1) * orders + 4 * n))
             cached, out, scratch = block, block + 1, block + 1 + (size + 1) * orders
             key = ctx.stream_key(f"{STATES[kind]}.{a}")
             here = [f"state[{out} + {row} * {orders} + {o}]" for o in range(orders)]
@@ -174,7 +174,8 @@ def _filtered_noise(ctx, psd, taps: int, linear_vars, angular_vars) -> list[str]
             hermite = "hermite5" if orders == 3 else "hermite3"
             args = ", ".join(x for pair in (before[::-1], here[::-1]) for x in pair)
             lines += [f"if state[{cached}] != {chunk}:",   # a chunk not cached yet: compute it
-                      f"    fill_chunk({key}, {chunk}, {size}, {taps}, {orders}, prm, {h}, state, {out}, {scratch})",
+                      f"    fill_chunk({key}, {chunk}, {size}, {taps}, {orders}, prm, {h}, {tw}, state, {out}, "
+                      f"{scratch})",
                       f"    state[{cached}] = {chunk}",
                       f"if {u} > {1.0 - 1e-6!r}:",   # the sample (nodes stay below 1 - 5e-3)
                       *[f"    {g} = {x}" for g, x in zip(got, here)],

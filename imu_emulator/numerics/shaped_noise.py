@@ -2,53 +2,114 @@
 samples at a time, and the Hermite interpolants that evaluate it between samples.
 
 `fill_chunk` computes rows `chunk * size - 1 .. chunk * size + size - 1` of y_o = h_o * w (o = 0 .. orders - 1: the
-quantity and its integrals, one FIR each) from the counter-based normals w_j = normal(key, j + taps): every row is
-a pure function of (key, run sample), so the chunk a block lands in, and the block sizes, never change a value.
-The kernel calls it when a sample's chunk differs from the one cached in its state; nothing is allocated (the
-noise scratch is state too), so the kernel runs without numba's runtime.
+quantity and its integrals, one FIR of `taps` taps each) from the counter-based normals w_j = normal(key, j + taps):
+every row is a pure function of (key, run sample), so the chunk a block lands in, and the block sizes, never
+change a value. It convolves by FFT (overlap-save): the chunk's n = size + taps normals transformed once, times
+each filter's spectrum, transformed back two orders at a time (the real and imaginary parts of one transform),
+about 3 n log2 n butterflies per chunk in place of orders x taps multiply-adds per row. The kernel calls it when a
+sample's chunk differs from the one cached in its state; nothing is allocated (the transforms' scratch is state
+too, spectra and twiddles are parameters), so the kernel runs without numba's runtime.
 """
 from __future__ import annotations
+
+import numpy as np
 
 from imu_emulator.native.lazy import jit
 from imu_emulator.numerics.counter_rng import normal
 
+#: the smallest transform: a chunk of n - taps rows costs about 3 n log2 n butterflies, so the per-row cost falls
+#: while n - taps grows against n and barely moves past n = 4 taps
+MIN_FFT = 1024
 
-# No fastmath: reassociated sums would vectorize, but differently in the kernel's machine code and in numba's
-# dispatcher (tests/test_native_kernel.py holds the two to the bit)
+
+def fft_size(taps: int) -> int:
+    """The transform length for filters of `taps` taps: a power of two, at least 4 taps and MIN_FFT."""
+    return max(MIN_FFT, 1 << (4 * taps - 1).bit_length())
+
+
+def twiddles(n: int) -> list[float]:
+    """cos(2 pi k / n) for k < n / 2, then sin(2 pi k / n): the table `fft` reads."""
+    angle = 2.0 * np.pi * np.arange(n // 2) / n
+    return [float(x) for x in np.concatenate([np.cos(angle), np.sin(angle)])]
+
+
+def correlation_spectrum(taps_reversed, n: int) -> list[float]:
+    """The spectrum (real parts, then imaginary parts, n each) that `fill_chunk` multiplies a chunk's transform by
+    for the FIR y_r = sum_m taps_reversed[m] w_(r + m), with the inverse transform's 1 / n folded in: the DFT of
+    g_j = taps_reversed[-j mod n] (circular convolution with g is that correlation where it does not wrap)."""
+    h = np.asarray(taps_reversed, dtype=float)
+    g = np.zeros(n)
+    g[0] = h[0]
+    g[n - h.size + 1:] = h[:0:-1]
+    spectrum = np.fft.fft(g) / n
+    return [float(x) for x in np.concatenate([spectrum.real, spectrum.imag])]
+
+
+# No fastmath: reassociated or contracted arithmetic could compile differently in the kernel's machine code and in
+# numba's dispatcher (tests/test_native_kernel.py holds the two to the bit)
 @jit
-def fill_chunk(key, chunk, size, taps, orders, prm, h_base, state, out_base, scratch_base):
-    """Rows r = 0 .. size of chunk `chunk` (run sample chunk * size - 1 + r) into
-    state[out_base + r * orders + o], orders 2 or 3; taps of order o, reversed (oldest noise first), at
-    prm[h_base + o * taps]."""
-    first = chunk * size - taps      # the run sample of scratch[0]: taps - 1 samples before row 0
-    for i in range(size + taps):
-        state[scratch_base + i] = normal(key, first + i + taps)
-    # the orders in one pass over the noise (read once per row, not once per order), two partial sums per order
-    # in a fixed order: independent chains the CPU overlaps, nothing reassociated
-    h0, h1, h2 = h_base, h_base + taps, h_base + 2 * taps
-    for r in range(size + 1):
-        w = scratch_base + r
-        y = out_base + r * orders
-        a0, a1, a2, b0, b1, b2 = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-        third = orders == 3      # invariant: LLVM takes the test out of the loop
-        for m in range(0, taps - 1, 2):
-            x, z = state[w + m], state[w + m + 1]
-            a0 += prm[h0 + m] * x
-            b0 += prm[h0 + m + 1] * z
-            a1 += prm[h1 + m] * x
-            b1 += prm[h1 + m + 1] * z
-            if third:
-                a2 += prm[h2 + m] * x
-                b2 += prm[h2 + m + 1] * z
-        if taps % 2:     # an odd tap count: the last tap has no partner
-            x = state[w + taps - 1]
-            a0, a1 = a0 + prm[h0 + taps - 1] * x, a1 + prm[h1 + taps - 1] * x
-            if third:
-                a2 += prm[h2 + taps - 1] * x
-        state[y] = a0 + b0
-        state[y + 1] = a1 + b1
-        if third:
-            state[y + 2] = a2 + b2
+def fft(state, re, im, n, prm, tw):
+    """In place, the DFT X_k = sum_j x_j exp(-2 pi i j k / n) of the n complex values (state[re + j],
+    state[im + j]), n a power of two (radix 2, decimation in time); twiddles at prm[tw] (`twiddles` of n or of a
+    multiple of n: the stride takes every (table's n / n)-th)."""
+    j = 0
+    for i in range(1, n):        # bit-reversed order
+        bit = n >> 1
+        while j & bit:
+            j ^= bit
+            bit >>= 1
+        j |= bit
+        if i < j:
+            state[re + i], state[re + j] = state[re + j], state[re + i]
+            state[im + i], state[im + j] = state[im + j], state[im + i]
+    for i in range(0, n, 2):     # the first pass's twiddle is 1: no multiplications
+        ar, ai, br, bi = state[re + i], state[im + i], state[re + i + 1], state[im + i + 1]
+        state[re + i], state[im + i], state[re + i + 1], state[im + i + 1] = ar + br, ai + bi, ar - br, ai - bi
+    half = n // 2
+    span = 2
+    while span < n:
+        step = half // span
+        for k in range(span):
+            c, s = prm[tw + k * step], prm[tw + half + k * step]
+            for a in range(k, n, 2 * span):
+                b = a + span
+                br, bi = state[re + b], state[im + b]
+                tr, ti = c * br + s * bi, c * bi - s * br     # times exp(-2 pi i k / (2 span))
+                ar, ai = state[re + a], state[im + a]
+                state[re + a], state[im + a] = ar + tr, ai + ti
+                state[re + b], state[im + b] = ar - tr, ai - ti
+        span *= 2
+
+
+@jit
+def fill_chunk(key, chunk, size, taps, orders, prm, spectra, tw, state, out_base, scratch_base):
+    """Rows r = 0 .. size of chunk `chunk` (run sample chunk * size - 1 + r) into state[out_base + r * orders + o],
+    orders 2 or 3; the spectrum of order o (`correlation_spectrum`, n = size + taps) at prm[spectra + 2 n o];
+    4 n slots of scratch."""
+    n = size + taps
+    xr, xi, yr, yi = scratch_base, scratch_base + n, scratch_base + 2 * n, scratch_base + 3 * n
+    for i in range(n):     # scratch i: run sample chunk * size - taps + i, taps - 1 samples before row 0
+        state[xr + i] = normal(key, chunk * size + i)
+        state[xi + i] = 0.0
+    fft(state, xr, xi, n, prm, tw)
+    for o in range(0, orders, 2):
+        # Y = X G_o + i X G_o+1 (y_o, y_o+1 real: the real and imaginary parts of Y's inverse), inverted as
+        # conj(DFT(conj(Y))) (1 / n is in the spectra): one transform routine, exact negations
+        pair = o + 1 < orders
+        g, h = spectra + 2 * n * o, spectra + 2 * n * (o + 1)
+        for k in range(n):
+            ar, ai = state[xr + k], state[xi + k]
+            pr, pi = ar * prm[g + k] - ai * prm[g + n + k], ar * prm[g + n + k] + ai * prm[g + k]
+            if pair:
+                qr, qi = ar * prm[h + k] - ai * prm[h + n + k], ar * prm[h + n + k] + ai * prm[h + k]
+                state[yr + k], state[yi + k] = pr - qi, -(pi + qr)
+            else:
+                state[yr + k], state[yi + k] = pr, -pi
+        fft(state, yr, yi, n, prm, tw)
+        for r in range(size + 1):
+            state[out_base + r * orders + o] = state[yr + r]
+            if pair:
+                state[out_base + r * orders + o + 1] = -state[yi + r]
 
 
 @jit
