@@ -405,25 +405,43 @@ def test_fft_is_numpys_dft(n):
     assert state[0] == 3.0
 
 
-@pytest.mark.parametrize("taps, orders", [(16, 2), (17, 3), (256, 3), (1000, 2)])
-def test_fill_chunk_is_the_convolution_of_the_streams_normals(taps, orders):
+def _fill(fft, key, chunk, taps, h, offset):
+    """Chunk `chunk` of the reversed taps h (orders x taps) by fill_chunk (fft) or fill_chunk_direct, its rows
+    at state[offset:], after slots and parameters the call must not touch: (state, rows per chunk)."""
+    from imu_emulator.numerics.shaped_noise import correlation_spectrum, fft_size, fill_chunk, fill_chunk_direct
+    from imu_emulator.numerics.shaped_noise import twiddles
+    orders = h.shape[0]
+    if fft:
+        n = fft_size(taps)
+        size, tw = n - taps, twiddles(n)
+        prm = np.array([7.0] + tw + [x for o in range(orders) for x in correlation_spectrum(h[o], n)])
+        state = np.zeros(offset + (size + 1) * orders + 4 * n)
+        fill_chunk(np.uint64(key), chunk, size, taps, orders, prm, 1 + len(tw), 1, state, offset,
+                   offset + (size + 1) * orders)
+    else:
+        size = 32
+        prm = np.concatenate([[7.0], h.ravel()])
+        state = np.zeros(offset + (size + 1) * orders + size + taps)
+        fill_chunk_direct(np.uint64(key), chunk, size, taps, orders, prm, 1, state, offset,
+                          offset + (size + 1) * orders)
+    return state, size
+
+
+@pytest.mark.parametrize("fft, taps, orders", [(False, 16, 2), (False, 17, 3), (False, 40, 3), (True, 16, 2),
+                                               (True, 17, 3), (True, 256, 3), (True, 1000, 2)])
+def test_fill_chunk_is_the_convolution_of_the_streams_normals(fft, taps, orders):
     # Row r of chunk c is sample c * size - 1 + r of sum_i h_o[i] w[j - i], w_j = normal(key, j + taps): numpy's
-    # direct convolution of counter_rng.normals as the oracle (even and odd tap counts, 2 and 3 orders: one
-    # inverse transform carries two orders, the third one alone). fill_chunk convolves by FFT, whose round-off is
-    # about eps log2 n of the output's scale (test above): 1e-13 of the largest row.
+    # direct convolution of counter_rng.normals as the oracle (even and odd tap counts, 2 and 3 orders: the FFT's
+    # inverse transform carries two orders, the third one alone). The direct form's round-off is eps times the
+    # sum of |h w| (about sqrt(taps) times a row); the FFT's about eps log2 n of the rows' scale (test above):
+    # 1e-13 of the largest row bounds both.
     from imu_emulator.numerics.counter_rng import normals
-    from imu_emulator.numerics.shaped_noise import correlation_spectrum, fft_size, fill_chunk, twiddles
-    n = fft_size(taps)
-    size, chunk, key = n - taps, 3, 987654321
+    chunk, key = 3, 987654321
     h = np.random.default_rng(1).normal(size=(orders, taps))
-    tw = twiddles(n)
-    # an unrelated parameter, the twiddles, the spectra of the reversed taps
-    prm = np.array([7.0] + tw + [x for o in range(orders) for x in correlation_spectrum(h[o, ::-1], n)])
-    state = np.zeros(5 + (size + 1) * orders + 4 * n)
-    fill_chunk(np.uint64(key), chunk, size, taps, orders, prm, 1 + len(tw), 1, state, 5, 5 + (size + 1) * orders)
+    state, size = _fill(fft, key, chunk, taps, h[:, ::-1], 5)
     first = chunk * size - 1                                 # the run sample of row 0
     w = normals(key, first - taps + 1 + taps, size + taps)   # w_j for j = first - taps + 1 .. first + size
-    assert not state[:5].any()                               # nothing written before out_base
+    assert not state[:5].any()                               # nothing written before the rows
     for o in range(orders):
         want = np.convolve(w, h[o], mode="valid")             # samples first .. first + size
         np.testing.assert_allclose(state[5 + o: 5 + (size + 1) * orders: orders], want, rtol=0,

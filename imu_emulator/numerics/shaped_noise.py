@@ -6,7 +6,8 @@ quantity and its integrals, one FIR of `taps` taps each) from the counter-based 
 every row is a pure function of (key, run sample), so the chunk a block lands in, and the block sizes, never
 change a value. It convolves by FFT (overlap-save): the chunk's n = size + taps normals transformed once, times
 each filter's spectrum, transformed back two orders at a time (the real and imaginary parts of one transform),
-about 3 n log2 n butterflies per chunk in place of orders x taps multiply-adds per row. The kernel calls it when a
+about 3 n / 2 log2 n butterflies per chunk in place of orders x taps multiply-adds per row (`fill_chunk_direct`,
+the direct form, is cheaper for short filters and fills the same rows to rounding). The kernel calls it when a
 sample's chunk differs from the one cached in its state; nothing is allocated (the transforms' scratch is state
 too, spectra and twiddles are parameters), so the kernel runs without numba's runtime.
 """
@@ -48,8 +49,8 @@ def correlation_spectrum(taps_reversed, n: int) -> list[float]:
     return [float(x) for x in np.concatenate([spectrum.real, spectrum.imag])]
 
 
-# No fastmath: reassociated or contracted arithmetic could compile differently in the kernel's machine code and in
-# numba's dispatcher (tests/test_native_kernel.py holds the two to the bit)
+# No fastmath (here and below): reassociated or contracted arithmetic could compile differently in the kernel's
+# machine code and in numba's dispatcher (tests/test_native_kernel.py holds the two to the bit)
 @jit
 def fft(state, re, im, n, prm, tw):
     """In place, the DFT X_k = sum_j x_j exp(-2 pi i j k / n) of the n complex values (state[re + j],
@@ -113,6 +114,41 @@ def fill_chunk(key, chunk, size, taps, orders, prm, spectra, tw, state, out_base
             state[out_base + r * orders + o] = state[yr + r]
             if pair:
                 state[out_base + r * orders + o + 1] = -state[yi + r]
+
+
+@jit
+def fill_chunk_direct(key, chunk, size, taps, orders, prm, h_base, state, out_base, scratch_base):
+    """`fill_chunk` by the direct-form FIR, cheaper for short filters (vibration.DIRECT_TAPS): taps of order o,
+    reversed (oldest noise first), at prm[h_base + o * taps]; size + taps slots of scratch."""
+    first = chunk * size - taps      # the run sample of scratch[0]: taps - 1 samples before row 0
+    for i in range(size + taps):
+        state[scratch_base + i] = normal(key, first + i + taps)
+    # the orders in one pass over the noise (read once per row, not once per order), two partial sums per order
+    # in a fixed order: independent chains the CPU overlaps, nothing reassociated
+    h0, h1, h2 = h_base, h_base + taps, h_base + 2 * taps
+    for r in range(size + 1):
+        w = scratch_base + r
+        y = out_base + r * orders
+        a0, a1, a2, b0, b1, b2 = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+        third = orders == 3      # invariant: LLVM takes the test out of the loop
+        for m in range(0, taps - 1, 2):
+            x, z = state[w + m], state[w + m + 1]
+            a0 += prm[h0 + m] * x
+            b0 += prm[h0 + m + 1] * z
+            a1 += prm[h1 + m] * x
+            b1 += prm[h1 + m + 1] * z
+            if third:
+                a2 += prm[h2 + m] * x
+                b2 += prm[h2 + m + 1] * z
+        if taps % 2:     # an odd tap count: the last tap has no partner
+            x = state[w + taps - 1]
+            a0, a1 = a0 + prm[h0 + taps - 1] * x, a1 + prm[h1 + taps - 1] * x
+            if third:
+                a2 += prm[h2 + taps - 1] * x
+        state[y] = a0 + b0
+        state[y + 1] = a1 + b1
+        if third:
+            state[y + 2] = a2 + b2
 
 
 @jit
