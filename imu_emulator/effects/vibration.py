@@ -185,10 +185,10 @@ def _filtered_noise(ctx, psd, taps: int, linear_vars, angular_vars) -> list[str]
 
 STATES = {0: "noise", 1: "angular_noise"}
 #: psd_lines up to this: the direct-form FIR (chunks of CHUNK rows); above, FFT convolution. The direct form's
-#: cost grows with the taps, the FFT's barely up to 512 (one 1024-point transform): the two meet near 64
-#: (tools/bench_vibration.py --lines, 3 axes at 1 kHz, the PSD's own CPU ns per sample: direct 141 at 64 taps,
-#: 262 at 128, 531 at 256; FFT 133 at 128, 162 at 256)
-DIRECT_TAPS = 64
+#: cost grows with the taps, the FFT's barely up to 512 (one 1024-point transform): they meet near 38
+#: (tools/bench_vibration.py --lines, 3 axes at 1 kHz, the PSD's own CPU ns per sample, 2026-12-02: direct 77 at
+#: 32 taps, 105 at 48, 146 at 64, 499 at 256; FFT 88 at 32 to 64, 135 at 256)
+DIRECT_TAPS = 40
 CHUNK = 256
 
 
@@ -336,4 +336,4 @@ EFFECT = Effect(
             Param("angular_psd_axes", "imu.vibration", "1", "angular PSD weight per body axis (0: none)",
                   default=1.0),
             Param("psd_lines", "imu.vibration", "1", "taps of the FIR filter shaping each PSD's noise (its "
-                  "frequency resolution: rate_hz / psd_lines)", shape="scalar", default=256.0, example=64.0)))
+                  "frequency resolution: rate_hz / psd_lines)", shape="scalar", default=256.0, example=32.0)))
