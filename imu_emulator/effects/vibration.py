@@ -31,7 +31,7 @@ the IMU's axes really turn. (--truth roll, pitch, yaw stay the body's, like its 
   each three transforms (linear; angular: two) of n / 2 log2 n butterflies and n normals; up to DIRECT_TAPS in
   direct form, cheaper for short filters: chunks of 256 samples, orders x psd_lines multiply-adds and at most two
   normals per sample and axis. No sin/cos either way (tools/bench_vibration.py: 3 axes x 256 lines at 1 kHz,
-  the FFT costs a third of the direct form).
+  the FFT costs a quarter to a third of the direct form).
   Between samples (the quadrature nodes of the integrated outputs) the motion is the quintic through
   (d, d', d'') at the samples s - 1 and s, its derivatives with it (cubic through (angle, rate) for angular):
   the increments integrate that interpolant exactly, continuous with the samples. The clock effect's offset does
