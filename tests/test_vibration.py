@@ -174,6 +174,26 @@ def test_random_vibration_same_bytes_for_any_block_size_and_new_phases_for_anoth
     assert np.abs(np.corrcoef(whole[0, :, 0], again[0, :, 0])[0, 1]) < 5 / math.sqrt(3000)
 
 
+def test_fft_filtered_vibration_is_drawn_on_the_parts_axes_to_the_bit():
+    # At rest without gravity the IMU reads the vibration alone. An ENU scene's body axes are the part's forward-
+    # right-down axes turned half a turn about x (EmitContext.frd_sign): its y and z samples are the NED scene's
+    # negated, to the last bit, x the same, over chunk boundaries (psd_lines 256: the FFT filler, 768 rows a chunk;
+    # tests/test_axes_at_the_wire.py holds the direct form, at 16 lines, to the same).
+    def at_rest(frame):
+        return Simulation(scene_from_dict({
+            "scene": {"rate_hz": 1000, "duration_s": 2.0, "seed": 5, "frame": frame},
+            "trajectory": {"x": "0", "y": "0", "z": "0"},
+            "imu": [{"name": "imu0", "vibration": {"psd": [["20 Hz", "0.01 g^2/Hz"], ["300 Hz", "0.01 g^2/Hz"]],
+                                                   "angular_psd": [[20, 1e-4], [200, 1e-4]]}}],
+            "effects": {"vibration": True}}), attitude=False).run()
+    enu, ned = at_rest("ENU"), at_rest("NED")
+    for name in ("accel", "gyro"):
+        a, b = getattr(enu, name)[0], getattr(ned, name)[0]
+        assert (b.std(axis=0) > 0).all()      # every axis vibrates: nothing trivially equal
+        assert a[:, 0].tobytes() == b[:, 0].tobytes()
+        assert a[:, 1:].tobytes() == (-b[:, 1:]).tobytes()
+
+
 def _raw(s, seed):
     """The random_vibration scene's dict with another seed."""
     return {"scene": {"rate_hz": RATE, "duration_s": SECONDS, "seed": seed},
@@ -390,20 +410,59 @@ def test_hermite_interpolants_reproduce_polynomials_of_their_degree():
             np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12)
 
 
-@pytest.mark.parametrize("taps, orders", [(16, 2), (17, 3), (40, 3)])
-def test_fill_chunk_is_the_convolution_of_the_streams_normals(taps, orders):
+@pytest.mark.parametrize("n", [2, 4, 64, 1024])
+def test_fft_is_numpys_dft(n):
+    # The in-place radix-2 transform against numpy.fft.fft on random complex input; round-off of a radix-2 FFT
+    # grows as eps log2 n times the input's RMS per output (Higham, Accuracy and Stability, sec. 24.1), so 1e-14
+    # of the largest output bounds it with room for n up to 2^20
+    from imu_emulator.numerics.shaped_noise import fft, twiddles
+    x = np.random.default_rng(n).normal(size=(2, n))
+    state = np.concatenate([[3.0], x[0], x[1]])          # after an unrelated slot
+    prm = np.array([5.0] + twiddles(n))
+    fft(state, 1, 1 + n, n, prm, 1)
+    want = np.fft.fft(x[0] + 1j * x[1])
+    np.testing.assert_allclose(state[1:1 + n] + 1j * state[1 + n:], want, rtol=0, atol=1e-14 * np.abs(want).max())
+    assert state[0] == 3.0
+
+
+def _fill(fft, key, chunk, taps, h, offset):
+    """Chunk `chunk` of the reversed taps h (orders x taps) by fill_chunk (fft) or fill_chunk_direct, its rows
+    at state[offset:], after slots and parameters the call must not touch: (state, rows per chunk)."""
+    from imu_emulator.numerics.shaped_noise import correlation_spectrum, fft_size, fill_chunk, fill_chunk_direct
+    from imu_emulator.numerics.shaped_noise import twiddles
+    orders = h.shape[0]
+    if fft:
+        n = fft_size(taps)
+        size, tw = n - taps, twiddles(n)
+        prm = np.array([7.0] + tw + [x for o in range(orders) for x in correlation_spectrum(h[o], n)])
+        state = np.zeros(offset + (size + 1) * orders + 4 * n)
+        fill_chunk(np.uint64(key), chunk, size, taps, orders, prm, 1 + len(tw), 1, state, offset,
+                   offset + (size + 1) * orders)
+    else:
+        size = 32
+        prm = np.concatenate([[7.0], h.ravel()])
+        state = np.zeros(offset + (size + 1) * orders + size + taps)
+        fill_chunk_direct(np.uint64(key), chunk, size, taps, orders, prm, 1, state, offset,
+                          offset + (size + 1) * orders)
+    return state, size
+
+
+@pytest.mark.parametrize("fft, taps, orders", [(False, 16, 2), (False, 17, 3), (False, 40, 3), (True, 16, 2),
+                                               (True, 17, 3), (True, 256, 3), (True, 1000, 2)])
+def test_fill_chunk_is_the_convolution_of_the_streams_normals(fft, taps, orders):
     # Row r of chunk c is sample c * size - 1 + r of sum_i h_o[i] w[j - i], w_j = normal(key, j + taps): numpy's
-    # convolution of counter_rng.normals as the oracle (even and odd tap counts, 2 and 3 orders).
+    # direct convolution of counter_rng.normals as the oracle (even and odd tap counts, 2 and 3 orders: the FFT's
+    # inverse transform carries two orders, the third one alone). The direct form's round-off is eps times the
+    # sum of |h w| (about sqrt(taps) times a row); the FFT's about eps log2 n of the rows' scale (test above):
+    # 1e-13 of the largest row bounds both.
     from imu_emulator.numerics.counter_rng import normals
-    from imu_emulator.numerics.shaped_noise import fill_chunk
-    size, chunk, key = 32, 3, 987654321
-    rng = np.random.default_rng(1)
-    h = rng.normal(size=(orders, taps))
-    prm = np.concatenate([[7.0], h[:, ::-1].ravel()])       # reversed taps, after an unrelated parameter
-    state = np.zeros(5 + (size + 1) * orders + size + taps)
-    fill_chunk(np.uint64(key), chunk, size, taps, orders, prm, 1, state, 5, 5 + (size + 1) * orders)
+    chunk, key = 3, 987654321
+    h = np.random.default_rng(1).normal(size=(orders, taps))
+    state, size = _fill(fft, key, chunk, taps, h[:, ::-1], 5)
     first = chunk * size - 1                                 # the run sample of row 0
     w = normals(key, first - taps + 1 + taps, size + taps)   # w_j for j = first - taps + 1 .. first + size
+    assert not state[:5].any()                               # nothing written before the rows
     for o in range(orders):
         want = np.convolve(w, h[o], mode="valid")             # samples first .. first + size
-        np.testing.assert_allclose(state[5 + o: 5 + (size + 1) * orders: orders], want, rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(state[5 + o: 5 + (size + 1) * orders: orders], want, rtol=0,
+                                   atol=1e-13 * np.abs(want).max())

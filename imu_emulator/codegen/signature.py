@@ -13,7 +13,7 @@ RUNTIME_IMPORTS = {
     "imu_emulator.numerics.phase": ("sincos_cycles",),
     "imu_emulator.geo.rotations": ("matrix_to_quat_scalar", "quat_multiply_scalar"),
     "imu_emulator.numerics.counter_rng": ("normal",),
-    "imu_emulator.numerics.shaped_noise": ("fill_chunk", "hermite5", "hermite3"),
+    "imu_emulator.numerics.shaped_noise": ("fill_chunk", "fill_chunk_direct", "hermite5", "hermite3"),
 }
 #: The kernel's arguments (then imu_emulator.codegen.increments.ARGS when it integrates); `arguments` lays them out.
 ARGS = ("k0", "n", "s0", "mot", "att", "hold", "keys", "state", "prm", "out_acc", "out_gyro", "out_quat",

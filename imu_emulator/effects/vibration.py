@@ -24,11 +24,14 @@ the IMU's axes really turn. (--truth roll, pitch, yaw stay the body's, like its 
   frequency grid, smoothed between its points by the window (resolution fs / psd_lines), which is what d'' has
   too; they enter the lever-arm terms above unchanged (for a vibration of tens of Hz and more they are small
   beside d''). The table's resolution is the filter's: breakpoints closer than 2 fs / psd_lines are blurred.
-  Rows are computed a chunk at a time (max(256, psd_lines) samples, one direct-form FIR pass:
-  imu_emulator.numerics.shaped_noise) into the IMU's state, a cache of a pure function of (seed, run sample):
-  the same bytes for any block size, and the table's levels are run-time numbers (the taps are parameters,
-  only their count is structure). Cost per axis and sample: orders x psd_lines multiply-adds and at most two
-  normals, no sin/cos (tools/bench_vibration.py).
+  Rows are computed a chunk at a time into the IMU's state, a cache of a pure function of (seed, run sample): the
+  same bytes for any block size, and the table's levels are run-time numbers (the filters' coefficients are
+  parameters, only their count is structure). Above DIRECT_TAPS lines the FIRs run by FFT (overlap-save,
+  imu_emulator.numerics.shaped_noise): chunks of n - psd_lines samples, n = fft_size(psd_lines) >= 2 psd_lines,
+  each three transforms (linear; angular: two) of n / 2 log2 n butterflies and n normals; up to DIRECT_TAPS in
+  direct form, cheaper for short filters: chunks of 256 samples, orders x psd_lines multiply-adds and at most two
+  normals per sample and axis. No sin/cos either way (tools/bench_vibration.py: 3 axes x 256 lines at 1 kHz,
+  the FFT costs a quarter to a third of the direct form).
   Between samples (the quadrature nodes of the integrated outputs) the motion is the quintic through
   (d, d', d'') at the samples s - 1 and s, its derivatives with it (cubic through (angle, rate) for angular):
   the increments integrate that interpolant exactly, continuous with the samples. The clock effect's offset does
@@ -62,11 +65,6 @@ def psd_level(table, f: float) -> float:
         if f <= f1:
             return s0 * (f / f0) ** (math.log(s1 / s0) / math.log(f1 / f0))
     return table[-1][1]
-
-
-#: samples per chunk of filtered noise at least (the chunk is max(CHUNK, taps): a chunk draws size + taps - 1
-#: normals, so at most two per sample)
-CHUNK = 256
 
 
 def folded_level(table, f: float, rate_hz: float) -> float:
@@ -146,7 +144,7 @@ def _filtered_noise(ctx, psd, taps: int, linear_vars, angular_vars) -> list[str]
     """Lines adding each PSD axis's filtered noise (linear: a, v, d; angular: rate, angle) at this instant: the
     sample's rows of its chunk, or between the run samples s - 1 and s (the increments' quadrature nodes) the
     Hermite interpolant of those two rows."""
-    size = max(CHUNK, taps)
+    size, coefficients, fill = _chunk_filler(ctx, taps)
     u, row, chunk = ctx.var("u"), ctx.var("row"), ctx.var("chunk")
     # where this instant sits between the samples s - 1 (u = 0) and s (u = 1): the quadrature's nodes lie inside,
     # the sample itself at 1 (to rounding, which the clamp and the exact branch below take out)
@@ -159,13 +157,14 @@ def _filtered_noise(ctx, psd, taps: int, linear_vars, angular_vars) -> list[str]
         for axis, weight in per_axis.items():
             a = AXES[axis]
             # drawn on the part's forward-right-down axis: the sign into the scene's body axes
-            # (EmitContext.frd_sign) rides on the taps, so an ENU and a NED scene vibrate alike
-            h = ctx.constant(f"H{kind}{a}", [ctx.frd_sign(axis) * x for order in shaping_taps(
+            # (EmitContext.frd_sign) rides on the filters' coefficients, an exact negation through every product
+            # and sum, so an ENU and a NED scene vibrate alike to the bit
+            sign = ctx.frd_sign(axis)
+            h = ctx.constant(f"H{kind}{a}", [sign * x for order in shaping_taps(
                 ctx.value(f"imu.vibration.{('psd', 'angular_psd')[kind]}"), taps, ctx.scene.rate_hz, weight,
-                orders) for x in order])
-            block = ctx.state_block(STATES[kind], [lambda draw: -1.0] + [lambda draw: 0.0] * (
-                (size + 1) * orders + size + taps))
-            cached, out, scratch = block, block + 1, block + 1 + (size + 1) * orders
+                orders) for x in coefficients(order)])
+            block = ctx.state_block(STATES[kind], [lambda draw: -1.0] + [lambda draw: 0.0] * ((size + 1) * orders))
+            cached, out = block, block + 1
             key = ctx.stream_key(f"{STATES[kind]}.{a}")
             here = [f"state[{out} + {row} * {orders} + {o}]" for o in range(orders)]
             before = [f"state[{out} + ({row} - 1) * {orders} + {o}]" for o in range(orders)]
@@ -174,7 +173,7 @@ def _filtered_noise(ctx, psd, taps: int, linear_vars, angular_vars) -> list[str]
             hermite = "hermite5" if orders == 3 else "hermite3"
             args = ", ".join(x for pair in (before[::-1], here[::-1]) for x in pair)
             lines += [f"if state[{cached}] != {chunk}:",   # a chunk not cached yet: compute it
-                      f"    fill_chunk({key}, {chunk}, {size}, {taps}, {orders}, prm, {h}, state, {out}, {scratch})",
+                      f"    {fill(key, chunk, orders, h, out)}",
                       f"    state[{cached}] = {chunk}",
                       f"if {u} > {1.0 - 1e-6!r}:",   # the sample (nodes stay below 1 - 5e-3)
                       *[f"    {g} = {x}" for g, x in zip(got, here)],
@@ -185,6 +184,29 @@ def _filtered_noise(ctx, psd, taps: int, linear_vars, angular_vars) -> list[str]
 
 
 STATES = {0: "noise", 1: "angular_noise"}
+#: psd_lines up to this: the direct-form FIR (chunks of CHUNK rows); above, FFT convolution. The direct form's
+#: cost grows with the taps, the FFT's barely up to 512 (one 1024-point transform): they meet near 38
+#: (tools/bench_vibration.py --lines, 3 axes at 1 kHz, the PSD's own CPU ns per sample, 2026-12-02: direct 77 at
+#: 32 taps, 105 at 48, 146 at 64, 499 at 256; FFT 88 at 32 to 64, 135 at 256)
+DIRECT_TAPS = 40
+CHUNK = 256
+
+
+def _chunk_filler(ctx, taps: int):
+    """How this IMU's chunks of filtered noise are filled (imu_emulator.numerics.shaped_noise): (rows per chunk,
+    the parameters standing for one order's reversed taps, the call's source from (key, chunk, orders, parameters'
+    base, rows' base)). The scratch is dead between calls: one block serves every axis."""
+    from imu_emulator.numerics.shaped_noise import correlation_spectrum, fft_size, twiddles
+    if taps <= DIRECT_TAPS:
+        scratch = ctx.state_block("scratch", [lambda draw: 0.0] * (CHUNK + taps))
+        return CHUNK, list, lambda key, chunk, orders, h, out: (
+            f"fill_chunk_direct({key}, {chunk}, {CHUNK}, {taps}, {orders}, prm, {h}, state, {out}, {scratch})")
+    n = fft_size(taps)
+    size = n - taps      # rows per chunk: the transform's length less the filter's reach
+    tw = ctx.constant("TW", twiddles(n))
+    scratch = ctx.state_block("scratch", [lambda draw: 0.0] * (4 * n))
+    return size, lambda order: correlation_spectrum(order, n), lambda key, chunk, orders, h, out: (
+        f"fill_chunk({key}, {chunk}, {size}, {taps}, {orders}, prm, {h}, {tw}, state, {out}, {scratch})")
 
 
 def _psd_axes(ctx, key: str) -> dict[int, float]:
@@ -299,7 +321,7 @@ EFFECT = Effect(
     name="vibration",
     description="vibration as motion of the IMU: sinusoidal lines (linear or angular) and random PSDs",
     stage=Stage.BODY, order=50, emit=emit, validate=validate, warn=warn, random=True,
-    state=("noise", "angular_noise"), cached_state=True,
+    state=("noise", "angular_noise", "scratch"), cached_state=True,
     params=(Param("sines", "imu.vibration", "m/s^2|rad/s", "sinusoidal lines: [{axis, amplitude, frequency, "
                   "phase}], amplitude as the sensor sees it (acceleration, or kind = \"angular\": rate)",
                   shape="sines", default=(), datasheet="`[{axis = \"x\", amplitude = \"2 g\", frequency = "
@@ -314,4 +336,4 @@ EFFECT = Effect(
             Param("angular_psd_axes", "imu.vibration", "1", "angular PSD weight per body axis (0: none)",
                   default=1.0),
             Param("psd_lines", "imu.vibration", "1", "taps of the FIR filter shaping each PSD's noise (its "
-                  "frequency resolution: rate_hz / psd_lines)", shape="scalar", default=256.0, example=64.0)))
+                  "frequency resolution: rate_hz / psd_lines)", shape="scalar", default=256.0, example=32.0)))
