@@ -104,7 +104,7 @@ def _ziggurat_draw(key: int, counter: int) -> tuple[float, bool]:
 
 
 def test_counter_normals_match_the_ziggurat_written_out():
-    # the compiled draw (its fast path inlined, its rare branch marked unlikely for LLVM) against the algorithm
+    # the compiled draw against the algorithm
     # in plain Python, bit for bit, over enough draws that the wedge, the tail and the redraws all occur
     key, n = stream_key(7, 0, "test"), 40_000
     reference = [_ziggurat_draw(key, c) for c in range(n)]
@@ -114,7 +114,7 @@ def test_counter_normals_match_the_ziggurat_written_out():
 
 
 def test_kernel_noise_is_the_streams_normals():
-    # the generated kernel's per-sample draws (inlined there) are the normals() of the noise streams
+    # the generated kernel's per-sample draws are the normals() of the noise streams
     gyro, accel, _ = errors(static_scene(1000, 20.0, ["noise"], {"noise_density": 0.01}, {"noise_density": 0.002}))
     for err, sensor in ((gyro[0], "gyro"), (accel[0], "accel")):
         for axis, name in enumerate("xyz"):

@@ -17,7 +17,7 @@ from __future__ import annotations
 import hashlib
 import math
 
-from imu_emulator.native.lazy import intrinsic, jit
+from imu_emulator.native.lazy import jit
 import numpy as np
 
 _GAMMA = np.uint64(0x9E3779B97F4A7C15)
@@ -102,26 +102,7 @@ def _slow_path(z, idx, rabs, x):
             return x
 
 
-@intrinsic
-def _likely(typingctx, cond):
-    """`cond`, marked as almost always true for LLVM (llvm.expect.i1); the value is unchanged.
-
-    The ziggurat's rectangle test passes in 98.5 % of draws. Known as such, LLVM keeps the rare branch (a
-    call to _slow_path) out of the way: with normal() inlined, the kernel's draws are straight code and its
-    per-sample values are not saved to the stack around a call at each one."""
-    from llvmlite import ir
-    from numba.core import cgutils, types
-
-    def codegen(context, builder, signature, args):
-        bit = ir.IntType(1)
-        expect = cgutils.get_or_insert_function(builder.module, ir.FunctionType(bit, [bit, bit]), "llvm.expect.i1")
-        return builder.call(expect, [args[0], ir.Constant(bit, 1)])
-    return types.boolean(types.boolean), codegen
-
-
-# inlined where a kernel calls it (numba's IR inliner): the fast path becomes straight code in the sample loop,
-# the slow path stays one call
-@jit(inline="always")
+@jit
 def normal(key, counter):
     """The standard normal number `counter` of stream `key` (both uint64-compatible integers)."""
     z = key + (np.uint64(counter) + _ONE) * _GAMMA
@@ -133,7 +114,7 @@ def normal(key, counter):
     x = float(rabs) * WI[idx]
     if sign:
         x = -x
-    if _likely(rabs < KI[idx]):
+    if rabs < KI[idx]:
         return x
     return _slow_path(z, idx, rabs, x)
 
