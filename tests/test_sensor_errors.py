@@ -104,8 +104,7 @@ def _ziggurat_draw(key: int, counter: int) -> tuple[float, bool]:
 
 
 def test_counter_normals_match_the_ziggurat_written_out():
-    # the compiled draw against the algorithm
-    # in plain Python, bit for bit, over enough draws that the wedge, the tail and the redraws all occur
+    # the compiled draw against the algorithm in plain Python, bit for bit, over enough draws that the wedge, the tail and the redraws all occur
     key, n = stream_key(7, 0, "test"), 40_000
     reference = [_ziggurat_draw(key, c) for c in range(n)]
     np.testing.assert_array_equal(normals(np.uint64(key), 0, n), [x for x, _ in reference])
