@@ -52,6 +52,77 @@ def test_counter_normals_are_a_pure_function_of_key_and_counter():
     np.testing.assert_array_equal(np.concatenate([normals(key, k, 7) for k in range(0, 1001, 7)])[:1000], whole)
 
 
+
+def test_counter_hash_is_splitmix64():
+    # Rosetta Code, "Pseudo-random numbers/Splitmix64": the first five outputs for seed 1234567. Output i of
+    # SplitMix64 is the mix of seed + i * gamma, which is normal()'s hash of counter i - 1 under key = seed.
+    from imu_emulator.numerics.counter_rng import _GAMMA, mix64
+    published = [6457827717110365317, 3203168211198807973, 9817491932198370423, 4593380528125082431,
+                 16408922859458223821]
+    assert [int(mix64(np.uint64((1234567 + i * int(_GAMMA)) % 2 ** 64))) for i in range(1, 6)] == published
+
+
+def _ziggurat_draw(key: int, counter: int) -> tuple[float, bool]:
+    """normal(key, counter) written out in Python integers from counter_rng's description (Marsaglia & Tsang's
+    ziggurat on SplitMix64 bits; the tables are the module's), and whether it left the fast path."""
+    from imu_emulator.numerics import counter_rng as rng
+    mask, gamma, extra = 2 ** 64 - 1, int(rng._GAMMA), int(rng._EXTRA)
+
+    def mix(z):
+        z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & mask
+        z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & mask
+        return z ^ (z >> 31)
+
+    def unit(i):
+        return (mix((z + i * extra) & mask) >> 11) / 2.0 ** 53
+
+    def layer(r):
+        idx, r = r & 0xFF, r >> 8
+        rabs = (r >> 1) & (2 ** 52 - 1)
+        x = float(rabs) * float(rng.WI[idx])
+        return idx, rabs, -x if r & 1 else x
+
+    z = (key + (counter + 1) * gamma) & mask
+    idx, rabs, x = layer(mix(z))
+    i = 1
+    if rabs < int(rng.KI[idx]):
+        return x, False
+    while True:
+        if idx == 0:
+            while True:
+                xx = -math.log1p(-unit(i)) / rng._R
+                yy = -math.log1p(-unit(i + 1))
+                i += 2
+                if yy + yy > xx * xx:
+                    return (-(rng._R + xx) if (rabs >> 8) & 1 else rng._R + xx), True
+        if (rng.FI[idx - 1] - rng.FI[idx]) * unit(i) + rng.FI[idx] < math.exp(-0.5 * x * x):
+            return x, True
+        idx, rabs, x = layer(mix((z + (i + 1) * extra) & mask))
+        i += 2
+        if rabs < int(rng.KI[idx]):
+            return x, True
+
+
+def test_counter_normals_match_the_ziggurat_written_out():
+    # the compiled draw against the algorithm in plain Python, bit for bit, over enough draws that the wedge, the tail and the redraws all occur
+    key, n = stream_key(7, 0, "test"), 40_000
+    reference = [_ziggurat_draw(key, c) for c in range(n)]
+    np.testing.assert_array_equal(normals(np.uint64(key), 0, n), [x for x, _ in reference])
+    slow = [x for x, rare in reference if rare]
+    assert len(slow) > 100 and any(abs(x) > 3.6541528853610088 for x in slow)
+
+
+def test_kernel_noise_is_the_streams_normals():
+    # the generated kernel's per-sample draws are the normals() of the noise streams
+    gyro, accel, _ = errors(static_scene(1000, 20.0, ["noise"], {"noise_density": 0.01}, {"noise_density": 0.002}))
+    for err, sensor in ((gyro[0], "gyro"), (accel[0], "accel")):
+        for axis, name in enumerate("xyz"):
+            x = normals(np.uint64(stream_key(1, 0, f"noise.{sensor}.{name}")), 0, err.shape[0])
+            # one scale per axis (density times sqrt(rate)); the error is scale * x up to the rounding of the
+            # product and of g's subtraction (an ulp of g, 2e-15 m/s^2), where a wrong draw is off by ~0.01
+            scale = np.median(err[:, axis] / x)
+            np.testing.assert_allclose(err[:, axis], scale * x, rtol=1e-12, atol=1e-13)
+
 # --- exact discrete statistics (fast) --------------------------------------------------------------
 
 @pytest.mark.parametrize("seed", SEEDS)
