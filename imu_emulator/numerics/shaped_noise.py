@@ -14,7 +14,7 @@ from imu_emulator.numerics.counter_rng import normal
 
 
 # No fastmath: reassociated sums would vectorize, but differently in the kernel's machine code and in numba's
-# dispatcher (tests/test_native_kernel.py holds the two to the bit)
+# dispatcher (tests/runtime/test_native_kernel.py holds the two to the bit)
 @jit
 def fill_chunk(key, chunk, size, taps, orders, prm, h_base, state, out_base, scratch_base):
     """Rows r = 0 .. size of chunk `chunk` (run sample chunk * size - 1 + r) into
