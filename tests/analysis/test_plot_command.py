@@ -15,10 +15,6 @@ EXAMPLES = sorted((ROOT / "examples").glob("*.toml"))
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
-@pytest.fixture(autouse=True)
-def cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
-
 
 def _assert_png(path: Path):
     data = path.read_bytes()

@@ -94,7 +94,6 @@ def test_readme_example_reads_plus_g_on_z(tmp_path, monkeypatch):
     """The README's batch example, one realization in this process: imu1 is upside down (roll 180 deg) in a NED
     scene, so its z axis points up and reads +g on average (level circle: the horizontal centripetal 7.9 m/s^2
     leaks into z by at most sin of the perturbation's few tenths of a degree); imu0 reads -g."""
-    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
     out = tmp_path / "mc"
     assert main(["batch", str(TWO_IMUS), "--runs", "1", "--seed", "7", "-o", str(out), "--workers", "0", "--quiet",
                  "--vary", "imu0.gyro.bias_instability=uniform(1,5) deg/h",

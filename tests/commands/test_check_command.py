@@ -30,14 +30,8 @@ lever_arm = true
 """
 
 
-@pytest.fixture
-def cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
-    return tmp_path
-
-
 @pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.name)
-def test_check_every_example(path, capsys, cache):
+def test_check_every_example(path, capsys):
     assert main(["check", str(path)]) == 0
     out = capsys.readouterr().out
     assert out.startswith(f"scene {path}: valid")
@@ -50,7 +44,7 @@ def test_check_every_example(path, capsys, cache):
     assert out.count("  stream  ") == len(raw.get("stream", []))
 
 
-def test_check_describes_what_generate_then_does(tmp_path, capsys, cache):
+def test_check_describes_what_generate_then_does(tmp_path, capsys, fresh_cache):
     """Sample count = duration x rate; the NPZ size estimate matches the file `generate` writes (its arrays' bytes
     plus at most run_size.NPZ_ARRAY_OVERHEAD per array); the CSV bound is above the real CSV; the kernel is
     reported compiled after `generate` compiled it, and not before."""
@@ -75,7 +69,7 @@ def test_check_describes_what_generate_then_does(tmp_path, capsys, cache):
     assert os.path.getsize(tmp_path / "o.csv") <= sizes["CSV bound"]
 
 
-def test_check_reports_each_streams_link_budget(tmp_path, capsys, cache):
+def test_check_reports_each_streams_link_budget(tmp_path, capsys):
     # mavlink-highres is 75 bytes per sample (MAVLink 2 header 10 + payload 63 + CRC 2): at 100 Hz 7,500 B/s
     # against 115200 baud / 10 = 11,520 B/s is 65 %.
     scene = tmp_path / "s.toml"
@@ -99,7 +93,7 @@ BAD = [
 
 
 @pytest.mark.parametrize("text, message", BAD)
-def test_check_bad_scene_is_one_error_line_exit_2(text, message, tmp_path, capsys, cache):
+def test_check_bad_scene_is_one_error_line_exit_2(text, message, tmp_path, capsys):
     scene = tmp_path / "bad.toml"
     scene.write_text(text)
     assert main(["check", str(scene)]) == 2
@@ -107,12 +101,12 @@ def test_check_bad_scene_is_one_error_line_exit_2(text, message, tmp_path, capsy
     assert err.startswith("error: ") and err.count("\n") == 1 and message in err
 
 
-def test_check_missing_file(capsys, cache):
+def test_check_missing_file(capsys):
     assert main(["check", "/nonexistent/scene.toml"]) == 2
     assert "cannot read scene file" in capsys.readouterr().err
 
 
-def test_check_lists_each_effects_nonzero_parameters_in_si_one_a_line(capsys, cache):
+def test_check_lists_each_effects_nonzero_parameters_in_si_one_a_line(capsys):
     """examples/drone_imu.toml: the preset's and the scene's datasheet units, converted by hand (0.5 deg/s =
     0.5 pi/180 rad/s; 0.014 deg/s/sqrt(Hz) from the bosch-bmi088 preset; 10 mg = 0.0980665 m/s^2), each under
     its effect; a parameter left at zero (the constant bias) is not listed."""

@@ -14,6 +14,7 @@ from scipy.spatial.transform import Rotation
 from imu_emulator import scene_from_dict
 from imu_emulator.errors import SceneError
 from imu_emulator.runtime.simulation import Simulation
+from tests.support.scenes import scene, yaw_at
 
 G0 = 9.80665
 W = 0.7                       # rad/s yaw rate
@@ -21,13 +22,9 @@ MOUNT_RPY_DEG = (10.0, -20.0, 35.0)
 
 
 def turning_scene(effects, gyro=None, accel=None, mounting=MOUNT_RPY_DEG, rate_hz=100, duration_s=0.2, **imu):
-    return scene_from_dict({
-        "scene": {"rate_hz": rate_hz, "duration_s": duration_s},
-        "trajectory": {"shape": "static"},
-        "attitude": {"roll": "0", "pitch": "0", "yaw": f"{W!r}*t"},
-        "imu": [{"name": "imu0", "mounting_rpy_deg": list(mounting), "gyro": dict(gyro or {}),
-                 "accel": dict(accel or {}), **imu}],
-        "effects": {"gravity": True, "mounting": True, **{name: True for name in effects}}})
+    return scene(rate_hz=rate_hz, duration_s=duration_s, attitude=yaw_at(W),
+                 imus=[{"name": "imu0", "mounting_rpy_deg": list(mounting), "gyro": dict(gyro or {}),
+                        "accel": dict(accel or {}), **imu}], effects=("gravity", "mounting", *effects))
 
 
 def true_sensor_values(mounting=MOUNT_RPY_DEG):
@@ -81,11 +78,9 @@ def test_g_sensitivity_adds_g_times_specific_force_to_the_gyros():
 def vibration_scene(effects, accel, a0, freq, rate_hz, periods):
     # x = -a0/(2 pi f)^2 sin(2 pi f t): specific force along x is a0 sin(2 pi f t), level, no rotation
     amp = a0 / (2 * np.pi * freq) ** 2
-    return scene_from_dict({
-        "scene": {"rate_hz": rate_hz, "duration_s": periods / freq},
-        "trajectory": {"x": f"-{amp!r}*sin(2*pi*{freq!r}*t)", "y": "0", "z": "0"},
-        "imu": [{"name": "imu0", "accel": accel}],
-        "effects": {"gravity": True, **{name: True for name in effects}}})
+    return scene(rate_hz=rate_hz, duration_s=periods / freq,
+                 trajectory={"x": f"-{amp!r}*sin(2*pi*{freq!r}*t)", "y": "0", "z": "0"},
+                 imus=[{"name": "imu0", "accel": accel}], effects=("gravity", *effects))
 
 
 def test_quadratic_nonlinearity_rectifies_a_sine_vibration_into_k2_a0_squared_over_2():
@@ -122,12 +117,9 @@ def test_nonlinearity_in_percent_of_full_scale_is_k2_x_over_fs():
 def ramp_scene(effects, gyro, accel, rate_hz=100, duration_s=2.0, t0=-1.0):
     # without gravity, accel z = t (z = t^3/6, untouched by the yaw) and gyro z = -t (yaw = -t^2/2): both cross
     # +-range within the run; the other axes read 0
-    return scene_from_dict({
-        "scene": {"rate_hz": rate_hz, "duration_s": duration_s, "t0_s": t0},
-        "trajectory": {"x": "0", "y": "0", "z": "t**3/6"},
-        "attitude": {"roll": "0", "pitch": "0", "yaw": "-t**2/2"},
-        "imu": [{"name": "imu0", "gyro": gyro, "accel": accel}],
-        "effects": {name: True for name in effects}})
+    return scene(rate_hz=rate_hz, duration_s=duration_s, t0_s=t0, trajectory={"x": "0", "y": "0", "z": "t**3/6"},
+                 attitude={"roll": "0", "pitch": "0", "yaw": "-t**2/2"},
+                 imus=[{"name": "imu0", "gyro": gyro, "accel": accel}], effects=effects)
 
 
 def test_range_saturates_exactly_at_full_scale_and_counts_per_axis():
@@ -220,12 +212,9 @@ def test_generate_and_stream_show_the_range_saturation_counts(tmp_path, capsys):
 
 
 def temperature_scene(imu, gyro=None, accel=None, rate_hz=10, duration_s=2000.0):
-    return scene_from_dict({
-        "scene": {"rate_hz": rate_hz, "duration_s": duration_s},
-        "trajectory": {"shape": "static"},
-        "attitude": {"roll": "0", "pitch": "0", "yaw": f"{W!r}*t"},
-        "imu": [{"name": "imu0", "gyro": dict(gyro or {}), "accel": dict(accel or {}), **imu}],
-        "effects": {"gravity": True, "temperature": True}})
+    return scene(rate_hz=rate_hz, duration_s=duration_s, attitude=yaw_at(W),
+                 imus=[{"name": "imu0", "gyro": dict(gyro or {}), "accel": dict(accel or {}), **imu}],
+                 effects=("gravity", "temperature"))
 
 
 def test_temperature_coefficients_follow_a_warm_up_profile():

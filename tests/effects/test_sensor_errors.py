@@ -11,9 +11,9 @@ import math
 import numpy as np
 import pytest
 
-from imu_emulator import scene_from_dict
 from imu_emulator.numerics.counter_rng import normals, stream_key
 from imu_emulator.runtime.simulation import Simulation
+from tests.support.scenes import scene
 
 G0 = 9.80665
 SEEDS = (1, 2, 3)
@@ -21,9 +21,7 @@ SEEDS = (1, 2, 3)
 
 def static_scene(rate_hz, duration_s, effects, gyro=None, accel=None, seed=1, n_imu=1):
     imus = [{"name": f"imu{i}", "gyro": dict(gyro or {}), "accel": dict(accel or {})} for i in range(n_imu)]
-    return scene_from_dict({"scene": {"rate_hz": rate_hz, "duration_s": duration_s, "seed": seed},
-                            "trajectory": {"shape": "static"}, "imu": imus,
-                            "effects": {"gravity": True, **{name: True for name in effects}}})
+    return scene(rate_hz=rate_hz, duration_s=duration_s, seed=seed, imus=imus, effects=("gravity", *effects))
 
 
 def errors(scene, truth=False):

@@ -14,18 +14,16 @@ from scipy import signal, stats
 from imu_emulator import scene_from_dict
 from imu_emulator.errors import SceneError
 from imu_emulator.runtime.simulation import Simulation
+from tests.support import scenes
 
 G0 = 9.80665
 
 
 def scene(vibration, effects=("gravity", "vibration"), rate_hz=1000, duration_s=0.5, attitude=None, seed=1,
           **imu):
-    return scene_from_dict({
-        "scene": {"rate_hz": rate_hz, "duration_s": duration_s, "seed": seed},
-        "trajectory": {"x": "0", "y": "0", "z": "0"},
-        **({"attitude": attitude} if attitude else {}),
-        "imu": [{"name": "imu0", "vibration": vibration, **imu}],
-        "effects": {name: True for name in effects}})
+    return scenes.scene(rate_hz=rate_hz, duration_s=duration_s, seed=seed, trajectory=scenes.AT_ORIGIN,
+                        attitude=attitude or None, imus=[{"name": "imu0", "vibration": vibration, **imu}],
+                        effects=effects)
 
 
 def run(s, attitude=False):

@@ -20,6 +20,7 @@ import pytest
 from imu_emulator import scene_from_dict
 from imu_emulator.errors import SceneError
 from imu_emulator.runtime.simulation import Simulation
+from tests.support.scenes import scene
 
 mpmath.mp.dps = 40
 A = 6378137.0
@@ -56,8 +57,7 @@ def _scene(frame, trajectory, origin=None, effects=EFFECTS, duration=DURATION, *
     head = {"rate_hz": RATE_HZ, "duration_s": duration, "frame": frame, **extra}
     if origin is not None:
         head["origin"] = dict(zip(("lat_deg", "lon_deg", "height_m"), origin))
-    return scene_from_dict({"scene": head, "trajectory": trajectory, "attitude": {"mode": "tangent"},
-                            "imu": [{"name": "a"}], "effects": effects})
+    return scene(**head, trajectory=trajectory, attitude={"mode": "tangent"}, imus=[{"name": "a"}], effects=effects)
 
 
 def _run(scene):

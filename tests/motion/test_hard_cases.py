@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from imu_emulator import DataError, SceneError, load_scene, scene_from_dict
+from imu_emulator import DataError, SceneError, load_scene
 from imu_emulator.motion.attitude_rates import euler_rate, increment_rate, increment_rate_from_quaternions, quat_log
 from imu_emulator.numerics.derivatives import wrap_angles
 from imu_emulator.geo.rotations import (euler_to_matrix, euler_to_quat, matrix_to_euler, matrix_to_quat,
@@ -15,6 +15,7 @@ from imu_emulator.geo.rotations import (euler_to_matrix, euler_to_quat, matrix_t
 from imu_emulator.scene.model import DEFAULT_DERIVATIVE
 from imu_emulator.runtime.simulation import Simulation
 from tests.support.reference import imu_functions, t as T
+from tests.support.scenes import scene
 
 G0 = 9.80665
 
@@ -29,9 +30,8 @@ def _scene(traj, attitude, rate=100.0, duration=None, t0=None, lever=(0.0, 0.0, 
         head["duration_s"] = duration
     if t0 is not None:
         head["t0_s"] = t0
-    return scene_from_dict({"scene": head, "trajectory": traj, "attitude": attitude,
-                            "imu": [{"name": "a", "lever_arm_m": list(lever)}],
-                            "effects": {"gravity": gravity, "lever_arm": any(lever)}})
+    return scene(**head, trajectory=traj, attitude=attitude, imus=[{"name": "a", "lever_arm_m": list(lever)}],
+                 effects={"gravity": gravity, "lever_arm": any(lever)})
 
 
 def _finite(out):

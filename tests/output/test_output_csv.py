@@ -54,7 +54,6 @@ def _digits(text):
 
 
 def test_generate_csv_equals_npz_bit_for_bit(tmp_path, monkeypatch):
-    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
     from pathlib import Path
     scene = str(EXAMPLES / "two_imus.toml")
     assert main(["generate", scene, "-o", str(tmp_path / "o.csv"), "--quiet", "--truth"]) == 0

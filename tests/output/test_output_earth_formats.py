@@ -50,23 +50,14 @@ temperature = true
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     """The same scene written in every output format (NPZ, CSV, Parquet, MCAP, ...); {suffix: path}."""
-    import os
     tmp = tmp_path_factory.mktemp("earth_formats")
-    old = os.environ.get("IMU_EMULATOR_CACHE")
-    os.environ["IMU_EMULATOR_CACHE"] = str(tmp / "cache")
     scene = tmp / "s.toml"
     scene.write_text(SCENE)
     paths = {}
-    try:
-        for suffix, record in FORMATS.items():      # every registered format, with what it can carry
-            paths[suffix] = tmp / f"o{suffix}"
-            options = ["--increments"] if record.increments else []
-            assert main(["generate", str(scene), "-o", str(paths[suffix]), "--quiet", "--truth", *options]) == 0
-    finally:
-        if old is None:
-            os.environ.pop("IMU_EMULATOR_CACHE")
-        else:
-            os.environ["IMU_EMULATOR_CACHE"] = old
+    for suffix, record in FORMATS.items():      # every registered format, with what it can carry
+        paths[suffix] = tmp / f"o{suffix}"
+        options = ["--increments"] if record.increments else []
+        assert main(["generate", str(scene), "-o", str(paths[suffix]), "--quiet", "--truth", *options]) == 0
     paths["scene"] = scene
     return paths
 
@@ -206,7 +197,6 @@ BOTH = "earth_rate = true\ncoriolis = true\n"
     ("ECEF", ECI_ORBIT, "ECI", BOTH),
 ])
 def test_odometry_ecef_twist_in_other_frames(tmp_path, monkeypatch, frame, trajectory, reference, effects):
-    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
     from tests.output.test_output_mcap import read_bag
     scene = tmp_path / "s.toml"
     scene.write_text(f'[scene]\nrate_hz = 50\nduration_s = 1.0\nframe = "{frame}"\ngravity_model = "wgs84"\n'
@@ -284,7 +274,6 @@ def test_simulate_memory_check_counts_every_array(run, monkeypatch):
 
 def test_a_batch_writes_the_earth_truth_too(run, tmp_path, monkeypatch):
     """batch's Parquet files carry the same Earth truth columns (the truth does not depend on the seed)."""
-    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
     import pyarrow.parquet as pq
 
     from imu_emulator.analysis import batch

@@ -16,7 +16,6 @@ from tests.support.paths import EXAMPLES
 
 
 def test_generate_parquet_equals_npz_bit_for_bit(tmp_path, monkeypatch):
-    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
     scene = str(EXAMPLES / "two_imus.toml")
     assert main(["generate", scene, "-o", str(tmp_path / "o.parquet"), "--quiet", "--truth", "--block", "999"]) == 0
     assert main(["generate", scene, "-o", str(tmp_path / "o.npz"), "--quiet", "--truth"]) == 0
@@ -37,7 +36,6 @@ def test_generate_parquet_equals_npz_bit_for_bit(tmp_path, monkeypatch):
 
 
 def test_parquet_footer_names_scene_seed_and_versions(tmp_path, monkeypatch):
-    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
     text = (EXAMPLES / "two_imus.toml").read_text().replace("[scene]\n", "[scene]\nseed = {seed}\n", 1)
     digests = []
     for seed in (5, 6):
@@ -102,7 +100,6 @@ print(json.dumps(trace))
 @pytest.mark.parametrize("suffix, flat", [(".parquet", True), (".csv", True), (".npz", False)])
 def test_generate_memory_stays_flat_while_it_runs(tmp_path, monkeypatch, suffix, flat):
     """Parquet and CSV stay flat; NPZ, which holds the run by design, grows (and shows the check can fail)."""
-    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
     scene = tmp_path / "long.toml"
     scene.write_text(SCENE_4IMU.format(duration=320))
     out = subprocess.run([sys.executable, "-c", _RSS_TRACE, str(scene), str(tmp_path / f"run{suffix}")],
@@ -119,7 +116,6 @@ def test_generate_memory_stays_flat_while_it_runs(tmp_path, monkeypatch, suffix,
 
 
 def test_parquet_carries_the_increments_as_npz_does(tmp_path, monkeypatch):
-    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
     scene = str(EXAMPLES / "two_imus.toml")
     for suffix in (".parquet", ".npz"):
         assert main(["generate", scene, "-o", str(tmp_path / f"o{suffix}"), "--quiet", "--increments"]) == 0

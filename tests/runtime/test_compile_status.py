@@ -10,21 +10,14 @@ from tests.support.paths import REPO
 ROOT = REPO
 
 
-@pytest.fixture
-def cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
-    monkeypatch.setattr(kernel_module, "_loaded", {})
-    return tmp_path / "cache" / "kernels"
-
-
-def test_first_compile_is_announced_with_its_time_on_a_terminal(cache, tmp_path, capsys, monkeypatch):
+def test_first_compile_is_announced_with_its_time_on_a_terminal(fresh_cache, tmp_path, capsys, monkeypatch):
     from imu_emulator.cli import main
     scene = str(ROOT / "examples" / "orientation_only.toml")
     args = ["generate", scene, "-o", str(tmp_path / "o.npz")]
     assert main(args) == 0                      # stderr is not a terminal: no status line (errors stay one line)
     assert "compiling" not in capsys.readouterr().err
     kernel_module._loaded.clear()
-    shutil.rmtree(cache)                        # cold again
+    shutil.rmtree(fresh_cache)                        # cold again
     monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
     assert main(args) == 0
     cold = capsys.readouterr().err
@@ -35,7 +28,7 @@ def test_first_compile_is_announced_with_its_time_on_a_terminal(cache, tmp_path,
 
 
 @pytest.mark.parametrize("raised, outcome", [(KeyboardInterrupt, "interrupted"), (RuntimeError, "failed")])
-def test_a_compile_cut_short_says_why(cache, capsys, monkeypatch, raised, outcome):
+def test_a_compile_cut_short_says_why(fresh_cache, capsys, monkeypatch, raised, outcome):
     """Ctrl-C during the first compile is the user's choice: "interrupted", not "failed" (issue 23, item 12)."""
     from imu_emulator.runtime.progress import CompileStatus
     from imu_emulator.scene import load_scene

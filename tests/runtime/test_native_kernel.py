@@ -22,13 +22,6 @@ ROOT = REPO
 from tests.effects.test_effects_mechanism import _imu_with, _sample_value  # noqa: E402
 
 
-@pytest.fixture
-def cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
-    monkeypatch.setattr(kernel_module, "_loaded", {})
-    return tmp_path / "cache" / "kernels"
-
-
 def _every_effect_scene():
     """Two IMUs with every effect on (state slots, stream keys, counters, bias truth all in use)."""
     base = {param: _sample_value(param, 1.0) for _, param in all_params()}
@@ -63,7 +56,7 @@ def _earth_scene():
 @pytest.mark.parametrize("scene_name,increments", [("every_effect", 0), ("circle", 0), ("two_imus", 0),
                                                    ("sampled_track", 0), ("every_effect", 3), ("earth", 0),
                                                    ("earth", 2)])
-def test_machine_code_equals_numba_dispatcher_bit_for_bit(cache, monkeypatch, scene_name, increments):
+def test_machine_code_equals_numba_dispatcher_bit_for_bit(fresh_cache, monkeypatch, scene_name, increments):
     # increments and the Earth effects add kernel arguments and outputs: the loader is typed from the trial call
     scene = {"every_effect": _every_effect_scene, "earth": _earth_scene}.get(
         scene_name, lambda: load_scene(ROOT / "examples" / f"{scene_name}.toml"))()
@@ -100,7 +93,7 @@ def test_warm_start_does_not_import_numba(tmp_path):
 
 
 @pytest.mark.parametrize("damage", ["truncate", "flip_a_byte", "other_source"])
-def test_damaged_machine_code_is_compiled_again(cache, damage):
+def test_damaged_machine_code_is_compiled_again(fresh_cache, damage):
     scene = load_scene(ROOT / "examples" / "helix.toml")
     good = Simulation(scene).block(0, 500)
     entry, compiled = kernel_module.cached_kernel(scene)
@@ -123,7 +116,7 @@ def test_damaged_machine_code_is_compiled_again(cache, damage):
     assert path.read_bytes() != blob[: len(blob) // 2]
 
 
-def test_native_kernel_refuses_wrong_arguments(cache):
+def test_native_kernel_refuses_wrong_arguments(fresh_cache):
     scene = load_scene(ROOT / "examples" / "circle.toml")
     kernel = Simulation(scene).kernel
     args = list(trial_arguments(scene, True, False))

@@ -17,11 +17,11 @@ import math
 import numpy as np
 import pytest
 
-from imu_emulator import scene_from_dict
 from imu_emulator.scene import presets
 from imu_emulator.commands.models import cmd_models
 from imu_emulator.errors import SceneError
 from imu_emulator.runtime.simulation import Simulation
+from tests.support.scenes import scene
 
 allantools = pytest.importorskip("allantools")
 
@@ -40,9 +40,7 @@ def preset_scene(models, rate_hz, duration_s, seed=1, effects=("noise", "bias_in
                 if b:
                     imu.setdefault(triad, {})["bias_instability"] = [b, 0, 0]
         imus.append(imu)
-    return scene_from_dict({"scene": {"rate_hz": rate_hz, "duration_s": duration_s, "seed": seed},
-                            "trajectory": {"shape": "static"}, "imu": imus,
-                            "effects": {name: True for name in effects}})
+    return scene(rate_hz=rate_hz, duration_s=duration_s, seed=seed, imus=imus, effects=effects)
 
 
 def expected(n: float, b: float, taus) -> np.ndarray:
