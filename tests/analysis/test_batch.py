@@ -17,6 +17,7 @@ import pytest
 from imu_emulator.analysis import batch
 from imu_emulator.cli import main
 from imu_emulator.output.formats.parquet import read_metadata
+from tests.support.timing import scaled
 
 SCENE = """
 [scene]
@@ -41,19 +42,6 @@ bias_instability = true
 ROOT_SEED = 2026
 
 
-@pytest.fixture(scope="module")
-def cache(tmp_path_factory):
-    """One kernel cache for the module: the scene compiles once, in the first test that runs it."""
-    path = tmp_path_factory.mktemp("kernel-cache")
-    old = os.environ.get("IMU_EMULATOR_CACHE")
-    os.environ["IMU_EMULATOR_CACHE"] = str(path)
-    yield path
-    if old is None:
-        os.environ.pop("IMU_EMULATOR_CACHE")
-    else:
-        os.environ["IMU_EMULATOR_CACHE"] = old
-
-
 def _scene(tmp_path, duration=0.5):
     path = tmp_path / "scene.toml"
     path.write_text(SCENE.format(duration=duration))
@@ -71,7 +59,7 @@ def test_seeds_are_numpy_seedsequence_spawn():
         assert batch.realization_seed(ROOT_SEED, i) == int(child.generate_state(1, np.uint64)[0])
 
 
-def test_serial_and_two_worker_cluster_give_identical_files(tmp_path, cache):
+def test_serial_and_two_worker_cluster_give_identical_files(tmp_path):
     from distributed import Client, LocalCluster
     scene = _scene(tmp_path)
     serial = batch.run(scene, 16, ROOT_SEED, tmp_path / "serial")
@@ -102,7 +90,7 @@ def test_serial_and_two_worker_cluster_give_identical_files(tmp_path, cache):
 
 
 @pytest.mark.skipif(not batch.fork_workers(), reason="local workers fork only on Linux")
-def test_local_workers_fork_with_the_kernel_and_give_the_serial_files(tmp_path, cache, capsys):
+def test_local_workers_fork_with_the_kernel_and_give_the_serial_files(tmp_path, capsys):
     """The CLI's local cluster (LocalBatchCluster): worker processes forked from this one after it loaded the
     kernel, so none loads it again (counted: kernel_load_s, and a load asked of each worker finds it there), with
     the profiler off; their files are those of --workers 0, with one worker and with two."""
@@ -149,14 +137,14 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def test_real_scheduler_and_two_worker_processes(tmp_path, cache):
+def test_real_scheduler_and_two_worker_processes(tmp_path, kernel_cache):
     """`dask scheduler` and two `dask worker` processes, as a user's cluster would be; each worker loads the
     scene's kernel once for all the realizations it runs."""
     from distributed import Client
     dask = str(Path(sys.executable).with_name("dask"))
     port = _free_port()
     address = f"tcp://127.0.0.1:{port}"
-    env = {**os.environ, "IMU_EMULATOR_CACHE": str(cache)}
+    env = {**os.environ, "IMU_EMULATOR_CACHE": str(kernel_cache)}
     procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
                               env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
     try:
@@ -164,8 +152,8 @@ def test_real_scheduler_and_two_worker_processes(tmp_path, cache):
             procs.append(subprocess.Popen([dask, "worker", address, "--nworkers", "1", "--nthreads", "1",
                                            "--no-dashboard", "--no-nanny"], env=env,
                                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-        with Client(address, timeout=60) as client:
-            client.wait_for_workers(2, timeout=120)
+        with Client(address, timeout=scaled(60)) as client:
+            client.wait_for_workers(2, timeout=scaled(120))
             pids = set(client.run(os.getpid).values())
         scene = _scene(tmp_path)
         assert main(["batch", str(scene), "--runs", "12", "--seed", str(ROOT_SEED), "-o", str(tmp_path / "out"),
@@ -184,7 +172,7 @@ def test_real_scheduler_and_two_worker_processes(tmp_path, cache):
             proc.terminate()
         for proc in procs:
             try:
-                proc.wait(timeout=20)
+                proc.wait(timeout=scaled(20))
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
@@ -212,7 +200,7 @@ def test_vary_draws_follow_their_distributions(tmp_path):
     assert abs(np.corrcoef(normal[:, 0], normal[:, 1])[0, 1]) < 5 / np.sqrt(n)
 
 
-def test_vary_values_reach_scene_files_and_summary(tmp_path, cache):
+def test_vary_values_reach_scene_files_and_summary(tmp_path):
     scene = _scene(tmp_path)
     vary = ["imu0.gyro.bias_instability=uniform(1,5) deg/h"]
     result = batch.run(scene, 2, ROOT_SEED, tmp_path / "out", vary=vary)
@@ -248,7 +236,7 @@ def test_bad_vary_is_one_line_exit_2(tmp_path, capsys, option, message):
     assert not (tmp_path / "out").exists()
 
 
-def test_failed_realization_is_reported_and_others_finish(tmp_path, cache, capsys):
+def test_failed_realization_is_reported_and_others_finish(tmp_path, capsys):
     scene = _scene(tmp_path)
     out = tmp_path / "out"
     out.mkdir()
@@ -262,14 +250,14 @@ def test_failed_realization_is_reported_and_others_finish(tmp_path, cache, capsy
     assert rows[2]["seed"] == batch.realization_seed(ROOT_SEED, 2) and rows[2]["error"]
 
 
-def test_killed_batch_restarts_without_recomputing(tmp_path, cache):
+def test_killed_batch_restarts_without_recomputing(tmp_path):
     scene = _scene(tmp_path, duration=2.0)
     out = tmp_path / "out"
     runs = 40
     command = [sys.executable, "-m", "imu_emulator", "batch", str(scene), "--runs", str(runs), "--seed",
                str(ROOT_SEED), "-o", str(out), "--workers", "0", "--quiet"]
     proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    deadline = time.monotonic() + 300
+    deadline = time.monotonic() + scaled(300)
     while len(list(out.glob("run-*.parquet"))) < 3 and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.005)
     proc.send_signal(signal.SIGKILL)
@@ -289,7 +277,7 @@ def test_killed_batch_restarts_without_recomputing(tmp_path, cache):
     assert alone.ok and _same_file(out / "run-00039.parquet", tmp_path / "alone" / "run-00039.parquet")
 
 
-def test_restart_with_truth_does_not_take_files_written_without_it(tmp_path, cache):
+def test_restart_with_truth_does_not_take_files_written_without_it(tmp_path):
     # A rerun asking for --truth must not skip files that lack the truth columns: it says so instead.
     scene = _scene(tmp_path)
     out = tmp_path / "out"

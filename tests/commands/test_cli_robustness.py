@@ -12,6 +12,9 @@ import numpy as np
 import pytest
 
 from tests.support.stream import REPO, Emulator, mavlink_parse, open_pty_reader, read_for, run_emulator, write_scene
+from tests.support.timing import scaled
+
+pytestmark = pytest.mark.subprocess
 
 WARNING = "warning: imu[1].mounting_rpy_deg is ignored because effects.mounting is not true"
 
@@ -179,10 +182,10 @@ def test_write_error_is_one_line_naming_the_file_and_leaves_nothing(tmp_path, na
     args = [sys.executable, "-m", "imu_emulator", "generate", "examples/helix.toml", "--block", "100", "-o"]
     # the kernel compiled first, without the limit: the limit is for the output, not for the cache's own files
     # (a cold cache would hit it writing numba's index, whatever the order the tests run in)
-    warm = subprocess.run(args + [str(tmp_path / "warm.npz")], capture_output=True, text=True, cwd=REPO, timeout=600)
+    warm = subprocess.run(args + [str(tmp_path / "warm.npz")], capture_output=True, text=True, cwd=REPO, timeout=scaled(600))
     assert warm.returncode == 0, warm.stderr
     (tmp_path / "warm.npz").unlink()
-    result = subprocess.run(args + [str(out)], capture_output=True, text=True, cwd=REPO, timeout=120,
+    result = subprocess.run(args + [str(out)], capture_output=True, text=True, cwd=REPO, timeout=scaled(120),
                             preexec_fn=limit_file_size)
     _only_one_error_line(result.returncode, result.stderr, str(out), "cannot write", "File too large")
     assert not out.exists()
@@ -283,12 +286,12 @@ def test_generate_stopped_by_a_signal_leaves_no_file(tmp_path, sig):
     out = tmp_path / "long.csv"
     proc = subprocess.Popen([sys.executable, "-m", "imu_emulator", "generate", "examples/circle.toml", "-o", str(out),
                              "--block", "1000"], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 120
+    deadline = time.monotonic() + scaled(120)
     while not any(p.name.endswith(".part") and p.stat().st_size > 0 for p in tmp_path.iterdir()):
         assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
         time.sleep(0.05)
     proc.send_signal(sig)
-    _, err = proc.communicate(timeout=60)
+    _, err = proc.communicate(timeout=scaled(60))
     assert proc.returncode != 0 and "Traceback" not in err, err
     assert list(tmp_path.iterdir()) == []
 

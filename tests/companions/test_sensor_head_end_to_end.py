@@ -20,6 +20,9 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from tests.firmware_protocols.wire_formats.test_xsens import ap_parse_mtdata2
 from tests.support.paths import REPO
+from tests.support.timing import scaled
+
+pytestmark = pytest.mark.subprocess
 
 ROOT = REPO
 RATE = 200.0
@@ -49,7 +52,7 @@ STREAMS = (
 
 def cli(*args):
     done = subprocess.run([sys.executable, "-m", "imu_emulator.cli", *map(str, args)], capture_output=True,
-                          text=True, cwd=ROOT, timeout=600)
+                          text=True, cwd=ROOT, timeout=scaled(600))
     assert done.returncode == 0, done.stdout + done.stderr
     return done.stdout + done.stderr
 

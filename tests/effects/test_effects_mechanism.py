@@ -22,6 +22,8 @@ from imu_emulator.codegen.plan import EffectPlan
 from imu_emulator.runtime.cache import generator_modules, scene_key
 from imu_emulator.runtime.kernels import compile_kernel
 from tests.support.paths import DATA, REPO
+from tests.support.timing import scaled
+from tests.support import scenes
 
 ROOT = REPO
 EXAMPLES = ROOT / "examples"
@@ -29,10 +31,9 @@ GOLDEN = DATA / "kernels"
 
 
 def _scene(effects=None, imu=None, **scene):
-    head = {"rate_hz": 100, "duration_s": 0.5, **scene}
-    return scene_from_dict({"scene": head, "trajectory": {"x": "0.5*t*t", "y": "0", "z": "0"},
-                            "attitude": {"roll": "0.1*t", "pitch": "0", "yaw": "0.2*t"},
-                            "imu": [imu or {"name": "a"}], "effects": effects or {}})
+    return scenes.scene(**{"rate_hz": 100, "duration_s": 0.5, **scene}, trajectory={"x": "0.5*t*t", "y": "0", "z": "0"},
+                        attitude={"roll": "0.1*t", "pitch": "0", "yaw": "0.2*t"}, imus=[imu or {"name": "a"}],
+                        effects=effects or {})
 
 
 def _sample_value(param, scale: float):
@@ -222,13 +223,6 @@ def test_readme_parameter_table_is_the_records_table():
 
 # --- cache ------------------------------------------------------------------------------------------
 
-@pytest.fixture
-def fresh_cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path))
-    monkeypatch.setattr(kernel_module, "_loaded", {})
-    return tmp_path / "kernels"
-
-
 def _entries(root: Path) -> list[str]:
     return sorted(p.name for p in root.iterdir()) if root.exists() else []
 
@@ -283,7 +277,7 @@ def test_two_processes_fill_the_cache_at_once(tmp_path):
     env = {**os.environ, "IMU_EMULATOR_CACHE": str(tmp_path)}
     procs = [subprocess.Popen([sys.executable, "-c", script], env=env, stdout=subprocess.PIPE,
                               stderr=subprocess.PIPE, text=True) for _ in range(2)]
-    results = [p.communicate(timeout=600) for p in procs]
+    results = [p.communicate(timeout=scaled(600)) for p in procs]
     assert all(p.returncode == 0 for p in procs), [r[1] for r in results]
     assert results[0][0] == results[1][0]
     entries = _entries(tmp_path / "kernels")

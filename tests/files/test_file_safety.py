@@ -21,6 +21,9 @@ from imu_emulator.output.atomic import AtomicOutput
 from imu_emulator.runtime import cache, kernels
 from imu_emulator.scene.load import load_scene
 from tests.support.paths import REPO
+from tests.support.timing import scaled
+
+pytestmark = pytest.mark.subprocess
 
 NOBODY = 65534
 as_root = pytest.mark.skipif(os.geteuid() != 0, reason="acting as another user (uid 65534) needs root")
@@ -112,6 +115,27 @@ def test_an_entry_owned_by_another_user_is_refused_unread(tmp_path, monkeypatch)
     with pytest.raises(trust.UntrustedCache, match=f"{entry}: kernel cache not trusted: owned by uid 65534"):
         kernels.compile_kernel(scene)
     assert not planted.exists()
+
+
+def test_an_entry_file_gone_between_listing_and_check_is_skipped_the_rest_still_checked(tmp_path, monkeypatch):
+    """Two runs sharing a cache (xdist workers, parallel CI jobs): one lists an entry while the other renames its
+    temporary file into place. The vanished name is skipped, not raised; the walk goes on and still refuses a
+    file others can write (the rule of check_private, checked on the entry's real files)."""
+    from imu_emulator.files import trust
+    entry = tmp_path / "entry"
+    (entry / "__pycache__").mkdir(parents=True, mode=0o700)
+    entry.chmod(0o700)
+    (entry / "kernel.py").write_text("x = 1\n")
+    real_walk = os.walk
+
+    def walk_listing_a_vanished_temp(top):
+        for dirpath, dirnames, filenames in real_walk(top):
+            yield dirpath, dirnames, [".kernel.o.1234.tmp", *filenames]
+    monkeypatch.setattr(trust.os, "walk", walk_listing_a_vanished_temp)
+    trust.check_tree(entry)
+    (entry / "kernel.py").chmod(0o664)
+    with pytest.raises(trust.UntrustedCache, match="kernel.py: kernel cache not trusted: writable by group"):
+        trust.check_tree(entry)
 
 
 def test_the_secret_is_created_0600_and_refused_otherwise(tmp_path, monkeypatch):
@@ -291,7 +315,7 @@ def test_a_second_stream_process_is_refused_with_one_line(tmp_path):
     try:
         result = subprocess.run([sys.executable, "-m", "imu_emulator", "stream", REPO / "examples/helix.toml",
                                  "--format", "mavlink-highres", "--speed", "0", "--to", f"file:{capture}"],
-                                capture_output=True, text=True, cwd=REPO, timeout=300)
+                                capture_output=True, text=True, cwd=REPO, timeout=scaled(300))
         _one_error_line(result.returncode, result.stderr, str(capture),
                         f"in use by another running stream (pid {holder.pid}")
     finally:

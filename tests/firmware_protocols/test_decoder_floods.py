@@ -52,6 +52,7 @@ def _cpu_ns(name: str, data: bytes, repeats: int = 2) -> int:
     return best
 
 
+@pytest.mark.realtime      # compares CPU times: not beside another of its kind
 @pytest.mark.parametrize("name", DECODERS)
 def test_flood_decodes_in_time_proportional_to_its_size(name):
     # Linear cost gives a ratio of 4 between 200 kB and 50 kB, quadratic cost 16; 8 leaves room for noise

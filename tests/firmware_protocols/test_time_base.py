@@ -21,6 +21,9 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from firmware_protocols.base import Samples
 from tests.support.paths import REPO
+from tests.support.timing import scaled
+
+pytestmark = pytest.mark.subprocess
 
 UTC = timezone.utc
 START_ISO = "2026-11-27T12:00:00Z"
@@ -170,7 +173,7 @@ def test_gps_week_offset_is_retired_in_one_line():
 RATE = 50
 
 
-def _cli(*args, timeout=120) -> subprocess.CompletedProcess:
+def _cli(*args, timeout=scaled(120)) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "imu_emulator", *map(str, args)], cwd=REPO, capture_output=True,
                           text=True, timeout=timeout)
 

@@ -31,6 +31,7 @@ from imu_emulator.live.transport import TargetOptions, parse_target
 from imu_emulator.live.transport.ardupilot_sitl import ArduPilotJsonTransport
 from imu_emulator.live.transport.px4_sim import Px4SimTransport
 from imu_emulator.live.transport.stack_link import LockstepTimeout
+from tests.support.timing import scaled
 
 PERIOD_S = 0.004
 
@@ -317,7 +318,7 @@ class Px4Model:
     HIL_STATE_QUATERNION; HIL_SENSOR id 0 sets the clock; one HIL_ACTUATOR_CONTROLS per step (flags 1: lockstep)."""
 
     def __init__(self, port: int):
-        self.sock = socket.create_connection(("127.0.0.1", port), timeout=5)
+        self.sock = socket.create_connection(("127.0.0.1", port), timeout=scaled(5))
         self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self.mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
         self.clock_usec = None
@@ -564,7 +565,7 @@ def test_px4_input_no_device_reads_is_bounded_and_counted():
         transport.await_turn()
         for _ in range(800):                      # ~74 kB of HIL_ACTUATOR_CONTROLS nobody reads as a device would
             px4.send_controls(0.0)
-        end = time.monotonic() + 5
+        end = time.monotonic() + scaled(5)
         while transport.actuator_messages < 800 and time.monotonic() < end:
             time.sleep(0.02)
             transport.await_turn()

@@ -24,6 +24,9 @@ sys.path.insert(0, str(ROOT / "tools" / "interop"))
 import ardupilot_params  # noqa: E402
 import ardupilot_sitl_run  # noqa: E402
 import sitl_report  # noqa: E402
+from tests.support.timing import scaled
+
+pytestmark = pytest.mark.subprocess
 
 ORIGIN = (-35.363262, 149.165237, 584.0)
 
@@ -197,7 +200,7 @@ def test_stream_states_the_wall_clock_of_its_first_deadline(tmp_path):
     result = subprocess.run([sys.executable, "-m", "imu_emulator", "stream", str(scene), "--format", "mavlink-highres",
                              "--to", f"file:{tmp_path / 'out.bin'}", "--quiet", "--realtime", "off",
                              "--stats-json", str(stats)],
-                            capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(ROOT)), timeout=300)
+                            capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(ROOT)), timeout=scaled(300))
     after = time.time_ns()
     assert result.returncode == 0, result.stderr
     started = json.loads(stats.read_text())["started_unix_ns"]

@@ -15,6 +15,9 @@ import pytest
 
 from tests.interop.test_sitl_backends import Px4Model, SimJsonModel, _free_port
 from tests.support.stream import REPO, emulator_command
+from tests.support.timing import scaled
+
+pytestmark = pytest.mark.subprocess
 
 RATE_HZ, RADIUS_M, FREQ_HZ = 250.0, 5.0, 0.5
 ORIGIN = (47.397742, 8.545594, 488.0)
@@ -60,7 +63,7 @@ def test_ardupilot_sitl_steps_the_stream_and_reads_the_scene(tmp_path):
     sitl = SimJsonModel(port, frame_rate=400)
     try:
         states = [sitl.update([1000 + k] * 16) for k in range(30)]        # then SITL stops stepping
-        out, err = proc.communicate(timeout=120)
+        out, err = proc.communicate(timeout=scaled(120))
     finally:
         sitl.close()
         if proc.poll() is None:
@@ -101,7 +104,7 @@ def test_px4_sitl_gets_hil_sensor_and_hil_gps_in_lockstep(tmp_path):
         while proc.poll() is None and len(times) < 25:
             px4.send_controls(0.2)
             times += [m.time_usec for m in px4.sensors_until_one(10)]
-        out, err = proc.communicate(timeout=60)
+        out, err = proc.communicate(timeout=scaled(60))
     finally:
         px4.close()
         if proc.poll() is None:

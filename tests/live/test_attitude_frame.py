@@ -12,6 +12,8 @@ from scipy.spatial.transform import Rotation
 
 from tests.support.stream import reference, run_emulator, write_scene
 
+pytestmark = pytest.mark.subprocess
+
 HEADER = bytes([0x01, 0x11, 0x00])      # Common group: TimeStartup, Quaternion
 SIZE = 1 + 3 + 8 + 16 + 2
 # NED coordinates of ENU vectors: north = y, east = x, down = -z

@@ -16,6 +16,8 @@ from imu_emulator.live.transport.pty import PtyTransport
 from imu_emulator.live.transport.slcan_pty import parse_slcan_line
 from imu_emulator.live.transport.udp import UdpTransport
 
+pytestmark = pytest.mark.realtime
+
 
 def test_pty_transport_returns_what_the_reader_writes():
     transport = PtyTransport(TargetOptions())

@@ -17,6 +17,8 @@ from imu_emulator.live.config import RunOptions
 from imu_emulator.live.realtime import MISS_CAUSES, LatenessStats, Pacer
 from imu_emulator.live.streamer import Streamer, miss_cause
 
+pytestmark = pytest.mark.realtime
+
 RATE = 1000.0
 PERIOD_NS = 1_000_000
 BLOCK = 20

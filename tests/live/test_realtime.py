@@ -18,6 +18,9 @@ from imu_emulator.live.transport import TargetOptions
 from imu_emulator.live.transport.pty import PtyTransport
 from imu_emulator.live.transport.udp import UdpTransport
 from tests.support.stream import Emulator, mavlink_parse, open_pty_reader, read_for, read_until_closed, write_scene
+from tests.support.timing import scaled
+
+pytestmark = pytest.mark.realtime
 
 
 def test_lateness_quantiles_from_histogram():
@@ -52,19 +55,16 @@ def test_lateness_beyond_the_fine_bins_is_measured_and_beyond_all_bins_is_not_a_
     assert [LatenessStats.shown(summary[k]) for k in ("p50_us", "p99_us")] == ["100000", "> 65536000"]
 
 
-def _median_lateness(pacer, period_ns=5_000_000, count=100):
+def _lateness(pacer, period_ns=5_000_000, count=60):
     start = time.monotonic_ns() + period_ns
-    late = [pacer.wait_until(start + k * period_ns) - (start + k * period_ns) for k in range(count)]
-    assert min(late) >= 0
-    return np.median(late)
+    return [pacer.wait_until(start + k * period_ns) - (start + k * period_ns) for k in range(count)]
 
 
-def test_pacer_sleep_then_spin_median_under_2ms_at_200hz():
-    assert _median_lateness(Pacer(fifo=False)) < 2_000_000
-
-
-def test_pacer_sleep_only_median_under_2ms_at_200hz():
-    assert _median_lateness(Pacer(fifo=False, spin=False), count=60) < 2_000_000
+@pytest.mark.parametrize("spin", [True, False], ids=["sleep-then-spin", "sleep-only"])
+def test_pacer_never_returns_before_its_deadline_at_200hz(spin):
+    # A lower bound, true however loaded the machine: how late it returns is a figure (tools/bench_stream.py
+    # prints the stream's lateness p50/p99 at each rate; tools/bench_coexist.py beside a competitor).
+    assert min(_lateness(Pacer(fifo=False, spin=spin))) >= 0
 
 
 @pytest.fixture
@@ -314,10 +314,14 @@ def test_cpu_clock_step_is_fine_here_and_the_pacer_times_work_by_wall_time_where
     # This host accounts CPU time to the ns; the UML guest moves it in 10 ms ticks. There a behind sender
     # reading its CPU time would see 0 for most samples and never sleep: it must then sleep as long as the
     # wall time its previous sample took (2 ms of work here, at a 1 ms period).
-    assert realtime.cpu_clock_step_ns() < realtime._FINE_CPU_CLOCK_NS
     fine = time.thread_time_ns
-    monkeypatch.setattr(realtime.time, "thread_time_ns", lambda: fine() // 10_000_000 * 10_000_000)
+    ticks = iter(range(0, 10**9, 7))          # a clock that moves 7 ns a read: precise accounting, on any host
+    monkeypatch.setattr(realtime.time, "thread_time_ns", lambda: next(ticks))
+    assert realtime.cpu_clock_step_ns() == 7 < realtime._FINE_CPU_CLOCK_NS
+    reads = iter(range(10**9))                # 10 ms ticks, one every 1000 reads (the UML guest's accounting)
+    monkeypatch.setattr(realtime.time, "thread_time_ns", lambda: next(reads) // 1000 * 10_000_000)
     assert realtime.cpu_clock_step_ns() == 10_000_000
+    monkeypatch.setattr(realtime.time, "thread_time_ns", lambda: fine() // 10_000_000 * 10_000_000)
     period, work = 1_000_000, 2_000_000
     woke = []
 
@@ -382,7 +386,7 @@ def test_commands_are_answered_while_the_sender_waits_for_a_late_block():
     receiver, sender = multiprocessing.Pipe(duplex=False)
     fd = os.open(stream.transport.pty.path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)     # a driver: reads, writes
     try:
-        late_ns = 600_000_000
+        late_ns = int(scaled(0.6) * 1e9)      # the driver reads for half of it: a reply must fit in that
         threading.Timer(late_ns / 1e9, lambda: sender.send("the block")).start()
         os.write(fd, b"$VNRRG,01*XX\r\n")
         replies = []

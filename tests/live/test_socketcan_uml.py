@@ -9,6 +9,8 @@ from tests.support.paths import UML
 sys.path.insert(0, str(UML))
 import boot as uml  # noqa: E402
 
+pytestmark = [pytest.mark.uml, pytest.mark.subprocess, pytest.mark.slow]
+
 
 def test_socketcan_suite_inside_user_mode_linux(tmp_path):
     reason = uml.unavailable()

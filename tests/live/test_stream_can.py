@@ -10,6 +10,8 @@ import pytest
 
 from tests.support.stream import Emulator, dronecan_rawimu, reference, run_emulator, write_scene
 
+pytestmark = pytest.mark.subprocess
+
 
 def _check_rawimu(frames, scene_path, imu=0, minimum=100):
     scene, _, accel, gyro = reference(scene_path, imu)

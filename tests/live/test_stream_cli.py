@@ -7,6 +7,8 @@ import pytest
 
 from tests.support.stream import REPO, run_emulator, write_scene
 
+pytestmark = pytest.mark.subprocess
+
 
 def _one_line_error(result):
     assert result.returncode != 0

@@ -9,6 +9,8 @@ import pytest
 from tests.support.stream import (Emulator, check_highres_against_scene, mavlink_parse, open_pty_reader, read_for,
                                  read_until_closed, reference, write_scene)
 
+pytestmark = pytest.mark.subprocess
+
 
 def _seq_steps(messages):
     return np.diff([m.get_seq() for m in messages]) % 256

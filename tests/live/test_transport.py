@@ -2,6 +2,7 @@
 import os
 import time
 import tty
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -87,21 +88,36 @@ def test_full_pty_drops_whole_packets_and_resumes():
     assert received == b"".join(accepted) + b"\xAA" * 75
 
 
-def test_pace_baud_delivers_no_faster_than_the_uart():
+def test_pace_baud_delivers_no_faster_than_the_uart(monkeypatch):
+    """9600 baud is 960 B/s (10 bits a byte): a 75-byte packet holds the line 78.125 ms, and the 150-byte FIFO
+    lets a packet in while at most 156.25 ms of line time wait before it. On the writer's clock (driven here, so
+    the count depends on no machine) the k-th packet (from 0) goes on the line at k x 78.125 ms and is accepted
+    at the first offer (one a ms) no more than 156.25 ms before that: by T ms, floor((T + 156.25) / 78.125) + 1."""
+    from imu_emulator.live.transport import fdwriter
+    now_ns = [1_000_000_000]
+    monkeypatch.setattr(fdwriter, "time", SimpleNamespace(monotonic_ns=lambda: now_ns[0], sleep=time.sleep))
     master, slave = _pty()
-    writer = FdPacketWriter(master, pace_baud=9600, fifo_bytes=150)   # 960 B/s
+    writer = FdPacketWriter(master, pace_baud=9600, fifo_bytes=150)
+    accepted, received = [], b""
     try:
-        start = time.monotonic()
-        sent = 0
-        while time.monotonic() - start < 0.5:
-            sent += 75 * writer.send(b"x" * 75)
-            time.sleep(0.001)
-        elapsed = time.monotonic() - start
+        for ms in range(501):                   # one offer a millisecond for half a second
+            now_ns[0] = 1_000_000_000 + ms * 1_000_000
+            if writer.send(b"x" * 75):
+                accepted.append(ms)
+            received += os.read(slave, 65536) if _readable(slave) else b""
     finally:
         os.close(master)
         os.close(slave)
-    assert sent <= 960 * elapsed + 150 + 75
-    assert sent >= 960 * elapsed * 0.5
+    # k = 0, 1, 2 fit (line + FIFO) at their first offers; then k at the first whole ms >= k x 78.125 - 156.25
+    assert accepted == [0, 1, 2, 79, 157, 235, 313, 391, 469]
+    assert len(accepted) == (500 + 156.25) // 78.125 + 1
+    assert writer.refusals["uart-fifo-full"] == 501 - len(accepted)
+    assert received == b"x" * 75 * len(accepted)
+
+
+def _readable(fd) -> bool:
+    import select
+    return bool(select.select([fd], [], [], 0)[0])
 
 
 def test_slcan_lines():

@@ -5,6 +5,11 @@ import subprocess
 import sys
 from pathlib import Path
 from tests.support.paths import REPO
+from tests.support.timing import scaled
+
+import pytest
+
+pytestmark = pytest.mark.subprocess
 
 ROOT = REPO
 LINT = Path(sys.executable).with_name("lint-imports")
@@ -14,7 +19,7 @@ def _lint(tree: Path) -> subprocess.CompletedProcess:
     # --no-cache: a cache from another tree (or another user) must not decide this check
     return subprocess.run([str(LINT), "--config", str(tree / "pyproject.toml"), "--no-cache"], cwd=tree,
                           env={"PATH": "/usr/bin:/bin", "PYTHONPATH": str(tree)}, capture_output=True, text=True,
-                          timeout=300)
+                          timeout=scaled(300))
 
 
 def test_imports_keep_the_contract():

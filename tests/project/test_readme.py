@@ -14,6 +14,9 @@ import sympy as sp
 
 from tests.support.reference import imu_functions, t
 from tests.support.paths import REPO
+from tests.support.timing import scaled
+
+pytestmark = pytest.mark.subprocess
 
 README = (REPO / "README.md").read_text()
 
@@ -32,7 +35,7 @@ def test_readme_has_the_python_blocks_this_test_runs():
 
 @pytest.mark.parametrize("block", PYTHON_BLOCKS, ids=lambda b: b.strip().splitlines()[-1][:40])
 def test_python_block_runs_in_a_fresh_interpreter(block):
-    result = subprocess.run([sys.executable, "-c", block], capture_output=True, text=True, cwd=REPO, timeout=300)
+    result = subprocess.run([sys.executable, "-c", block], capture_output=True, text=True, cwd=REPO, timeout=scaled(300))
     assert result.returncode == 0, result.stderr
     assert "Warning" not in result.stderr, result.stderr
 
@@ -53,7 +56,7 @@ def test_main_job_runs_as_written_and_gives_the_described_file(tmp_path):
     (tmp_path / "examples").symlink_to(REPO / "examples")
     commands = _main_job_commands()
     for command in commands:
-        result = subprocess.run(command, shell=True, capture_output=True, text=True, cwd=tmp_path, timeout=300)
+        result = subprocess.run(command, shell=True, capture_output=True, text=True, cwd=tmp_path, timeout=scaled(300))
         assert result.returncode == 0, f"{command}: {result.stderr}"
         assert "Traceback" not in result.stderr and "Warning" not in result.stderr, result.stderr
     output = tmp_path / shlex.split(commands[-1])[shlex.split(commands[-1]).index("-o") + 1]

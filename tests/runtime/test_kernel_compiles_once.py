@@ -13,6 +13,9 @@ from pathlib import Path
 
 import pytest
 from tests.support.paths import REPO
+from tests.support.timing import scaled
+
+pytestmark = pytest.mark.subprocess
 
 ROOT = REPO
 RUN = ("import sys\n"
@@ -26,7 +29,7 @@ def _cache_log(cache: Path, native: bool) -> tuple[str, bool]:
     env = {**os.environ, "IMU_EMULATOR_CACHE": str(cache), "NUMBA_DEBUG_CACHE": "1",
            "IMU_EMULATOR_NATIVE": "1" if native else "0"}
     done = subprocess.run([sys.executable, "-c", RUN], cwd=ROOT, env=env, capture_output=True, text=True,
-                          timeout=600, check=True)
+                          timeout=scaled(600), check=True)
     # the generated module's functions: kernel (numba's dispatcher) and kernel_body (what the machine code runs)
     log = "\n".join(line for line in done.stdout.splitlines() if "kernel.kernel" in line)
     return log, "numba imported: True" in done.stdout

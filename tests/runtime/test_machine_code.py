@@ -16,6 +16,8 @@ import pytest
 from imu_emulator.native import objects
 from tests.support.paths import REPO
 
+pytestmark = pytest.mark.subprocess
+
 ROOT = REPO
 
 
@@ -32,7 +34,6 @@ def _mixed(key, scale, values, out, n):
 
 
 def test_exported_function_equals_numba_dispatcher(tmp_path, monkeypatch):
-    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))     # whose secret seals the object
     values = np.linspace(-1.0, 2.0, 10)
     args = (np.uint64(2**63 + 12345), np.float32(1.5), values, np.zeros(10), 8)
     path = tmp_path / "mixed.o"
@@ -55,7 +56,6 @@ def test_exported_function_equals_numba_dispatcher(tmp_path, monkeypatch):
 @pytest.mark.parametrize("damage", [lambda b: b[: len(b) // 2], lambda b: b[:-50] + bytes([b[-50] ^ 1]) + b[-49:],
                                     lambda b: b"garbage"])
 def test_damaged_object_does_not_load(tmp_path, monkeypatch, damage):
-    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
     path = tmp_path / "mixed.o"
     assert objects.export(_mixed, (np.uint64(1), np.float32(1.0), np.zeros(3), np.zeros(3), 3), path, {}, "m.o")
     path.write_bytes(damage(path.read_bytes()))
@@ -115,7 +115,6 @@ def test_entry_reads_arguments_in_place_or_converts_them(tmp_path, monkeypatch, 
     on a copy of the same arguments)."""
     compiled_for = (np.zeros((2, 3)), 5, 2.0)
     path = tmp_path / "f.o"
-    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))     # whose secret seals the object
     assert objects.export(_scaled_sum, compiled_for, path, {}, "f.o")
     function = objects.load(path, "f.o")[0]
     base = np.arange(12.0).reshape(4, 3)
@@ -156,7 +155,6 @@ def test_tuple_of_arrays_is_passed_or_converted_as_numba_would(tmp_path, monkeyp
     arrays are numba's dispatcher's (the oracle, run on copies)."""
     compiled_for = ((np.zeros((3, 2)), np.zeros((1, 2)), np.zeros((4, 1))), np.zeros(5, dtype=np.int64), np.zeros(5))
     path = tmp_path / "picked.o"
-    monkeypatch.setenv("IMU_EMULATOR_CACHE", str(tmp_path / "cache"))
     assert objects.export(_picked, compiled_for, path, {}, "picked.o")
     function = objects.load(path, "picked.o")[0]
     which = np.array([0, 1, 2, 0, 2], dtype=np.int64)

@@ -9,6 +9,8 @@ import sys
 from pathlib import Path
 from tests.support.paths import REPO
 
+import pytest
+
 ROOT = REPO
 HEAVY = ("pint", "dask", "distributed", "babel", "pandas", "matplotlib", "sympy", "numba", "scipy")
 SCENE = """
@@ -41,6 +43,9 @@ bias = true
 PROBE = """
 import json, sys
 from imu_emulator.cli import main
+from tests.support.timing import scaled
+
+pytestmark = pytest.mark.subprocess
 code = main(sys.argv[1:])
 print(json.dumps({"code": code, "modules": sorted(sys.modules)}))
 """
@@ -50,7 +55,7 @@ def _generate(scene: Path, out: Path, cache: Path, native: bool = True) -> dict:
     env = {**os.environ, "IMU_EMULATOR_CACHE": str(cache), "PYTHONPATH": str(ROOT),
            "IMU_EMULATOR_NATIVE": "1" if native else "0"}
     done = subprocess.run([sys.executable, "-c", PROBE, "generate", str(scene), "-o", str(out), "--quiet"],
-                          env=env, capture_output=True, text=True, timeout=900, cwd=ROOT)
+                          env=env, capture_output=True, text=True, timeout=scaled(900), cwd=ROOT)
     assert done.returncode == 0, done.stderr
     result = json.loads(done.stdout.strip().splitlines()[-1])
     assert result["code"] in (0, None), done.stderr

@@ -12,6 +12,8 @@ from imu_emulator import scene_from_dict
 from imu_emulator.codegen.generate import generate_source
 from tests.support.paths import REPO
 
+pytestmark = pytest.mark.subprocess
+
 ROOT = REPO
 LIMIT_S = 120        # a run that loads and refuses a scene takes ~2 s (imports); the hangs took minutes or for ever
 

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 from tests.support.paths import REPO
+from tests.support.timing import scaled
 
 
 SCENE = """
@@ -72,7 +73,7 @@ def emulator_command(*args) -> list[str]:
 
 
 def run_emulator(*args, timeout: float = 60) -> subprocess.CompletedProcess:
-    return subprocess.run(emulator_command(*args), capture_output=True, text=True, timeout=timeout, cwd=REPO)
+    return subprocess.run(emulator_command(*args), capture_output=True, text=True, timeout=scaled(timeout), cwd=REPO)
 
 
 class Emulator:
@@ -96,12 +97,14 @@ class Emulator:
         return self.wait(timeout)
 
     def wait(self, timeout: float = 30) -> tuple[int, str]:
+        """(exit code, stderr); AssertionError if it runs past `timeout` (scaled to the machine)."""
+        limit = scaled(timeout)
         try:
-            _, err = self.proc.communicate(timeout=timeout)
+            _, err = self.proc.communicate(timeout=limit)
         except subprocess.TimeoutExpired:
             self.proc.kill()
             _, err = self.proc.communicate()
-            raise AssertionError(f"emulator did not finish; stderr: {err}")
+            raise AssertionError(f"emulator did not finish within {limit:.0f} s; stderr: {err}")
         return self.proc.returncode, err
 
     def __enter__(self):
@@ -194,20 +197,27 @@ def dronecan_rawimu(frames, fd: bool = False):
 
 
 def read_until_closed(fd, timeout=60.0) -> bytes:
-    """Everything until the emulator closes its side (EIO), as a driver reading a port would."""
+    """Everything until the emulator closes its side (EIO), as a driver reading a port would; AssertionError if
+    it is still open after `timeout` (scaled to the machine), never a silent partial read."""
     chunks = []
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        ready, _, _ = select.select([fd], [], [], 1.0)
-        if ready:
-            try:
-                data = os.read(fd, 65536)
-            except OSError:
-                break
-            if not data:
-                break
-            chunks.append(data)
-    os.close(fd)
+    limit = scaled(timeout)
+    end = time.monotonic() + limit
+    try:
+        while True:
+            if time.monotonic() >= end:
+                raise AssertionError(f"the emulator's port was still open after {limit:.0f} s "
+                                     f"({sum(map(len, chunks))} bytes read)")
+            ready, _, _ = select.select([fd], [], [], 1.0)
+            if ready:
+                try:
+                    data = os.read(fd, 65536)
+                except OSError:
+                    break
+                if not data:
+                    break
+                chunks.append(data)
+    finally:
+        os.close(fd)
     return b"".join(chunks)
 
 

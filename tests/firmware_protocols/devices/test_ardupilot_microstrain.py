@@ -25,6 +25,8 @@ import pytest
 
 from tests.support.stream import Emulator, wire_attitude, write_scene
 
+pytestmark = pytest.mark.subprocess
+
 GRAVITY_MSS = 9.80665
 # MAVLink GPS_FIX_TYPE, as AP_MicroStrain stores it
 NO_GPS, NO_FIX, FIX_2D, FIX_3D, RTK_FLOAT, RTK_FIXED = 0, 1, 2, 3, 5, 6

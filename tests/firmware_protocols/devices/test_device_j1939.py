@@ -8,6 +8,9 @@ import pytest
 
 from tests.live.test_stream_can import _multicast_route_or_skip, free_udp_port
 from tests.support.stream import Emulator, write_scene
+from tests.support.timing import scaled
+
+pytestmark = pytest.mark.subprocess
 
 j1939 = pytest.importorskip("j1939")
 
@@ -41,14 +44,14 @@ def test_address_claim_requests_nack_and_a_lost_contention(tmp_path):
     try:
         with Emulator(scene_path, "--format", "j1939", "--to", f"can:udp_multicast:{GROUP}:{port}", "--duration", "40",
                       "--option", f"ecu_name={OUR_NAME}") as emu:
-            first = bus.recv(timeout=30)          # the stream runs (start-up may take seconds under load)
+            first = bus.recv(timeout=scaled(30))          # the stream runs (start-up may take seconds under load)
             assert first is not None
             start = [(time.monotonic(), first.arbitration_id, bytes(first.data))] + _frames(bus, 2.0)
             # a tool with its own address asks, globally, who is there, then for an unknown PGN at 0x90
             tool = j1939.ControllerApplication(j1939.Name(value=0x2000), 0x20)
             ecu.add_ca(controller_application=tool)
             tool.start()
-            end = time.monotonic() + 5
+            end = time.monotonic() + scaled(5)
             while tool.state != j1939.ControllerApplication.State.NORMAL and time.monotonic() < end:
                 time.sleep(0.05)
             tool.send_request(0, PGN_CLAIM, 0xFF)

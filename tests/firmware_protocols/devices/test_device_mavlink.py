@@ -10,6 +10,9 @@ import pytest
 
 from tests.support.stream import Emulator, read_for, write_scene
 from tests.support.paths import CLIENTS
+from tests.support.timing import scaled
+
+pytestmark = pytest.mark.subprocess
 
 mavlink2 = pytest.importorskip("pymavlink.dialects.v20.common")
 
@@ -162,7 +165,7 @@ def test_mavsdk_discovers_connects_receives_imu_and_sets_its_rate(tmp_path):
         assert client.stdout.readline().strip() == "listening"
         with Emulator(scene_path, "--format", "mavlink-highres", "--to", f"udp:127.0.0.1:{port}",
                       "--duration", "40") as emu:
-            out, _ = client.communicate(timeout=60)
+            out, _ = client.communicate(timeout=scaled(60))
             code, err = emu.interrupt()
     finally:
         if client.poll() is None:

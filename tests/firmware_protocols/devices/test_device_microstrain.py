@@ -12,6 +12,9 @@ import pytest
 
 from tests.support.stream import Emulator, read_for, reference, write_scene
 from tests.support.paths import CLIENTS
+from tests.support.timing import scaled
+
+pytestmark = pytest.mark.subprocess
 
 G = 9.80665
 
@@ -23,7 +26,7 @@ def test_mscl_pings_idles_reads_info_sets_format_and_gets_exactly_that(tmp_path)
     scene, _, accel, gyro = reference(scene_path)
     with Emulator(scene_path, "--format", "microstrain-mip", "--to", "pty", "--duration", "40") as emu:
         client = subprocess.run([sys.executable, str(CLIENTS / "mscl_client.py"),
-                                 emu.targets[0], str(wanted), "1.0"], capture_output=True, text=True, timeout=120)
+                                 emu.targets[0], str(wanted), "1.0"], capture_output=True, text=True, timeout=scaled(120))
         code, err = emu.interrupt()
     assert code == 0, err
     assert client.returncode == 0, client.stderr

@@ -5,6 +5,7 @@ scene computed here, position from the scene's truth through pymap3d, ECEF and b
 position and attitude with pymap3d and scipy, times consistent with one another."""
 import datetime
 
+import pytest
 import numpy as np
 import pymap3d
 from scipy.spatial.transform import Rotation
@@ -13,6 +14,8 @@ from tests.firmware_protocols.devices.test_device_vectornav import Driver
 from tests.support.stream import Emulator, reference, write_scene
 from tests.firmware_protocols.devices.test_vectornav_drivers import (ROS1_HEADER, ROS1_STRUCT, ROS2_CONFIG, ROS2_HEADER, ROS2_STRUCT,
                                     ROS2_VN300_READS, WEEK, WEEK_START, ecef_vector, identity, split)
+
+pytestmark = pytest.mark.subprocess
 
 WEEK_NS = 7 * 86400 * 10**9
 

@@ -6,8 +6,12 @@ import struct
 import time
 
 import numpy as np
+import pytest
 
 from tests.support.stream import FRD_FROM_SCENE, Emulator, read_for, reference, write_scene
+from tests.support.timing import scaled
+
+pytestmark = pytest.mark.subprocess
 
 
 def message(mid: int, data: bytes = b"") -> bytes:
@@ -48,7 +52,7 @@ class Client:
         self.data = b""
         assert read_for(self.fd, 30, stop_after=1)
 
-    def transact(self, sent: bytes, expect_mid: int, timeout=5.0):
+    def transact(self, sent: bytes, expect_mid: int, timeout=scaled(5.0)):
         """Send, resend every 2 s like ArduPilot, until a frame with expect_mid (or an Error) arrives."""
         start = len(self.data)
         end, next_send = time.monotonic() + timeout, 0.0

@@ -73,6 +73,7 @@ def test_a_datagram_left_unfinished_does_not_swallow_the_next_datagrams_commands
     assert device.stats.ignored_bytes == len(garbage)
 
 
+@pytest.mark.realtime      # compares CPU times: not beside another of its kind
 @pytest.mark.parametrize("flood", [b"\xfd", b"\xfe"])
 def test_a_flood_of_mavlink_start_bytes_costs_time_linear_in_its_size(flood):
     """On 168021a 0xFD x 2 MB took 411 s in one call (each false start searched the whole rest for 0xFE)."""
@@ -157,6 +158,7 @@ def test_a_command_cut_by_a_new_one_is_still_answered_as_before():
     assert [r.split(b",")[0] for r in replies] == [b"$VNERR", b"$VNRRG"]
 
 
+@pytest.mark.realtime      # compares CPU times: not beside another of its kind
 @pytest.mark.parametrize("flood", [b"$VNRRG,", b"$"])
 def test_a_flood_of_vectornav_lines_costs_time_linear_in_its_size(flood):
     """On 168021a `$VNRRG,` x 128 KiB took 42 s: each line searched the whole buffer for CR and LF (a memchr,

@@ -14,6 +14,8 @@ from tests.support.stream import Emulator, read_for, write_scene
 mavlink2 = pytest.importorskip("pymavlink.dialects.v20.common")
 from tests.support.devices import command_long, gcs  # noqa: E402
 
+pytestmark = pytest.mark.subprocess
+
 
 def _kinds(data):
     return [m for m in gcs().parse_buffer(data) or [] if m.get_type() != "BAD_DATA"]

@@ -16,6 +16,7 @@ from firmware_protocols import registry
 from firmware_protocols.base import EncodeError, Samples
 from firmware_protocols.wire_formats.microstrain import FIELDS, MipDecoder, MipEncoder
 from tests.support.stream_fuzz import damaged_stream, feed_in_chunks
+from tests.support.timing import scaled
 
 SETTINGS = settings(derandomize=True, deadline=None, max_examples=60,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
@@ -245,7 +246,7 @@ def mscl_packets(data: bytes, n: int) -> list:
     try:
         node = mscl.InertialNode(connection)
         os.write(master, data)
-        received, deadline = [], time.monotonic() + 5.0
+        received, deadline = [], time.monotonic() + scaled(5.0)
         while len(received) < n and time.monotonic() < deadline:
             received += list(node.getDataPackets(200))
     finally:

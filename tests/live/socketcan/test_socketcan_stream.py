@@ -9,8 +9,9 @@ import time
 import pytest
 
 from tests.support.stream import Emulator, write_scene  # noqa: E402
+from tests.support.timing import scaled
 
-pytestmark = pytest.mark.socketcan
+pytestmark = [pytest.mark.socketcan, pytest.mark.subprocess]
 
 
 def _vcan0_or_skip():
@@ -39,16 +40,16 @@ def test_rawimu_on_vcan0_decoded_by_dronecan_and_seen_by_candump(tmp_path):
             # NodeStatus (data type 341) shares the bus once a second: count RawIMU (1003) frames only
             # (incrementally: the guest is slow, and a reader that falls behind loses frames in the kernel)
             while raw_imu_frames < 7 * count:
-                message = bus.recv(timeout=30 if not frames else 5)
+                message = bus.recv(timeout=scaled(30) if not frames else 5)
                 if message is None:
                     break
                 frames.append((message.arbitration_id, bytes(message.data)))
                 raw_imu_frames += (message.arbitration_id >> 8) & 0xFFFF == 1003
-            code, err = emu.wait(timeout=60)
+            code, err = emu.wait(timeout=scaled(60))
     finally:
         bus.shutdown()
         candump.terminate()
-    dumped, _ = candump.communicate(timeout=10)
+    dumped, _ = candump.communicate(timeout=scaled(10))
     assert code == 0, err
     assert json.loads(stats.read_text())["dropped"] == 0
     raw_imu = [(i, d) for i, d in frames if (i >> 8) & 0xFFFF == 1003]
@@ -76,12 +77,12 @@ def test_dronecan_node_sees_node_status_and_gets_node_info(tmp_path):
         with Emulator(scene_path, "--format", "dronecan-rawimu", "--to", "can:socketcan:vcan0",
                       "--duration", "30", "--quiet", "--option", "node_id=42",
                       "--option", "node_name=org.imu_emulator.test") as emu:
-            end = time.monotonic() + 60
+            end = time.monotonic() + scaled(60)
             while len({s for n, s in statuses if n == 42}) < 3 and time.monotonic() < end:
                 node.spin(0.2)
             node.request(dronecan.uavcan.protocol.GetNodeInfo.Request(), 42,
                          lambda event: infos.append(event.response if event else None))
-            end = time.monotonic() + 30
+            end = time.monotonic() + scaled(30)
             while not infos and time.monotonic() < end:
                 node.spin(0.2)
             code, err = emu.interrupt()
@@ -114,11 +115,11 @@ def test_candump_at_normal_priority_receives_every_frame_of_every_transfer_with_
         try:
             with Emulator(scene_path, "--format", "dronecan-rawimu", "--to", "can:socketcan:vcan0", *link,
                           "--duration", seconds, "--stats-json", stats) as emu:
-                code, err = emu.wait(timeout=300)
+                code, err = emu.wait(timeout=scaled(300))
             time.sleep(0.5)   # candump takes what is still queued for it
         finally:
             candump.terminate()
-            candump.wait(timeout=10)
+            candump.wait(timeout=scaled(10))
     assert code == 0, err
     summary = json.loads(stats.read_text())
     assert summary["scheduling"] == "off"      # one CPU: the default neither spins nor takes SCHED_FIFO
