@@ -7,9 +7,13 @@ import os
 import subprocess
 import sys
 from pathlib import Path
-from tests.support.paths import REPO
 
 import pytest
+
+from tests.support.paths import REPO
+from tests.support.timing import scaled
+
+pytestmark = pytest.mark.subprocess
 
 ROOT = REPO
 HEAVY = ("pint", "dask", "distributed", "babel", "pandas", "matplotlib", "sympy", "numba", "scipy")
@@ -43,9 +47,6 @@ bias = true
 PROBE = """
 import json, sys
 from imu_emulator.cli import main
-from tests.support.timing import scaled
-
-pytestmark = pytest.mark.subprocess
 code = main(sys.argv[1:])
 print(json.dumps({"code": code, "modules": sorted(sys.modules)}))
 """
