@@ -46,9 +46,10 @@ def fresh_cache(tmp_path, monkeypatch) -> Path:
 
 
 def pytest_collection_modifyitems(config, items):
-    # Tests that pace, sleep or compare CPU times share one xdist group, so --dist loadgroup runs them one after
-    # another in one worker: two of them never compete for a core with each other (the other worker still runs
-    # ordinary tests beside them, so they must hold under load too; -n 0 runs them alone).
+    # Tests that pace, sleep, compare CPU times or start the emulator share one xdist group, so --dist loadgroup
+    # runs them one after another in one worker. A streaming emulator's sender spins at SCHED_FIFO ("auto"): two
+    # at once on two cores starve every normal thread, their own SIGINT handling included (seen: an emulator not
+    # stopping within 10 s of SIGINT). The other worker runs the ordinary tests beside them.
     for item in items:
-        if item.get_closest_marker("realtime") or item.get_closest_marker("uml"):
+        if any(item.get_closest_marker(name) for name in ("realtime", "uml", "subprocess")):
             item.add_marker(pytest.mark.xdist_group("realtime"))
