@@ -88,7 +88,7 @@ def to_body_axes(samples: Samples, axes: str) -> Samples:
 
 def declared(encoder_factory) -> tuple[str | None, str | None]:
     """(body_axes, reference) a registered encoder factory declares: the class itself, or the class a
-    functools.partial binds. (None, None) when it declares nothing (tests/test_formats_contract.py catches that)."""
+    functools.partial binds. (None, None) when it declares nothing (tests/firmware_protocols/test_formats_contract.py catches that)."""
     cls = getattr(encoder_factory, "func", encoder_factory)
     return getattr(cls, "body_axes", None), getattr(cls, "reference", None)
 

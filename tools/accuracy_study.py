@@ -1,5 +1,5 @@
 """What accuracy costs in time: every way the project produces IMU samples, on the same motions, against an
-independent symbolic truth (tests/reference.py: sympy, rates from R^T dR/dt).
+independent symbolic truth (tests/support/reference.py: sympy, rates from R^T dR/dt).
 
     python tools/accuracy_study.py [--quick] [--out docs/accuracy]
 
@@ -35,7 +35,6 @@ import sympy as sp
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests"))
 
 from imu_emulator.runtime import kernels as kernel_module  # noqa: E402
 from imu_emulator import scene_from_dict  # noqa: E402
@@ -43,7 +42,7 @@ from imu_emulator.motion.attitude_rates import dcm_rate, euler_rate, increment_r
 from imu_emulator.numerics.derivatives import wrap_angles  # noqa: E402
 from imu_emulator.scene.model import DEFAULT_DERIVATIVE  # noqa: E402
 from imu_emulator.runtime.simulation import Simulation  # noqa: E402
-from reference import imu_functions, t as T  # noqa: E402
+from tests.support.reference import imu_functions, t as T  # noqa: E402
 
 G0 = 9.80665
 OUTPUT_HZ = 1000.0
@@ -329,7 +328,7 @@ def write_markdown(rows, path, command, elapsed):
             "ω max int", "ω rms int", "ω max ends", "ω rms ends", "set-up s", "ns/sample"]
     out = ["# What accuracy costs in time", "",
            f"Regenerate: `{command}` ({elapsed:.0f} s on the machine that wrote this). Errors are the norm of the "
-           "error vector per sample against an independent sympy derivation (tests/reference.py): specific force "
+           "error vector per sample against an independent sympy derivation (tests/support/reference.py): specific force "
            "f at the IMU in m/s², angular rate ω in rad/s; *int* = middle 90 % of the 5 s run, *ends* = first and "
            "last 5 %. Set-up = scene parsing + kernel generation/compilation into an empty cache + fitting; "
            "ns/sample = one `Simulation.block` over the run after warm-up (sampled rows include evaluating "

@@ -34,9 +34,9 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "tests"))
+sys.path.insert(0, str(REPO))
 from bench_stream import SCENE, read_until_exit  # noqa: E402  (tools/ is on the path: this script's folder)
-from test_stream_support import candump_frames, dronecan_rawimu  # noqa: E402  (the tests' receiver: dronecan reassembles)
+from tests.support.stream import candump_frames, dronecan_rawimu  # noqa: E402  (the tests' receiver: dronecan reassembles)
 from imu_emulator.live.realtime import LatenessStats  # noqa: E402
 MODES = ("auto", "spin", "fifo", "off")
 BUSY = "while True: pass"
@@ -195,7 +195,7 @@ def guest(args) -> int:
 
 
 def boot_guest(args, show) -> None:
-    sys.path.insert(0, str(REPO / "tests" / "uml"))
+    sys.path.insert(0, str(REPO / "tests" / "support" / "uml"))
     import boot as uml
     reason = uml.unavailable()
     if reason:

@@ -5,7 +5,7 @@ Sources: LORD-MicroStrain/mip_sdk (src/mip/definitions/commands_base.h, commands
 reply fields; mip_result.h: ACK 0x00, NACK 0x01 unknown command, 0x02 invalid checksum, 0x03 invalid
 parameter, 0x04 command failed), ../shared/specs/devices.md (what SDK clients send: ping, set idle, device
 information and descriptors, message formats, enable streams, resume), and MicroStrain's own MSCL (pymscl)
-as the client in tests/test_device_microstrain.py.
+as the client in tests/firmware_protocols/devices/test_device_microstrain.py.
 
 A reply is one packet in the command's descriptor set: the ACK/NACK field `04 F1 <command> <code>`, then
 any data the command returns. Commands:

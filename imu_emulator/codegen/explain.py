@@ -5,7 +5,7 @@
 
 Only effect names and descriptions from the effect records, names the generator makes and the repr of validated
 numbers enter these comments, never user text (IMU names, paths, expression text):
-tests/test_kernel_source_safety.py checks the whole source, comments included.
+tests/codegen/test_kernel_source_safety.py checks the whole source, comments included.
 """
 from __future__ import annotations
 

@@ -3,7 +3,7 @@ through the part's errors.
 
 The model is NOAA/NCEI's WMM2025 (valid 2025.0-2030.0) as pygeomag evaluates it: a pure-Python package (no
 compiled code to build), MIT licence, carrying NOAA's own WMM2025.COF coefficients and reproducing NOAA's test
-value table (tests/test_companions.py). geomaglib is NOAA's reference port but needs its own wheels; ppigrf is
+value table (tests/companions/test_companions.py). geomaglib is NOAA's reference port but needs its own wheels; ppigrf is
 IGRF (a different model, fine for science, not what navigation parts compensate with). The field is evaluated
 at `date_year` (secular variation over a run, ~100 nT a year, is far below a part's noise) and memoised per
 cell of CELL_DEG x CELL_DEG x CELL_M around the position: the main field changes by less than 0.02 nT

@@ -18,8 +18,8 @@ SIGMA_PER_B = 0.856
 #: a plain Gauss-Markov process steps at least STEPS_PER_TAU times per tau (its per-knot statistics are
 #: exact, the straight lines between knots its only approximation); a pole of the flicker sum at least
 #: FLICKER_STEPS_PER_TAU times: only the sum's Allan curve is promised, and interpolating a pole over tau / 10
-#: changes it by far less than its confidence intervals at tau >= 0.1 s (tests/test_allan.py, the 2 h tests and
-#: tests/test_presets.py pass at 10 as at 20; the per-pole variance dips by (1 - exp(-1/10)) / 2 = 4.8 % midway
+#: changes it by far less than its confidence intervals at tau >= 0.1 s (tests/effects/test_allan.py, the 2 h tests and
+#: tests/scene/test_presets.py pass at 10 as at 20; the per-pole variance dips by (1 - exp(-1/10)) / 2 = 4.8 % midway
 #: between knots, 0.8 % of a six-pole sum). 10 rather than 20 halves the knot work: -5 ns/sample of the full
 #: model (tools/bench_bias_instability.py --steps 20,10)
 STEPS_PER_TAU = 100

@@ -118,7 +118,13 @@ def check_tree(directory: Path) -> None:
     for dirpath, dirnames, filenames in os.walk(directory):
         for name in dirnames + filenames:
             path = os.path.join(dirpath, name)
-            check_private(path, os.lstat(path))
+            try:
+                st = os.lstat(path)
+            except FileNotFoundError:
+                # Gone since the listing: a concurrent run's temporary file, renamed into place (numba's index, the
+                # machine code). Nothing loads a file that is not there; before this, the race raised instead.
+                continue
+            check_private(path, st)
 
 
 _secrets: dict[tuple[str, int, int], bytes] = {}

@@ -3,7 +3,7 @@
 The scene's navigation frame (ENU or NED) is a local tangent plane at [scene] origin; a scene without one uses
 DEFAULT_ORIGIN: PX4 SITL's default home (47.397742 N, 8.545594 E, 488 m above the ellipsoid),
 a point users of those drivers recognise. Conversion is exact (tangent plane -> ECEF -> geodetic,
-imu_emulator.geo.frames), not a flat-Earth approximation; tests/test_geodesy.py checks it against pymap3d.
+imu_emulator.geo.frames), not a flat-Earth approximation; tests/geo/test_geodesy.py checks it against pymap3d.
 """
 from __future__ import annotations
 

@@ -44,7 +44,7 @@ def normal_gravity_north(lat_rad, h_m):
     along the ellipsoid normal). The field is curl-free, so dg_N/dh = dg_up/dx_N = -(1/R_N) dgamma_0/dL, to
     first order in h/R: g_N = -h/R_N dgamma_0/dL with Somigliana's gamma_0, i.e.
     -gamma_e sin 2L (k w^2 + (1 + k sin^2 L) e2/2) h / (a (1 - e2)), w^2 = 1 - e2 sin^2 L: about -8.14e-9 h sin 2L
-    (Groves 2nd ed. eq. 2.142 rounds it to -8.08e-9 h sin 2L; tests/test_earth_gravity_north.py checks it
+    (Groves 2nd ed. eq. 2.142 rounds it to -8.08e-9 h sin 2L; tests/geo/test_earth_gravity_north.py checks it
     against the J2 + J4 gravitational potential)."""
     s = np.sin(lat_rad)
     s2 = s * s

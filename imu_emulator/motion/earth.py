@@ -38,7 +38,7 @@ from imu_emulator.scene.earth import position_frame
 #: updates of the geodetic latitude after Bowring's start (tan L from the parametric latitude u, tan u =
 #: a z / (b p)): the start is within 1e-13 rad at 10 km, 1e-9 at 1000 km, 4e-7 at 40 000 km, and each update
 #: (tan L = z / (p (1 - e2 N / (N + h)))) squares the error times about e2, so two reach 1e-15 rad from the
-#: ground to beyond geostationary height (imu_emulator.geo.frames runs the same scheme; tests/test_frames.py)
+#: ground to beyond geostationary height (imu_emulator.geo.frames runs the same scheme; tests/geo/test_frames.py)
 GEODETIC_UPDATES = 2
 
 

@@ -5,7 +5,7 @@ kernel's output times (which need not be input times, nor at the input rate).  P
 up to the third (tangent attitude turns acceleration into angular rate and jerk into angular acceleration),
 attitude angles up to the second.
 
-Methods (`METHODS`), with the error orders measured by tests/test_derivatives.py on a smooth signal,
+Methods (`METHODS`), with the error orders measured by tests/numerics/test_derivatives.py on a smooth signal,
 uniform input step h, d = derivative order:
 
 =========  ===========================================================  ==================================

@@ -50,7 +50,7 @@ def correlation_spectrum(taps_reversed, n: int) -> list[float]:
 
 
 # No fastmath (here and below): reassociated or contracted arithmetic could compile differently in the kernel's
-# machine code and in numba's dispatcher (tests/test_native_kernel.py holds the two to the bit)
+# machine code and in numba's dispatcher (tests/runtime/test_native_kernel.py holds the two to the bit)
 @jit
 def fft(state, re, im, n, prm, tw):
     """In place, the DFT X_k = sum_j x_j exp(-2 pi i j k / n) of the n complex values (state[re + j],

@@ -51,7 +51,7 @@ class Format:
 
     `estimated_bytes(scene, truth, increments)`: the file's size before the run (`check` prints it, and the
     checks before a run use it); `margin` (low, high): the real file's size over the estimate lies in it for a
-    run with noise (tests/test_output_earth_formats.py holds every format to its margin)."""
+    run with noise (tests/output/test_output_earth_formats.py holds every format to its margin)."""
     name: str                                       # as `check` prints it: "CSV"
     suffixes: tuple[str, ...]                       # lower case, with the dot
     open: Callable[[Path, Contents], Writer]

@@ -2,7 +2,7 @@
 
 A small grammar over a fixed table of units (UNITS), rather than pint: importing pint (and through it dask, babel,
 scipy) doubled the start-up of a warm `generate` of a scene written with units (tools/bench_startup_against.py),
-and the table is all a scene needs. tests/test_units_table.py checks every entry's factor and dimension against
+and the table is all a scene needs. tests/scene/test_units_table.py checks every entry's factor and dimension against
 pint's own registry, so pint stays the oracle without being imported here.
 
 Datasheets and pint disagree on one symbol: "g" is standard gravity here (so "ug", "mg" are micro-g and milli-g),

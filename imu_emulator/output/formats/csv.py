@@ -4,7 +4,7 @@ per IMU per sample. Numbers are the shortest text that reads back as the same do
 (imu_emulator.output.csv_text).
 
 Size: CSV_CHARS_PER_NUMBER characters a number, an estimate (shortest round-trip text is 16-17 significant
-digits for most measured doubles, fewer for round ones): tests/test_output_earth_formats.py holds it within
+digits for most measured doubles, fewer for round ones): tests/output/test_output_earth_formats.py holds it within
 CSV_ESTIMATE_MARGIN of an Earth run with noise; runs of round numbers come out smaller (two_imus.toml,
 noise-free: 0.72-0.99 of it). `csv_bytes`, every number at its longest, is the bound the disk check uses.
 """

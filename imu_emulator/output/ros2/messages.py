@@ -1,7 +1,7 @@
 """The ROS 2 messages a bag holds, each as its definition (MCAP's "ros2msg" schema text: the type, then every
 type it uses after a separator line, as rosbag2 writes it) and its CDR layout for one topic (cdr.Layout: the
 frame ids are the topic's constants). Field order and types are those of the ROS 2 Humble message files
-(sensor_msgs, nav_msgs, geometry_msgs, tf2_msgs, std_msgs, builtin_interfaces); tests/test_output_ros2_cdr.py
+(sensor_msgs, nav_msgs, geometry_msgs, tf2_msgs, std_msgs, builtin_interfaces); tests/output/test_output_ros2_cdr.py
 checks every layout byte for byte against rosbags' serializer.
 """
 from __future__ import annotations

@@ -10,7 +10,7 @@ independent of the position's. A least-squares spline s(t) on uniform knots mini
 covariance is (B^T W B)^-1 with B the stacked design rows (values at t_i, derivatives at u_k) and W the
 weights, so the variance of any derivative of the fit is known in closed form (`acceleration_std`); with
 velocities the acceleration's variance is lower than from positions alone, by how much depends on the two
-noise levels, the rates and the knot spacing (tests/test_joint_fit.py states and checks it)."""
+noise levels, the rates and the knot spacing (tests/scene/logs/test_joint_fit.py states and checks it)."""
 from __future__ import annotations
 
 import warnings
