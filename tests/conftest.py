@@ -46,10 +46,12 @@ def fresh_cache(tmp_path, monkeypatch) -> Path:
 
 
 def pytest_collection_modifyitems(config, items):
-    # Tests that pace, sleep, compare CPU times or start the emulator share one xdist group, so --dist loadgroup
+    # Tests that pace, sleep, compare CPU times or start a live stream share one xdist group, so --dist loadgroup
     # runs them one after another in one worker. A streaming emulator's sender spins at SCHED_FIFO ("auto"): two
     # at once on two cores starve every normal thread, their own SIGINT handling included (seen: an emulator not
-    # stopping within 10 s of SIGINT). The other worker runs the ordinary tests beside them.
+    # stopping within 10 s of SIGINT). The other worker runs the ordinary tests beside them, and the processes
+    # that stream nothing (generate, align, a wheel's install, the docs build): one group of everything that
+    # starts a process kept one worker busy for most of the run.
     for item in items:
-        if any(item.get_closest_marker(name) for name in ("realtime", "uml", "subprocess")):
+        if any(item.get_closest_marker(name) for name in ("realtime", "uml", "streams")):
             item.add_marker(pytest.mark.xdist_group("realtime"))

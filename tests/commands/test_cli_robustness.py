@@ -14,7 +14,7 @@ import pytest
 from tests.support.stream import REPO, Emulator, mavlink_parse, open_pty_reader, read_for, run_emulator, write_scene
 from tests.support.timing import scaled
 
-pytestmark = pytest.mark.subprocess
+pytestmark = [pytest.mark.subprocess, pytest.mark.streams]
 
 WARNING = "warning: imu[1].mounting_rpy_deg is ignored because effects.mounting is not true"
 

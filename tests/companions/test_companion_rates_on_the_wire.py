@@ -28,7 +28,7 @@ def closed_form_new(rate_hz: int, delay_samples: int = 0) -> np.ndarray:
 MAG_NEW, BARO_NEW = closed_form_new(MAG_HZ), closed_form_new(BARO_HZ)
 GNSS_NEW = closed_form_new(GNSS_HZ, LATENCY_SAMPLES)
 # generate and stream in subprocesses: some 20 s
-pytestmark = [pytest.mark.slow, pytest.mark.subprocess]
+pytestmark = [pytest.mark.slow, pytest.mark.subprocess, pytest.mark.streams]
 
 STREAMS = (("hil_sensor", "mavlink-hil-sensor", "bin"), ("scaled_pressure", "mavlink-scaled-pressure", "bin"),
            ("hil_gps", "mavlink-hil-gps", "bin"), ("dronecan", "dronecan-gnss-compass-baro", "log"),

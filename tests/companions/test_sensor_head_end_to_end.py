@@ -22,7 +22,7 @@ from tests.firmware_protocols.wire_formats.test_xsens import ap_parse_mtdata2
 from tests.support.paths import REPO
 from tests.support.timing import scaled
 
-pytestmark = pytest.mark.subprocess
+pytestmark = [pytest.mark.subprocess, pytest.mark.streams]
 
 ROOT = REPO
 RATE = 200.0

@@ -23,7 +23,7 @@ from firmware_protocols.base import Samples
 from tests.support.paths import REPO
 from tests.support.timing import scaled
 
-pytestmark = pytest.mark.subprocess
+pytestmark = [pytest.mark.subprocess, pytest.mark.streams]
 
 UTC = timezone.utc
 START_ISO = "2026-11-27T12:00:00Z"

@@ -26,7 +26,7 @@ import ardupilot_sitl_run  # noqa: E402
 import sitl_report  # noqa: E402
 from tests.support.timing import scaled
 
-pytestmark = pytest.mark.subprocess
+pytestmark = [pytest.mark.subprocess, pytest.mark.streams]
 
 ORIGIN = (-35.363262, 149.165237, 584.0)
 

@@ -17,7 +17,7 @@ from tests.interop.test_sitl_backends import Px4Model, SimJsonModel, _free_port
 from tests.support.stream import REPO, emulator_command
 from tests.support.timing import scaled
 
-pytestmark = pytest.mark.subprocess
+pytestmark = [pytest.mark.subprocess, pytest.mark.streams]
 
 RATE_HZ, RADIUS_M, FREQ_HZ = 250.0, 5.0, 0.5
 ORIGIN = (47.397742, 8.545594, 488.0)

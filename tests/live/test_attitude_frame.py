@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 
 from tests.support.stream import reference, run_emulator, write_scene
 
-pytestmark = pytest.mark.subprocess
+pytestmark = [pytest.mark.subprocess, pytest.mark.streams]
 
 HEADER = bytes([0x01, 0x11, 0x00])      # Common group: TimeStartup, Quaternion
 SIZE = 1 + 3 + 8 + 16 + 2

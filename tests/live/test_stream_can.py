@@ -10,7 +10,7 @@ import pytest
 
 from tests.support.stream import Emulator, dronecan_rawimu, reference, run_emulator, write_scene
 
-pytestmark = pytest.mark.subprocess
+pytestmark = [pytest.mark.subprocess, pytest.mark.streams]
 
 
 def _check_rawimu(frames, scene_path, imu=0, minimum=100):

@@ -7,7 +7,7 @@ import pytest
 
 from tests.support.stream import REPO, run_emulator, write_scene
 
-pytestmark = pytest.mark.subprocess
+pytestmark = [pytest.mark.subprocess, pytest.mark.streams]
 
 
 def _one_line_error(result):

@@ -9,7 +9,7 @@ import pytest
 from tests.support.stream import (Emulator, check_highres_against_scene, mavlink_parse, open_pty_reader, read_for,
                                  read_until_closed, reference, write_scene)
 
-pytestmark = pytest.mark.subprocess
+pytestmark = [pytest.mark.subprocess, pytest.mark.streams]
 
 
 def _seq_steps(messages):

@@ -15,7 +15,7 @@ import pytest
 from tests.support.paths import REPO
 from tests.support.timing import scaled
 
-pytestmark = pytest.mark.subprocess
+pytestmark = [pytest.mark.subprocess, pytest.mark.streams]
 
 ROOT = REPO
 RUN = ("import sys\n"

@@ -16,7 +16,7 @@ import pytest
 from imu_emulator.native import objects
 from tests.support.paths import REPO
 
-pytestmark = pytest.mark.subprocess
+pytestmark = [pytest.mark.subprocess, pytest.mark.streams]
 
 ROOT = REPO
 

@@ -25,7 +25,7 @@ import pytest
 
 from tests.support.stream import Emulator, wire_attitude, write_scene
 
-pytestmark = pytest.mark.subprocess
+pytestmark = [pytest.mark.subprocess, pytest.mark.streams]
 
 GRAVITY_MSS = 9.80665
 # MAVLink GPS_FIX_TYPE, as AP_MicroStrain stores it

@@ -10,7 +10,7 @@ from tests.live.test_stream_can import _multicast_route_or_skip, free_udp_port
 from tests.support.stream import Emulator, write_scene
 from tests.support.timing import scaled
 
-pytestmark = pytest.mark.subprocess
+pytestmark = [pytest.mark.subprocess, pytest.mark.streams]
 
 j1939 = pytest.importorskip("j1939")
 

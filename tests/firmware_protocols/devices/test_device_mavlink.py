@@ -12,7 +12,7 @@ from tests.support.stream import Emulator, read_for, write_scene
 from tests.support.paths import CLIENTS
 from tests.support.timing import scaled
 
-pytestmark = pytest.mark.subprocess
+pytestmark = [pytest.mark.subprocess, pytest.mark.streams]
 
 mavlink2 = pytest.importorskip("pymavlink.dialects.v20.common")
 

@@ -14,7 +14,7 @@ from tests.support.stream import Emulator, read_for, reference, write_scene
 from tests.support.paths import CLIENTS
 from tests.support.timing import scaled
 
-pytestmark = pytest.mark.subprocess
+pytestmark = [pytest.mark.subprocess, pytest.mark.streams]
 
 G = 9.80665
 

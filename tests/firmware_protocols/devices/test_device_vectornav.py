@@ -15,7 +15,7 @@ import pytest
 
 from tests.support.stream import Emulator, read_for, reference, wire_attitude, write_scene
 
-pytestmark = pytest.mark.subprocess
+pytestmark = [pytest.mark.subprocess, pytest.mark.streams]
 
 _LINE = re.compile(rb"\$VN[A-Z]{3}[^$\r\n]*\*[0-9A-F]{2,4}\r\n")
 

@@ -15,7 +15,7 @@ from tests.support.stream import Emulator, reference, write_scene
 from tests.firmware_protocols.devices.test_vectornav_drivers import (ROS1_HEADER, ROS1_STRUCT, ROS2_CONFIG, ROS2_HEADER, ROS2_STRUCT,
                                     ROS2_VN300_READS, WEEK, WEEK_START, ecef_vector, identity, split)
 
-pytestmark = pytest.mark.subprocess
+pytestmark = [pytest.mark.subprocess, pytest.mark.streams]
 
 WEEK_NS = 7 * 86400 * 10**9
 

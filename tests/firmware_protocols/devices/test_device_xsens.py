@@ -11,7 +11,7 @@ import pytest
 from tests.support.stream import FRD_FROM_SCENE, Emulator, read_for, reference, write_scene
 from tests.support.timing import scaled
 
-pytestmark = pytest.mark.subprocess
+pytestmark = [pytest.mark.subprocess, pytest.mark.streams]
 
 
 def message(mid: int, data: bytes = b"") -> bytes:

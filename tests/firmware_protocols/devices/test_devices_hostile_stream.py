@@ -14,7 +14,7 @@ from tests.support.stream import Emulator, read_for, write_scene
 mavlink2 = pytest.importorskip("pymavlink.dialects.v20.common")
 from tests.support.devices import command_long, gcs  # noqa: E402
 
-pytestmark = pytest.mark.subprocess
+pytestmark = [pytest.mark.subprocess, pytest.mark.streams]
 
 
 def _kinds(data):

@@ -11,7 +11,7 @@ import pytest
 from tests.support.stream import Emulator, write_scene  # noqa: E402
 from tests.support.timing import scaled
 
-pytestmark = [pytest.mark.socketcan, pytest.mark.subprocess]
+pytestmark = [pytest.mark.socketcan, pytest.mark.subprocess, pytest.mark.streams]
 
 
 def _vcan0_or_skip():
