@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import firmware_protocols
+from tests.support.timing import scaled
 from firmware_protocols import Samples
 from imu_emulator.live.config import StreamConfig
 from imu_emulator.live.stream import Stream
@@ -158,14 +159,18 @@ def test_a_command_cut_by_a_new_one_is_still_answered_as_before():
     assert [r.split(b",")[0] for r in replies] == [b"$VNERR", b"$VNRRG"]
 
 
-@pytest.mark.realtime      # compares CPU times: not beside another of its kind
+@pytest.mark.realtime      # measures CPU time: not beside another of its kind
 @pytest.mark.parametrize("flood", [b"$VNRRG,", b"$"])
-def test_a_flood_of_vectornav_lines_costs_time_linear_in_its_size(flood):
-    """On 168021a `$VNRRG,` x 128 KiB took 42 s: each line searched the whole buffer for CR and LF (a memchr,
-    so the quadratic term shows late: this ratio measured 7.6 there, 4.0 with the fix; 4 is linear)."""
-    def run(data):
-        firmware_protocols.create_device("vectornav-binary", 100.0).receive(data)
-    assert cpu_ratio(run, flood * 32_768, flood * 131_072) < 5.5
+def test_a_flood_of_vectornav_lines_is_not_quadratic(flood):
+    """On 168021a `$VNRRG,` x 128 Ki took 42 s of CPU: each line searched the whole buffer for CR and LF. Fixed,
+    it takes 0.56-0.69 s (2026-12-02, AMD EPYC). A limit of 8 s (scaled to the machine) stops the quadratic
+    parser 5 times over and leaves the linear one 11 times its cost: a hang limit, not a speed figure (the
+    ratio of two sizes, asserted here before, crossed its bound under load; tools/bench_decoder_floods.py
+    prints the figures)."""
+    import time
+    start = time.process_time()
+    firmware_protocols.create_device("vectornav-binary", 100.0).receive(flood * 131_072)
+    assert time.process_time() - start < scaled(8.0)
 
 
 # - the reply path -
