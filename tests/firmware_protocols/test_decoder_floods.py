@@ -41,7 +41,7 @@ def _floods(name: str) -> dict:
     return units
 
 
-def _cpu_ns(name: str, data: bytes, repeats: int = 2) -> int:
+def _cpu_ns(name: str, data: bytes, repeats: int = 3) -> int:
     best = None
     for _ in range(repeats):
         decoder = fp.create_decoder(name)
@@ -55,8 +55,8 @@ def _cpu_ns(name: str, data: bytes, repeats: int = 2) -> int:
 @pytest.mark.realtime      # compares CPU times: not beside another of its kind
 @pytest.mark.parametrize("name", DECODERS)
 def test_flood_decodes_in_time_proportional_to_its_size(name):
-    # Linear cost gives a ratio of 4 between 200 kB and 50 kB, quadratic cost 16; 8 leaves room for noise
-    # on a shared machine. The 1 ms added to both keeps timer noise on floods that cost nothing from
+    # Linear cost gives a ratio of 4 between 200 kB and 50 kB, quadratic cost 16; 11 leaves room for noise
+    # on a shared machine (8 was crossed once, 8.3, beside the other xdist worker). The 1 ms added to both keeps timer noise on floods that cost nothing from
     # deciding the ratio (a quadratic 200 kB flood costs seconds, far above it).
     floor = 1_000_000
     for label, unit in _floods(name).items():
@@ -64,7 +64,7 @@ def test_flood_decodes_in_time_proportional_to_its_size(name):
         large = (unit * (200_000 // len(unit) + 1))[:200_000]
         t_small, t_large = _cpu_ns(name, small), _cpu_ns(name, large)
         ratio = (t_large + floor) / (t_small + floor)
-        assert ratio < 8, f"{name}, flood of {label!r}: 200 kB took {t_large / 1e6:.1f} ms, " \
+        assert ratio < 11, f"{name}, flood of {label!r}: 200 kB took {t_large / 1e6:.1f} ms, " \
                           f"50 kB {t_small / 1e6:.1f} ms (ratio {ratio:.1f})"
 
 
