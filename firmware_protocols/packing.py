@@ -245,25 +245,19 @@ class FrameScanner:
         self._bad_end = 0       # stream offset just after the last damaged candidate answered
 
     def frames(self, chunk: bytes) -> list[bytes]:
-        return [frame for frame, ok in self.candidates(chunk) if ok]
+        """The complete frames whose checksum held, in stream order."""
+        return [frame for frame, ok in self._candidates(chunk, keep_damaged=False) if ok]
 
     def candidates(self, chunk: bytes) -> list[tuple[bytes, bool]]:
         """Complete candidates in stream order with whether their checksum held: a device answers a damaged
-        command (Xsens Error, MIP NACK) where a decoder only counts it."""
-        return [(frame, ok) for frame, ok, _ in self.marked_candidates(chunk)]
+        command (Xsens Error, MIP NACK) where a decoder only counts it. A damaged candidate that starts inside
+        the last damaged one is left out: a device answers only the first, so a flood of sync patterns (each a
+        false frame overlapping the previous) gets one error reply per claimed frame length, not one per sync."""
+        return self._candidates(chunk, keep_damaged=True)
 
-    def marked_candidates(self, chunk: bytes) -> list[tuple[bytes, bool, bool]]:
-        """candidates, each also with whether it starts inside the last damaged one: a device answers only the
-        first of those, so a flood of sync patterns (each a false frame overlapping the previous) gets one
-        error reply per claimed frame length instead of one per sync."""
-        marked = []
-        for frame, ok, start in self._candidates(chunk):
-            marked.append((frame, ok, start < self._bad_end))
-            if not ok and start >= self._bad_end:
-                self._bad_end = start + len(frame)
-        return marked
-
-    def _candidates(self, chunk: bytes) -> list[tuple[bytes, bool, int]]:
+    def _candidates(self, chunk: bytes, keep_damaged: bool) -> list[tuple[bytes, bool]]:
+        # Damaged candidates are copied out only when kept: a flood of false Xbus headers, each promising
+        # 8 KiB, held a copy of every one until the call returned (2.7 GB for a 2 MB flood).
         buf = self._buf
         buf += chunk
         found = []
@@ -290,10 +284,13 @@ class FrameScanner:
             frame = bytes(buf[j:j + total])
             if not self.checksum_ok(frame):
                 self.stats.bad_checksum += 1
-                found.append((frame, False, self._offset + j))
+                start = self._offset + j
+                if keep_damaged and start >= self._bad_end:
+                    found.append((frame, False))
+                    self._bad_end = start + total
                 search = j + 1
                 continue
-            found.append((frame, True, self._offset + j))
+            found.append((frame, True))
             pos = search = j + total
         del buf[:pos]
         self._offset += pos

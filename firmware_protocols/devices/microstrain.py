@@ -220,9 +220,7 @@ class MipDevice(Device):
     def _receive(self, data: bytes, now_ns: int) -> list:
         replies = []
         skipped = self._scanner.stats.skipped_bytes
-        for frame, ok, inside_bad in self._scanner.marked_candidates(data):
-            if not ok and inside_bad:
-                continue                            # its bytes count as skipped by the scanner
+        for frame, ok in self._scanner.candidates(data):
             if not ok:
                 # NACK the command it claims to be (a packet may begin inside it: the scanner hunts on)
                 first = frame[5] if len(frame) > 6 else 0

@@ -195,9 +195,7 @@ class XsensDevice(Device):
     def _receive(self, data: bytes, now_ns: int) -> list:
         replies = []
         skipped = self._scanner.stats.skipped_bytes
-        for frame, ok, inside_bad in self._scanner.marked_candidates(data):
-            if not ok and inside_bad:
-                continue                            # its bytes count as skipped by the scanner
+        for frame, ok in self._scanner.candidates(data):
             if not ok:
                 # A damaged frame, or a false preamble: say so; the scanner hunts on from the next byte.
                 self.stats.errors += 1

@@ -8,13 +8,12 @@ import numpy as np
 import pytest
 
 import firmware_protocols
-from tests.support.timing import scaled
 from firmware_protocols import Samples
 from imu_emulator.live.config import StreamConfig
 from imu_emulator.live.stream import Stream
 
 mavlink2 = pytest.importorskip("pymavlink.dialects.v20.common")
-from tests.support.devices import command_long, cpu_ratio, gcs  # noqa: E402
+from tests.support.devices import command_long, gcs  # noqa: E402
 
 
 def _samples(n=8):
@@ -74,19 +73,14 @@ def test_a_datagram_left_unfinished_does_not_swallow_the_next_datagrams_commands
     assert device.stats.ignored_bytes == len(garbage)
 
 
-@pytest.mark.realtime      # compares CPU times: not beside another of its kind
-@pytest.mark.parametrize("flood", [b"\xfd", b"\xfe"])
-def test_a_flood_of_mavlink_start_bytes_costs_time_linear_in_its_size(flood):
-    """On 168021a 0xFD x 2 MB took 411 s in one call (each false start searched the whole rest for 0xFE)."""
-    def run(data):
-        device = firmware_protocols.create_device("mavlink-highres", 100.0)
-        device.receive(data)
-        # The flood's tail may look like the start of a long frame: a command hidden behind it is found once
-        # that false frame's claimed length has arrived (the driver resending), as any MAVLink parser does.
-        assert (511, 0) in _acks(device.receive(command_long(105, 20_000) * 8))
-    # The rescan was a memchr, so its quadratic term shows late: on 168021a this ratio measured 6.5-7.2, with
-    # the fix 3.9-4.2 (4 is linear); the bound sits between.
-    assert cpu_ratio(run, flood * 131_072, flood * 524_288) < 5.5
+@pytest.mark.parametrize("unit", [b"\xfd", b"\xfe"])
+def test_a_command_behind_a_flood_of_mavlink_start_bytes_is_answered(unit):
+    """The flood's tail may look like the start of a long frame: a command hidden behind it is found once that
+    false frame's claimed length has arrived (the driver resending), as any MAVLink parser does. (What such a
+    flood costs: test_devices_fuzz.py::test_sync_byte_floods_are_not_quadratic.)"""
+    device = firmware_protocols.create_device("mavlink-highres", 100.0)
+    assert device.receive(unit * 65_536) == []
+    assert (511, 0) in _acks(device.receive(command_long(105, 20_000) * 8))
 
 
 # - MIP -
@@ -157,20 +151,6 @@ def test_a_command_cut_by_a_new_one_is_still_answered_as_before():
     device = firmware_protocols.create_device("vectornav-binary", 100.0)
     replies = device.receive(b"$VNR$VNRRG,01*XX\r\n")
     assert [r.split(b",")[0] for r in replies] == [b"$VNERR", b"$VNRRG"]
-
-
-@pytest.mark.realtime      # measures CPU time: not beside another of its kind
-@pytest.mark.parametrize("flood", [b"$VNRRG,", b"$"])
-def test_a_flood_of_vectornav_lines_is_not_quadratic(flood):
-    """On 168021a `$VNRRG,` x 128 Ki took 42 s of CPU: each line searched the whole buffer for CR and LF. Fixed,
-    it takes 0.56-0.69 s (2026-12-02, AMD EPYC). A limit of 8 s (scaled to the machine) stops the quadratic
-    parser 5 times over and leaves the linear one 11 times its cost: a hang limit, not a speed figure (the
-    ratio of two sizes, asserted here before, crossed its bound under load; tools/bench_decoder_floods.py
-    prints the figures)."""
-    import time
-    start = time.process_time()
-    firmware_protocols.create_device("vectornav-binary", 100.0).receive(flood * 131_072)
-    assert time.process_time() - start < scaled(8.0)
 
 
 # - the reply path -
