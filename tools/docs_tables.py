@@ -119,10 +119,17 @@ def ardupilot_params() -> str:
     rows = []
     for name, (what, fmt, options) in devices.items():
         # the compass calibration depends on the scene (minus its hard iron): said once, not as made-up numbers
-        params = {k: v for k, v in module.device_params(name, compass_offsets_mgauss=(1.0, 1.0, 1.0)).items()
-                  if not k.startswith("COMPASS_OFS_")}
-        cells = [f"`{k} {v:g}`" for k, v in params.items()]
-        if name != "json":
+        if name == "json":
+            # the loop rate follows the scene's: shown for the scene the SITL reports fly, and said
+            from imu_emulator.scene.load import load_scene
+            rate = load_scene(ROOT / "examples" / "sitl_flight.toml").rate_hz
+            params = module.device_params(name, json_imu_hz=rate)
+            cells = [f"`{k} {v:g}`" for k, v in params.items()]
+            cells.append(f"(`SCHED_LOOP_RATE` = half the scene's rate, {rate:g} Hz in `examples/sitl_flight.toml`)")
+        else:
+            params = {k: v for k, v in module.device_params(name, compass_offsets_mgauss=(1.0, 1.0, 1.0)).items()
+                      if not k.startswith("COMPASS_OFS_")}
+            cells = [f"`{k} {v:g}`" for k, v in params.items()]
             cells.append("`COMPASS_OFS_X/Y/Z` = minus the scene's magnetometer hard iron, in mGauss")
         emulator = f"`--format {fmt}`" + "".join(f" `--option {o}`" for o in options)
         rows.append((f"`{name}`", what, emulator, ", ".join(cells)))

@@ -36,7 +36,8 @@ OFFSETS = (-40.0, 25.0, -60.0)
 
 @pytest.mark.parametrize("device", ["vn300", "gq7", "json"])
 def test_defaults_file_reads_back_with_pymavlink(tmp_path, device):
-    params = ardupilot_params.device_params(device, compass_offsets_mgauss=None if device == "json" else OFFSETS)
+    params = ardupilot_params.device_params(device, compass_offsets_mgauss=None if device == "json" else OFFSETS,
+                                            json_imu_hz=200.0)
     path = ardupilot_params.write_params(tmp_path / "emulated.parm", params)
     from pymavlink import mavparm
     read = mavparm.MAVParmDict()
@@ -58,6 +59,21 @@ def test_defaults_file_reads_back_with_pymavlink(tmp_path, device):
         assert params["SCHED_LOOP_RATE"] == 50
         assert [params[f"INS_ACC{n}{k}_{a}"] for n in (2, 3) for k in ("OFFS", "SCAL") for a in "XYZ"] == [0] * 12
         assert params.get("EAHRS_RATE") == {"vn300": 100, "gq7": None}[device]
+
+
+def test_json_backend_has_one_sitl_imu_paced_by_the_scene_without_sitl_drift():
+    """The parameters the 2026-12-02 JSON run needed by hand (docs/sitl/README.md), now the runner's: a 200 Hz
+    scene gives a 100 Hz loop (ArduPilot wants 1.8 gyro samples per loop, AP_InertialSensor.cpp:1480), one SITL
+    IMU, no calibration values for IMUs 2 and 3, SITL's gyro drift off (AP_InertialSensor_SITL.cpp:215-219)."""
+    params = ardupilot_params.device_params("json", json_imu_hz=200.0)
+    assert params["SCHED_LOOP_RATE"] == 100 and params["SCHED_LOOP_RATE"] * 1.8 <= 200
+    assert params["SIM_IMU_COUNT"] == 1 and params["SIM_DRIFT_SPEED"] == 0
+    assert [params[f"INS_ACC{n}{k}_{a}"] for n in (2, 3) for k in ("OFFS", "SCAL") for a in "XYZ"] == [0] * 12
+    assert "EAHRS_TYPE" not in params and "AHRS_EKF_TYPE" not in params      # SITL's own EKF3
+    assert ardupilot_params.device_params("json", json_imu_hz=1000.0)["SCHED_LOOP_RATE"] == 500
+    for rate, says in ((None, "json_imu_hz"), (90.0, "100 Hz or more"), (9000.0, "50-2000 Hz")):
+        with pytest.raises(ValueError, match=says):
+            ardupilot_params.device_params("json", json_imu_hz=rate)
 
 
 def _bus_id_by_c_layout(bus_type, bus, address, devtype):

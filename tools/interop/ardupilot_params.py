@@ -123,11 +123,7 @@ def sole_sensor_params(mask: int, serial_port: int, imu_hz: float,
     field (AP_Compass_Backend.cpp:84-85), so they are minus the magnetometer's hard iron."""
     params: dict[str, float] = {}
     if mask & SENSOR_BITS["imu"]:
-        if not (MIN_LOOP_HZ <= imu_hz <= 4000):
-            raise ValueError(f"IMU rate {imu_hz:g} Hz: the main loop it paces must run at {MIN_LOOP_HZ}-2000 Hz "
-                             "(SCHED_LOOP_RATE, AP_Scheduler.cpp:110-113)")
-        params.update({"SIM_IMU_COUNT": 0, "SCHED_LOOP_RATE": max(MIN_LOOP_HZ, imu_hz / 2)})
-        params.update({f"INS_ACC{n}{kind}_{axis}": 0 for n in (2, 3) for kind in ("OFFS", "SCAL") for axis in "XYZ"})
+        params.update({"SIM_IMU_COUNT": 0, **_paced_loop_params(imu_hz)})
     if mask & SENSOR_BITS["baro"]:
         params["SIM_BARO_COUNT"] = 0
     if mask & SENSOR_BITS["compass"]:
@@ -141,14 +137,47 @@ def sole_sensor_params(mask: int, serial_port: int, imu_hz: float,
     return params
 
 
+def _paced_loop_params(imu_hz: float) -> dict[str, float]:
+    """The main loop paced by an IMU at imu_hz: SCHED_LOOP_RATE half its rate (see sole_sensor_params; ArduPilot
+    also fails "Gyro N rate ..Hz < loop ratex1.8" below 1.8 samples per loop, AP_InertialSensor.cpp:1480-1488),
+    and the calibration values of accelerometers 2 and 3 cleared (there are none)."""
+    if not (MIN_LOOP_HZ <= imu_hz <= 4000):
+        raise ValueError(f"IMU rate {imu_hz:g} Hz: the main loop it paces must run at {MIN_LOOP_HZ}-2000 Hz "
+                         "(SCHED_LOOP_RATE, AP_Scheduler.cpp:110-113)")
+    return {"SCHED_LOOP_RATE": max(MIN_LOOP_HZ, imu_hz / 2),
+            **{f"INS_ACC{n}{kind}_{axis}": 0 for n in (2, 3) for kind in ("OFFS", "SCAL") for axis in "XYZ"}}
+
+
+def json_params(imu_hz: float) -> dict[str, float]:
+    """The JSON backend: SITL's own EKF3 on the emulator's IMU samples at the scene's rate imu_hz (GPS, baro and
+    compass are SITL's, simulated from the JSON position and attitude).
+
+    One simulated IMU (SIM_IMU_COUNT 1): SITL's IMUs all read the JSON's gyro and accel, each with its own
+    noise, and a second one failed "Gyros inconsistent" (AP_Arming.cpp:497-499) on the 2026-12-02 run. The
+    loop at half the JSON rate: SIM_JSON's frame rate must stay above the vehicle's loop rate
+    (libraries/SITL/examples/JSON/readme.md), and 200 Hz samples at Copter's default 400 Hz loop failed "Gyro 0
+    rate 203Hz < loop ratex1.8 720Hz". SIM_DRIFT_SPEED 0: SITL adds to every gyro sample a drift growing by
+    0.05 deg/s per minute (SITL.cpp:73, AP_InertialSensor_SITL.cpp:215-219, 363-375), on top of the scene's
+    own gyro errors. (Its fixed noise floor, 0.04 deg/s gyro and 0.01 m/s^2 accel uniform,
+    AP_InertialSensor_SITL.cpp:111-117, 222-229, has no parameter.)"""
+    if not imu_hz >= 2 * MIN_LOOP_HZ:      # a serial IMU is exempt from the 1.8x check (:1486), SITL's is not
+        raise ValueError(f"JSON rate {imu_hz:g} Hz: SITL's IMU needs 1.8 samples per main loop, and the loop "
+                         f"runs at {MIN_LOOP_HZ} Hz at least: give the scene a rate of {2 * MIN_LOOP_HZ} Hz or more")
+    return {"SIM_IMU_COUNT": 1, "SIM_DRIFT_SPEED": 0, **_paced_loop_params(imu_hz)}
+
+
 def device_params(device: str, serial_port: int = SERIAL_PORT, sensors: str = "all",
-                  compass_offsets_mgauss: tuple[float, float, float] | None = None) -> dict[str, float]:
+                  compass_offsets_mgauss: tuple[float, float, float] | None = None,
+                  json_imu_hz: float | None = None) -> dict[str, float]:
     """The parameters selecting `device` (a key of DEVICES, or "json") on SERIAL<serial_port>, with the unit's
     `sensors` (sensors_mask) registered in ArduPilot and the only ones of their kind (sole_sensor_params;
-    compass_offsets_mgauss: the unit's compass calibration, needed when its compass is one of them)."""
+    compass_offsets_mgauss: the unit's compass calibration, needed when its compass is one of them). For "json",
+    json_imu_hz is the scene's sample rate (json_params)."""
     common = {"DISARM_DELAY": 0, "FS_CRASH_CHECK": 0}
     if device == "json":
-        return common            # SITL's own EKF3 on the emulator's IMU, GPS from the JSON position
+        if json_imu_hz is None:
+            raise ValueError("device 'json': give json_imu_hz, the scene's sample rate")
+        return {**common, **json_params(json_imu_hz)}
     if device not in DEVICES:
         raise ValueError(f"device {device!r}: not one of {', '.join(sorted(DEVICES) + ['json'])}")
     unit = DEVICES[device]

@@ -245,7 +245,8 @@ def run(args) -> dict:
     duration = float(truth.t[-1] - truth.t[0])
     offsets = compass_offsets_mgauss(scene) if args.device != "json" else None
     try:
-        params = {**ardupilot_params.device_params(args.device, sensors=args.sensors, compass_offsets_mgauss=offsets),
+        params = {**ardupilot_params.device_params(args.device, sensors=args.sensors, compass_offsets_mgauss=offsets,
+                                                   json_imu_hz=scene.rate_hz),
                   **dict(args.param)}
     except ValueError as exc:
         raise SystemExit(f"{args.scene}: {exc}") from None
