@@ -65,12 +65,15 @@ def test_estimator_status_flags_are_mavlinks():
     needs = (m.ESTIMATOR_ATTITUDE | m.ESTIMATOR_VELOCITY_HORIZ | m.ESTIMATOR_VELOCITY_VERT | m.ESTIMATOR_POS_HORIZ_ABS
              | m.ESTIMATOR_POS_VERT_ABS)
     assert sitl_report.EKF_HEALTHY_NEEDS == needs
-    assert sitl_report.ESTIMATOR_HEALTHY_FORBIDS == (m.ESTIMATOR_CONST_POS_MODE | m.ESTIMATOR_GPS_GLITCH
-                                                     | m.ESTIMATOR_ACCEL_ERROR)
+    assert sitl_report.ESTIMATOR_HEALTHY_FORBIDS == m.ESTIMATOR_GPS_GLITCH | m.ESTIMATOR_ACCEL_ERROR
+    # PX4 at rest with GNSS fused (flags 959 of the run of 2026-12-02: const-pos set by vehicle_at_rest,
+    # ekf_helper.cpp:714-716) is healthy; GNSS fusion stopped (933: no horizontal velocity / position) is not
     flags = np.array([needs, needs | m.ESTIMATOR_POS_HORIZ_REL, needs | m.ESTIMATOR_GPS_GLITCH,
-                      needs | m.ESTIMATOR_CONST_POS_MODE, needs & ~m.ESTIMATOR_POS_VERT_ABS])
+                      needs | m.ESTIMATOR_ACCEL_ERROR, needs & ~m.ESTIMATOR_POS_VERT_ABS, 959, 933])
     healthy = sitl_report.ekf_healthy(flags, sitl_report.ESTIMATOR_HEALTHY_FORBIDS)
-    assert healthy.tolist() == [True, True, False, False, False]
+    assert healthy.tolist() == [True, True, False, False, False, True, False]
+    assert 959 == needs | m.ESTIMATOR_POS_HORIZ_REL | m.ESTIMATOR_CONST_POS_MODE | m.ESTIMATOR_PRED_POS_HORIZ_REL \
+        | m.ESTIMATOR_PRED_POS_HORIZ_ABS
     # ArduPilot's reading of bit 10 (EKF_UNINITIALIZED) stays the default
     assert sitl_report.ekf_healthy([needs | 1024]).tolist() == [False]
 
@@ -100,3 +103,11 @@ def test_px4_failures_are_grouped_by_check():
     assert [(r["check"], r["count"], r["first"], r["last"]) for r in rows] == [
         ("Accel Sensor # missing", 2, 1.0, 3.0), ("Resolve system health failures first", 1, 2.0, 2.0)]
     assert sitl_report.failure_summary([1.0], ["PreArm: x"])[0]["check"] == "x"    # ArduPilot's default kept
+
+
+def test_unhealthy_spans_after_convergence():
+    t = np.arange(10.0)
+    ok = np.array([0, 1, 1, 0, 0, 1, 1, 0, 1, 0], dtype=bool)
+    assert sitl_report.outages(t, ok, 1.0) == [(3.0, 5.0), (7.0, 8.0), (9.0, None)]
+    assert sitl_report.outages(t, ok, None) == []
+    assert sitl_report.outages(t, np.ones(10, bool), 0.0) == []

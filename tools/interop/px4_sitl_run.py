@@ -246,7 +246,8 @@ def run(args) -> dict:
                 link.mav.command_long_send(link.target_system, 1, mavutil.mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0,
                                            1, 0, 0, 0, 0, 0, 0)
     finally:
-        if px4.poll() is None:
+        px4_stopped = px4.poll() is None
+        if px4_stopped:
             os.killpg(px4.pid, signal.SIGTERM)
         if emu.poll() is None:
             emu.send_signal(signal.SIGINT)
@@ -262,6 +263,7 @@ def run(args) -> dict:
     stream = json.loads((work / "stream.json").read_text()) if (work / "stream.json").exists() else {}
     return {"work": work, "rec": rec, "stream": stream, "truth": truth, "armed_at": armed_at,
             "disarmed_at": disarmed_at, "arm_requests": arm_requests, "params": values,
+            "px4_exit": px4.returncode, "px4_stopped": px4_stopped,
             "commands": [emu_cmd, [f"{k}={v}" for k, v in sorted(env_params.items())]
                          + [f"PX4_SYS_AUTOSTART={AUTOSTART}", "PX4_SIM_MODEL=none_iris"] + px4_cmd]}
 
@@ -309,7 +311,7 @@ def write_report(out: Path, args, outcome: dict, px4_commit: str) -> Path:
     rec, truth = outcome["rec"], outcome["truth"]
     est, wall_scene = estimates(rec)
     result = sitl_report.compare(est, truth, forbids=sitl_report.ESTIMATOR_HEALTHY_FORBIDS)
-    name = "px4-hil"
+    name = args.name
     title = f"PX4 SITL ({px4_commit}) on HIL_SENSOR + HIL_GPS: {args.scene.name} at {PX4_RATE_HZ:g} Hz"
     fig = sitl_report.plot(result, title)
     out.mkdir(parents=True, exist_ok=True)
@@ -321,6 +323,9 @@ def write_report(out: Path, args, outcome: dict, px4_commit: str) -> Path:
 
     def when(x):
         return f"{x:.1f} s" if x is not None and np.isfinite(x) else "never"
+
+    def spans(rows):
+        return ", ".join(f"{a:.1f}-{when(b)}" for a, b in rows) or "never"
 
     def at(wall):
         return float(wall_scene(np.array([wall]))[0]) if wall is not None else None
@@ -339,15 +344,17 @@ What is compared: PX4's ATTITUDE and GLOBAL_POSITION_INT, i.e. EKF2 run on the e
 barometer (HIL_SENSOR) and GNSS (HIL_GPS), against the scene's truth at the same scene time. Lockstep: PX4's clock is
 the HIL_SENSOR stamps, so time_boot_ms - one sample period is scene time exactly. The vehicle is not flown by PX4:
 the motion is scripted, the actuator outputs recorded. Statistics count from the first healthy ESTIMATOR_STATUS
-(attitude, horizontal and vertical velocity, absolute horizontal and vertical position flags; no const-position
-mode, GPS glitch or accel error) on.
+(attitude, horizontal and vertical velocity, absolute horizontal and vertical position flags; no
+GPS glitch or accel error; PX4 also sets the const-position flag whenever it thinks the vehicle is at rest,
+ekf_helper.cpp:714-716, so that one is not held against it) on.
 
 - pre-arm checks passed (SYS_STATUS pre-arm bit first set): {when(result['prearm_passed_s'])} scene time
-- EKF healthy: {when(result['ekf_healthy_s'])}
+- EKF healthy: {when(result['ekf_healthy_s'])}; unhealthy again after that: {spans(result['ekf_unhealthy_spans'])}
 - armed (Hold mode): {armed}
 - arm requests: {len(requests)}{' (first at ' + when(at(requests[0])) + ')' if requests else ''}; answers: \
 {answers(mav.MAV_CMD_COMPONENT_ARM_DISARM)}; mode requests answered: {answers(mav.MAV_CMD_DO_SET_MODE)}
-- emulator stream: {stream.get('samples', 0)} samples, dropped {stream.get('dropped', '?')}
+- emulator stream: {stream.get('samples', 0)} samples, dropped {stream.get('dropped', '?')}; PX4 exit code \
+{outcome.get('px4_exit')} ({'ended by the runner' if outcome.get('px4_stopped') else 'ended by itself'})
 
 {sitl_report.markdown_table(result)}
 
@@ -391,6 +398,7 @@ def main(argv=None) -> int:
     p.add_argument("--px4-build", type=Path, required=True, help="PX4's build/px4_sitl_default")
     p.add_argument("--scene", type=Path, default=REPO / "examples" / "sitl_flight.toml")
     p.add_argument("--out", type=Path, default=REPO / "docs" / "sitl")
+    p.add_argument("--name", default="px4-hil", help="the report's file name, without .md / .png")
     p.add_argument("--no-arm", dest="arm", action="store_false", help="only watch, never arm")
     p.add_argument("--px4-commit", default="unknown", help="written in the report")
     p.add_argument("--wall-limit", type=float, default=1800.0, help="stop after this many wall-clock seconds")

@@ -23,9 +23,12 @@ PREARM_CHECK = 0x10000000
 
 # MAVLink common.xml ESTIMATOR_STATUS_FLAGS (what PX4's ESTIMATOR_STATUS.flags carries: EKF2's solution status,
 # src/modules/ekf2/EKF/ekf_helper.cpp:678-689 at PX4 bb59c637cd): the same low bits as EKF_STATUS_FLAGS, but bit 10
-# is GPS_GLITCH there (not "uninitialised") and bit 11 ACCEL_ERROR
+# is GPS_GLITCH there (not "uninitialised") and bit 11 ACCEL_ERROR. PX4 sets CONST_POS_MODE also whenever it
+# thinks the vehicle is at rest (const_pos_mode = fake_pos || valid_fake_pos || vehicle_at_rest,
+# ekf_helper.cpp:714-716), GNSS fused or not: not a fault there; a fake position leaves POS_HORIZ_ABS unset
+# (isGlobalHorizontalPositionValid), which the needs catch.
 ESTIMATOR_GPS_GLITCH, ESTIMATOR_ACCEL_ERROR = 1024, 2048
-ESTIMATOR_HEALTHY_FORBIDS = EKF_CONST_POS_MODE | ESTIMATOR_GPS_GLITCH | ESTIMATOR_ACCEL_ERROR
+ESTIMATOR_HEALTHY_FORBIDS = ESTIMATOR_GPS_GLITCH | ESTIMATOR_ACCEL_ERROR
 
 
 def ekf_healthy(flags, forbids: int = EKF_HEALTHY_FORBIDS) -> np.ndarray:
@@ -33,6 +36,26 @@ def ekf_healthy(flags, forbids: int = EKF_HEALTHY_FORBIDS) -> np.ndarray:
     ESTIMATOR_STATUS with ESTIMATOR_HEALTHY_FORBIDS)."""
     flags = np.asarray(flags, dtype=np.int64)
     return ((flags & EKF_HEALTHY_NEEDS) == EKF_HEALTHY_NEEDS) & ((flags & forbids) == 0)
+
+
+def outages(t, condition, after: float | None) -> list[tuple[float, float | None]]:
+    """The spans (start, end) from `after` on where `condition` does not hold: start = the first time stamp without
+    it, end = the next one with it again (None: never again). None for `after`: no spans."""
+    if after is None:
+        return []
+    t, ok = np.asarray(t, float), np.asarray(condition, dtype=bool)
+    keep = t >= after
+    t, ok = t[keep], ok[keep]
+    spans, start = [], None
+    for when, good in zip(t, ok):
+        if not good and start is None:
+            start = float(when)
+        elif good and start is not None:
+            spans.append((start, float(when)))
+            start = None
+    if start is not None:
+        spans.append((start, None))
+    return spans
 
 
 def first_time(t, condition) -> float | None:
@@ -143,11 +166,13 @@ def compare(est: Estimates, truth: Truth, forbids: int = EKF_HEALTHY_FORBIDS) ->
     pos_true, vel_true, _ = truth.at(tp)
     dpos = position_error_ned(*est.lat_lon_alt[inside_p].T, pos_true, truth.origin)
     dvel = est.velocity_ned[inside_p] - vel_true
-    healthy_at = first_time(est.ekf_t, ekf_healthy(est.ekf_flags, forbids)) if len(est.ekf_t) else None
+    healthy = ekf_healthy(est.ekf_flags, forbids) if len(est.ekf_t) else np.zeros(0, dtype=bool)
+    healthy_at = first_time(est.ekf_t, healthy) if len(est.ekf_t) else None
     prearm_at = first_time(est.prearm_t, est.prearm_ok) if len(est.prearm_t) else None
     series = {"attitude_deg": (ta, att), "horizontal_m": (tp, np.hypot(dpos[:, 0], dpos[:, 1])),
               "vertical_m": (tp, dpos[:, 2]), "velocity_mps": (tp, np.linalg.norm(dvel, axis=1))}
     return {"series": series, "ekf_healthy_s": healthy_at, "prearm_passed_s": prearm_at,
+            "ekf_unhealthy_spans": outages(est.ekf_t, healthy, healthy_at),
             "stats": {k: stats(t, v, healthy_at) for k, (t, v) in series.items()},
             "truth_position": pos_true, "estimate_position": pos_true + dpos, "position_t": tp}
 
