@@ -2,6 +2,7 @@
 bb59c637cd74e04c000a0b8e35aac184251150d6, file:line given), pymavlink's enums and PX4 mode table, the scene loader."""
 from __future__ import annotations
 
+import os
 import sys
 import tomllib
 
@@ -111,3 +112,22 @@ def test_unhealthy_spans_after_convergence():
     assert sitl_report.outages(t, ok, 1.0) == [(3.0, 5.0), (7.0, 8.0), (9.0, None)]
     assert sitl_report.outages(t, ok, None) == []
     assert sitl_report.outages(t, np.ones(10, bool), 0.0) == []
+
+
+@pytest.mark.skipif(not os.environ.get("IMU_EMULATOR_PX4_BUILD"),
+                    reason="needs a built PX4 SITL: IMU_EMULATOR_PX4_BUILD (PX4's build/px4_sitl_default)")
+def test_px4_sitl_arms_and_its_ekf_follows_the_scene(tmp_path):
+    """The issue's goals, on PX4's defaults: arms, EKF healthy within 30 s, attitude RMS <= 1 deg, horizontal
+    position RMS <= 2 m (about a minute of wall-clock time in lockstep)."""
+    from pathlib import Path
+    ns = type("Args", (), dict(px4_build=Path(os.environ["IMU_EMULATOR_PX4_BUILD"]), scene=SCENE, out=tmp_path,
+                               name="px4-hil", arm=True, px4_commit="test", wall_limit=900.0, param=[]))()
+    outcome = px4_sitl_run.run(ns)
+    report = px4_sitl_run.write_report(tmp_path, ns, outcome, "test")
+    assert report.is_file() and (tmp_path / "px4-hil.png").is_file()
+    assert outcome["armed_at"] is not None
+    est, _ = px4_sitl_run.estimates(outcome["rec"])
+    result = sitl_report.compare(est, outcome["truth"], forbids=sitl_report.ESTIMATOR_HEALTHY_FORBIDS)
+    assert result["ekf_healthy_s"] is not None and result["ekf_healthy_s"] <= 30.0
+    assert result["stats"]["attitude_deg"]["rms"] <= 1.0
+    assert result["stats"]["horizontal_m"]["rms"] <= 2.0
