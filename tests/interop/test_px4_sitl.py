@@ -68,7 +68,7 @@ def test_estimator_status_flags_are_mavlinks():
     assert sitl_report.EKF_HEALTHY_NEEDS == needs
     assert sitl_report.ESTIMATOR_HEALTHY_FORBIDS == m.ESTIMATOR_GPS_GLITCH | m.ESTIMATOR_ACCEL_ERROR
     # PX4 at rest with GNSS fused (flags 959 of the run of 2026-12-02: const-pos set by vehicle_at_rest,
-    # ekf_helper.cpp:714-716) is healthy; GNSS fusion stopped (933: no horizontal velocity / position) is not
+    # ekf_helper.cpp:718-719) is healthy; GNSS fusion stopped (933: no horizontal velocity / position) is not
     flags = np.array([needs, needs | m.ESTIMATOR_POS_HORIZ_REL, needs | m.ESTIMATOR_GPS_GLITCH,
                       needs | m.ESTIMATOR_ACCEL_ERROR, needs & ~m.ESTIMATOR_POS_VERT_ABS, 959, 933])
     healthy = sitl_report.ekf_healthy(flags, sitl_report.ESTIMATOR_HEALTHY_FORBIDS)

@@ -67,7 +67,7 @@ def params(scene) -> dict[str, float]:
     - COM_DISARM_PRFLT = -1: no disarm for not taking off within 10 s of arming (commander_params.yaml:105-118):
       the runner arms about 20 s before the scene's take-off. COM_DISARM_LAND = -1: no disarm on a detected
       landing (commander_params.yaml:92-104): the vehicle is not flown by PX4, its land detector may say landed.
-    - COM_RCL_EXCEPT = 2 (bit 1, auto modes; commander_params.yaml:446-465): no manual-control-loss failsafe in
+    - COM_RCL_EXCEPT = 2 (bit 1, auto modes; commander_params.yaml:446-462): no manual-control-loss failsafe in
       Hold, the mode the runner arms in; there is no RC and no joystick on the bench.
     - NAV_DLL_ACT = 0 (disabled, its default; commander_params.yaml:409-424): stated, so that a GCS heartbeat gap
       under load is no failsafe.
@@ -346,7 +346,7 @@ the HIL_SENSOR stamps, so time_boot_ms - one sample period is scene time exactly
 the motion is scripted, the actuator outputs recorded. Statistics count from the first healthy ESTIMATOR_STATUS
 (attitude, horizontal and vertical velocity, absolute horizontal and vertical position flags; no
 GPS glitch or accel error; PX4 also sets the const-position flag whenever it thinks the vehicle is at rest,
-ekf_helper.cpp:714-716, so that one is not held against it) on.
+ekf_helper.cpp:718-719, so that one is not held against it) on.
 
 - pre-arm checks passed (SYS_STATUS pre-arm bit first set): {when(result['prearm_passed_s'])} scene time
 - EKF healthy: {when(result['ekf_healthy_s'])}; unhealthy again after that: {spans(result['ekf_unhealthy_spans'])}

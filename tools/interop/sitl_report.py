@@ -25,7 +25,7 @@ PREARM_CHECK = 0x10000000
 # src/modules/ekf2/EKF/ekf_helper.cpp:678-689 at PX4 bb59c637cd): the same low bits as EKF_STATUS_FLAGS, but bit 10
 # is GPS_GLITCH there (not "uninitialised") and bit 11 ACCEL_ERROR. PX4 sets CONST_POS_MODE also whenever it
 # thinks the vehicle is at rest (const_pos_mode = fake_pos || valid_fake_pos || vehicle_at_rest,
-# ekf_helper.cpp:714-716), GNSS fused or not: not a fault there; a fake position leaves POS_HORIZ_ABS unset
+# ekf_helper.cpp:718-719), GNSS fused or not: not a fault there; a fake position leaves POS_HORIZ_ABS unset
 # (isGlobalHorizontalPositionValid), which the needs catch.
 ESTIMATOR_GPS_GLITCH, ESTIMATOR_ACCEL_ERROR = 1024, 2048
 ESTIMATOR_HEALTHY_FORBIDS = ESTIMATOR_GPS_GLITCH | ESTIMATOR_ACCEL_ERROR
