@@ -17,13 +17,45 @@ EKF_POS_HORIZ_ABS, EKF_POS_VERT_ABS = 16, 32
 EKF_CONST_POS_MODE, EKF_UNINITIALIZED = 128, 1024
 #: what "EKF healthy" means here: attitude, velocity and absolute position all valid, not in constant-position mode
 EKF_HEALTHY_NEEDS = EKF_ATTITUDE | EKF_VELOCITY_HORIZ | EKF_VELOCITY_VERT | EKF_POS_HORIZ_ABS | EKF_POS_VERT_ABS
+EKF_HEALTHY_FORBIDS = EKF_CONST_POS_MODE | EKF_UNINITIALIZED
 #: MAV_SYS_STATUS_SENSOR bit of SYS_STATUS: set in onboard_control_sensors_health when the pre-arm checks pass
 PREARM_CHECK = 0x10000000
 
+# MAVLink common.xml ESTIMATOR_STATUS_FLAGS (what PX4's ESTIMATOR_STATUS.flags carries: EKF2's solution status,
+# src/modules/ekf2/EKF/ekf_helper.cpp:678-689 at PX4 bb59c637cd): the same low bits as EKF_STATUS_FLAGS, but bit 10
+# is GPS_GLITCH there (not "uninitialised") and bit 11 ACCEL_ERROR. PX4 sets CONST_POS_MODE also whenever it
+# thinks the vehicle is at rest (const_pos_mode = fake_pos || valid_fake_pos || vehicle_at_rest,
+# ekf_helper.cpp:718-719), GNSS fused or not: not a fault there; a fake position leaves POS_HORIZ_ABS unset
+# (isGlobalHorizontalPositionValid), which the needs catch.
+ESTIMATOR_GPS_GLITCH, ESTIMATOR_ACCEL_ERROR = 1024, 2048
+ESTIMATOR_HEALTHY_FORBIDS = ESTIMATOR_GPS_GLITCH | ESTIMATOR_ACCEL_ERROR
 
-def ekf_healthy(flags) -> np.ndarray:
+
+def ekf_healthy(flags, forbids: int = EKF_HEALTHY_FORBIDS) -> np.ndarray:
+    """EKF_HEALTHY_NEEDS all set and none of `forbids` (ArduPilot's EKF_STATUS_REPORT by default; PX4's
+    ESTIMATOR_STATUS with ESTIMATOR_HEALTHY_FORBIDS)."""
     flags = np.asarray(flags, dtype=np.int64)
-    return ((flags & EKF_HEALTHY_NEEDS) == EKF_HEALTHY_NEEDS) & ((flags & (EKF_CONST_POS_MODE | EKF_UNINITIALIZED)) == 0)
+    return ((flags & EKF_HEALTHY_NEEDS) == EKF_HEALTHY_NEEDS) & ((flags & forbids) == 0)
+
+
+def outages(t, condition, after: float | None) -> list[tuple[float, float | None]]:
+    """The spans (start, end) from `after` on where `condition` does not hold: start = the first time stamp without
+    it, end = the next one with it again (None: never again). None for `after`: no spans."""
+    if after is None:
+        return []
+    t, ok = np.asarray(t, float), np.asarray(condition, dtype=bool)
+    keep = t >= after
+    t, ok = t[keep], ok[keep]
+    spans, start = [], None
+    for when, good in zip(t, ok):
+        if not good and start is None:
+            start = float(when)
+        elif good and start is not None:
+            spans.append((start, float(when)))
+            start = None
+    if start is not None:
+        spans.append((start, None))
+    return spans
 
 
 def first_time(t, condition) -> float | None:
@@ -123,9 +155,9 @@ class Estimates:
     prearm_ok: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
 
-def compare(est: Estimates, truth: Truth) -> dict:
-    """Every error series and the summary the report prints. Convergence = the first EKF_STATUS_REPORT that is
-    healthy (ekf_healthy); the statistics count from there on, inside the scene's span."""
+def compare(est: Estimates, truth: Truth, forbids: int = EKF_HEALTHY_FORBIDS) -> dict:
+    """Every error series and the summary the report prints. Convergence = the first EKF status that is
+    healthy (ekf_healthy with `forbids`); the statistics count from there on, inside the scene's span."""
     inside_a = (est.attitude_t >= truth.t[0]) & (est.attitude_t <= truth.t[-1])
     inside_p = (est.position_t >= truth.t[0]) & (est.position_t <= truth.t[-1])
     ta, tp = est.attitude_t[inside_a], est.position_t[inside_p]
@@ -134,11 +166,13 @@ def compare(est: Estimates, truth: Truth) -> dict:
     pos_true, vel_true, _ = truth.at(tp)
     dpos = position_error_ned(*est.lat_lon_alt[inside_p].T, pos_true, truth.origin)
     dvel = est.velocity_ned[inside_p] - vel_true
-    healthy_at = first_time(est.ekf_t, ekf_healthy(est.ekf_flags)) if len(est.ekf_t) else None
+    healthy = ekf_healthy(est.ekf_flags, forbids) if len(est.ekf_t) else np.zeros(0, dtype=bool)
+    healthy_at = first_time(est.ekf_t, healthy) if len(est.ekf_t) else None
     prearm_at = first_time(est.prearm_t, est.prearm_ok) if len(est.prearm_t) else None
     series = {"attitude_deg": (ta, att), "horizontal_m": (tp, np.hypot(dpos[:, 0], dpos[:, 1])),
               "vertical_m": (tp, dpos[:, 2]), "velocity_mps": (tp, np.linalg.norm(dvel, axis=1))}
     return {"series": series, "ekf_healthy_s": healthy_at, "prearm_passed_s": prearm_at,
+            "ekf_unhealthy_spans": outages(est.ekf_t, healthy, healthy_at),
             "stats": {k: stats(t, v, healthy_at) for k, (t, v) in series.items()},
             "truth_position": pos_true, "estimate_position": pos_true + dpos, "position_t": tp}
 
@@ -195,16 +229,20 @@ def plot(result: dict, title: str):
 #: how ArduPilot's arming checks word a failure: "PreArm: " from the periodic pre-arm display, "Arm: " when an
 #: arming request is refused (AP_Arming::check_failed, libraries/AP_Arming/AP_Arming.cpp:301-308, 265753db8b)
 FAILURE_PREFIXES = ("PreArm: ", "Arm: ")
+#: how PX4's commander words them: "Preflight Fail: " from a health check reporting to the GCS (e.g.
+#: HealthAndArmingChecks/checks/accelerometerCheck.cpp:78), "Arming denied: " when a request is refused
+#: (Commander.cpp:674, 721), PX4 bb59c637cd
+PX4_FAILURE_PREFIXES = ("Preflight Fail: ", "Arming denied: ")
 
 
-def failure_summary(t, texts) -> list[dict]:
+def failure_summary(t, texts, prefixes=FAILURE_PREFIXES) -> list[dict]:
     """Every distinct arming-check failure among STATUSTEXT `texts` (stamped `t`), in order of first appearance:
     {"check": the text without its prefix, numbers as '#' (one row for "Main loop slow (284Hz < 400Hz)" and
     "(281Hz < 400Hz)"), "example": its last wording, "count", "first", "last": the times}."""
     import re
     rows: dict[str, dict] = {}
     for when, text in zip(t, texts):
-        prefix = next((p for p in FAILURE_PREFIXES if text.startswith(p)), None)
+        prefix = next((p for p in prefixes if text.startswith(p)), None)
         if prefix is None:
             continue
         body = text[len(prefix):]
