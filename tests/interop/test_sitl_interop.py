@@ -124,6 +124,35 @@ def test_compass_calibration_is_minus_the_scenes_hard_iron():
     assert offsets == pytest.approx([-1000.0 * h for h in hard_iron], abs=1e-9)
 
 
+def test_the_flight_scene_is_at_rest_where_it_says_and_follows_its_curves():
+    """The emulator's own truth of examples/sitl_flight.toml: at rest on the ground (0-40 s) and at the end (290-300
+    s), holding 10 m in the hovers, and on the closed-form figure eight and climb between the waypoints (its first
+    version's spline rang: 2.9 m up and 0.7 m/s on the ground, which PX4's EKF2 took for a drifting GNSS)."""
+    import importlib.util
+    truth = ardupilot_sitl_run.scene_truth(ardupilot_sitl_run.load(ROOT / "examples" / "sitl_flight.toml"))
+    t, pos, vel = truth.t, truth.position_ned, truth.velocity_ned
+    for lo, hi, down in ((0, 40, 0.0), (52.5, 60, -10.0), (270.5, 274, -10.0), (290, 300.1, 0.0)):
+        held = (t >= lo) & (t < hi)
+        assert np.abs(pos[held] - [0.0, 0.0, down]).max() < 0.005, (lo, hi)
+        assert np.abs(vel[held]).max() < 0.005, (lo, hi)
+    # between the waypoints (every 0.5 s) the truth stays on the curves they were sampled from
+    spec = importlib.util.spec_from_file_location("sitl_flight_waypoints",
+                                                  ROOT / "tools" / "interop" / "sitl_flight_waypoints.py")
+    curves = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(curves)
+    between = np.arange(40.25, 290, 0.5)
+    at = np.searchsorted(t, between)
+    expected = np.array([curves.position(x) for x in t[at]])
+    assert np.abs(pos[at] - expected).max() < 0.02
+    # and the scene holds what the generator writes
+    import tomllib
+    written = tomllib.loads((ROOT / "examples" / "sitl_flight.toml").read_text())["trajectory"]
+    times, positions, attitudes, _ = curves.waypoints()
+    assert np.array_equal(written["times_s"], times)
+    assert np.abs(np.array(written["positions_m"]) - positions).max() < 1e-3
+    assert np.abs(np.array(written["attitudes_deg"]) - attitudes).max() < 1e-2
+
+
 def test_sensor_mask_is_ardupilots_bitmask():
     """AP_ExternalAHRS.h AvailableSensor (265753db8b): GPS 1<<0, IMU 1<<1, BARO 1<<2, COMPASS 1<<3."""
     assert ardupilot_params.sensors_mask("gps") == 1 and ardupilot_params.sensors_mask("gps,baro") == 5

@@ -27,9 +27,7 @@ emulator's IMU samples and the JSON position (SITL's simulated GPS and compass a
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import shlex
 import signal
 import subprocess
 import sys
@@ -309,17 +307,10 @@ def run(args) -> dict:
         for proc in (sitl, emu):
             if proc is not None and proc.poll() is None:
                 proc.send_signal(signal.SIGINT if proc is emu else signal.SIGTERM)
-        for proc in (sitl, emu):
-            if proc is not None:
-                try:
-                    proc.wait(timeout=20)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
+        sitl_report.reap((sitl, emu))
         emu_log.close()
         sitl_log.close()
-    # every message kept, for a report made again later (write_report reads only these and the stream's figures)
-    (work / "mavlink.json").write_text(json.dumps(rec.rows))
-    stream = json.loads((work / "stream.json").read_text()) if (work / "stream.json").exists() else {}
+    stream = sitl_report.keep_records(work, rec.rows)
     return {"work": work, "rec": rec, "stream": stream, "truth": truth, "armed_at": armed_at,
             "disarmed_at": disarmed_at, "arm_requests": arm_requests, "cal_requests": cal_requests,
             "commands": [emu_cmd, sitl_cmd],
@@ -409,31 +400,14 @@ Pre-arm and arm failures ArduPilot stated (scene time):
 
 Commands (ArduPilot at {ardupilot_commit}, its Copter SITL built per its own BUILD.md):
 
-```sh
-{chr(10).join(shlex.join(str(a) for a in c) for c in outcome['commands'])}
-```
-
-Parameters written for SITL: {', '.join(f'{k}={v}' for k, v in outcome['params'].items())}
-
-STATUSTEXT ({len(texts)}):
-
-```
-{chr(10).join(texts[:80])}
-```
 """
+    said = "Parameters written for SITL: " + ", ".join(f"{k}={v}" for k, v in outcome["params"].items())
+    text += sitl_report.report_tail(outcome["commands"], said, texts)
     write_text(out / f"{name}.md", text)
     return out / f"{name}.md"
 
 
-def _param(text: str) -> tuple[str, float]:
-    name, sep, value = text.partition("=")
-    if not sep:
-        raise argparse.ArgumentTypeError(f"{text!r}: NAME=VALUE")
-    try:
-        ardupilot_params.param_text({name: float(value)})        # the name and value checks of the file
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    return name, float(value)
+_param = sitl_report.param_option(ardupilot_params.param_text)
 
 
 def main(argv=None) -> int:

@@ -23,10 +23,8 @@ reports are EKF2 run on the emulator's IMU, magnetometer, barometer and GNSS.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import re
-import shlex
 import signal
 import subprocess
 import sys
@@ -251,16 +249,11 @@ def run(args) -> dict:
             os.killpg(px4.pid, signal.SIGTERM)
         if emu.poll() is None:
             emu.send_signal(signal.SIGINT)
-        for proc in (px4, emu):
-            try:
-                proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                proc.kill()
+        sitl_report.reap((px4, emu))
         emu_log.close()
         px4_log.close()
         link.close()
-    (work / "mavlink.json").write_text(json.dumps(rec.rows))
-    stream = json.loads((work / "stream.json").read_text()) if (work / "stream.json").exists() else {}
+    stream = sitl_report.keep_records(work, rec.rows)
     return {"work": work, "rec": rec, "stream": stream, "truth": truth, "armed_at": armed_at,
             "disarmed_at": disarmed_at, "arm_requests": arm_requests, "params": values,
             "px4_exit": px4.returncode, "px4_stopped": px4_stopped,
@@ -366,31 +359,15 @@ Pre-arm and arm failures PX4 stated (scene time):
 
 Commands (PX4-Autopilot at {px4_commit}, `make px4_sitl_default`):
 
-```sh
-{chr(10).join(shlex.join(str(a) for a in c) for c in outcome['commands'])}
-```
-
-Parameters given to PX4 (px4_sitl_run.params says why): {', '.join(f'{k}={v:g}' for k, v in outcome['params'].items())}
-
-STATUSTEXT ({len(texts)}):
-
-```
-{chr(10).join(texts[:80])}
-```
 """
+    said = "Parameters given to PX4 (px4_sitl_run.params says why): " + \
+        ", ".join(f"{k}={v:g}" for k, v in outcome["params"].items())
+    text += sitl_report.report_tail(outcome["commands"], said, texts)
     write_text(out / f"{name}.md", text)
     return out / f"{name}.md"
 
 
-def _param(text: str) -> tuple[str, float]:
-    name, sep, value = text.partition("=")
-    if not sep:
-        raise argparse.ArgumentTypeError(f"{text!r}: NAME=VALUE")
-    try:
-        param_env({name: float(value)})
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    return name, float(value)
+_param = sitl_report.param_option(param_env)
 
 
 def main(argv=None) -> int:

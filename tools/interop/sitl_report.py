@@ -258,3 +258,62 @@ def failure_table(rows: list[dict]) -> str:
     lines = ["| check failed (last wording) | times | first, s | last, s |", "|---|---|---|---|"]
     lines += [f"| {r['example']} | {r['count']} | {r['first']:.1f} | {r['last']:.1f} |" for r in rows]
     return "\n".join(lines)
+
+
+def report_tail(commands: list, params_said: str, texts: list[str]) -> str:
+    """The end every report shares: the exact commands, the parameters given (`params_said`, one line) and the
+    first 80 STATUSTEXT lines."""
+    import shlex
+    lines = "\n".join(shlex.join(str(a) for a in c) for c in commands)
+    shown = "\n".join(texts[:80])
+    return f"""```sh
+{lines}
+```
+
+{params_said}
+
+STATUSTEXT ({len(texts)}):
+
+```
+{shown}
+```
+"""
+
+
+def param_option(check):
+    """An argparse type for `--param NAME=VALUE`: `check({name: value})` raises ValueError on what the stack
+    would not take (its message becomes the option's error)."""
+    import argparse
+
+    def parse(text: str) -> tuple[str, float]:
+        name, sep, value = text.partition("=")
+        if not sep:
+            raise argparse.ArgumentTypeError(f"{text!r}: NAME=VALUE")
+        try:
+            check({name: float(value)})
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+        return name, float(value)
+    return parse
+
+
+def reap(procs, timeout_s: float = 20.0) -> None:
+    """Wait for each process (already asked to stop) up to timeout_s, then kill it."""
+    import subprocess
+    for proc in procs:
+        if proc is None:
+            continue
+        try:
+            proc.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+
+
+def keep_records(work, rows: dict) -> dict:
+    """Every message kept in WORK/mavlink.json, for a report made again later (write_report reads only these and
+    the stream's figures); returns the stream's figures (its --stats-json), {} when it wrote none."""
+    import json
+    from pathlib import Path
+    work = Path(work)
+    (work / "mavlink.json").write_text(json.dumps(rows))
+    return json.loads((work / "stream.json").read_text()) if (work / "stream.json").exists() else {}
