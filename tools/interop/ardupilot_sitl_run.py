@@ -69,12 +69,7 @@ ARM_FROM_S, ARM_EVERY_S = 20.0, 10.0
 READY_TEXT = "ArduPilot Ready"
 
 
-def load(scene_path: Path):
-    from imu_emulator.scene.load import load_scene
-    scene = load_scene(scene_path)
-    if scene.frame != "NED":
-        raise SystemExit(f"{scene_path}: the report compares in NED; give the scene frame = \"NED\"")
-    return scene
+load = sitl_report.load_ned_scene
 
 
 def compass_offsets_mgauss(scene) -> tuple[float, float, float]:
@@ -89,30 +84,12 @@ def compass_offsets_mgauss(scene) -> tuple[float, float, float]:
     return tuple(-1000.0 * float(h) for h in hard_iron)
 
 
-def scene_truth(scene) -> sitl_report.Truth:
-    from imu_emulator.runtime.simulation import Simulation
-    block = Simulation(scene, truth=True).block(0, scene.n_samples)
-    # time since the scene's first sample, as the stream's started_unix_ns counts (its first sample's deadline)
-    return sitl_report.Truth(t=block.t_s - block.t_s[0], position_ned=block.truth["position"],
-                             velocity_ned=block.truth["velocity"], euler=block.truth["euler"], origin=scene.origin)
+scene_truth = sitl_report.scene_truth
 
 
-class Recorder:
-    """Every message of interest with its wall receive time; STATUSTEXT lines kept as text."""
-
+class Recorder(sitl_report.Recorder):
     KINDS = ("ATTITUDE", "GLOBAL_POSITION_INT", "EKF_STATUS_REPORT", "SYS_STATUS", "STATUSTEXT", "HEARTBEAT",
              "COMMAND_ACK")
-
-    def __init__(self):
-        self.rows = {k: [] for k in self.KINDS}
-
-    def add(self, msg, received: float) -> None:
-        kind = msg.get_type()
-        if kind in self.rows:
-            self.rows[kind].append((received, msg.to_dict()))
-
-    def texts(self) -> list[tuple[float, str]]:
-        return [(w, r["text"]) for w, r in self.rows["STATUSTEXT"]]
 
 
 #: the windows the stack's clock is mapped to the wall clock in (sitl_report.wall_to_scene): short, since SITL's

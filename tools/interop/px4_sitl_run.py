@@ -130,19 +130,8 @@ def wall_to_boot(wall_s, ref_wall_s, ref_boot_s):
     return np.interp(np.asarray(wall_s, float), ref_wall_s[order], np.maximum.accumulate(ref_boot_s[order]))
 
 
-def load(scene_path: Path):
-    from imu_emulator.scene.load import load_scene
-    scene = load_scene(scene_path)
-    if scene.frame != "NED":
-        raise SystemExit(f"{scene_path}: the report compares in NED; give the scene frame = \"NED\"")
-    return scene
-
-
-def scene_truth(scene) -> sitl_report.Truth:
-    from imu_emulator.runtime.simulation import Simulation
-    block = Simulation(scene, truth=True).block(0, scene.n_samples)
-    return sitl_report.Truth(t=block.t_s - block.t_s[0], position_ned=block.truth["position"],
-                             velocity_ned=block.truth["velocity"], euler=block.truth["euler"], origin=scene.origin)
+load = sitl_report.load_ned_scene
+scene_truth = sitl_report.scene_truth
 
 
 def emulator_command(scene: Path, work: Path) -> list[str]:
@@ -155,17 +144,9 @@ def px4_command(build: Path, work: Path) -> list[str]:
     return [str(build / "bin" / "px4"), "-d", "-w", str(work / "rootfs"), str(build / "etc")]
 
 
-class Recorder:
+class Recorder(sitl_report.Recorder):
     KINDS = ("ATTITUDE", "GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "ESTIMATOR_STATUS", "SYS_STATUS", "STATUSTEXT",
              "HEARTBEAT", "COMMAND_ACK")
-
-    def __init__(self):
-        self.rows = {k: [] for k in self.KINDS}
-
-    def add(self, msg, received: float) -> None:
-        kind = msg.get_type()
-        if kind in self.rows:
-            self.rows[kind].append((received, msg.to_dict()))
 
 
 def run(args) -> dict:

@@ -290,10 +290,14 @@ def param_option(check):
         if not sep:
             raise argparse.ArgumentTypeError(f"{text!r}: NAME=VALUE")
         try:
-            check({name: float(value)})
+            number = float(value)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r}: the value {value!r} is not a number") from None
+        try:
+            check({name: number})
         except ValueError as exc:
             raise argparse.ArgumentTypeError(str(exc)) from None
-        return name, float(value)
+        return name, number
     return parse
 
 
@@ -317,3 +321,37 @@ def keep_records(work, rows: dict) -> dict:
     work = Path(work)
     (work / "mavlink.json").write_text(json.dumps(rows))
     return json.loads((work / "stream.json").read_text()) if (work / "stream.json").exists() else {}
+
+
+def load_ned_scene(scene_path):
+    """The scene, which must be in NED: the reports compare in NED."""
+    from imu_emulator.scene.load import load_scene
+    scene = load_scene(scene_path)
+    if scene.frame != "NED":
+        raise SystemExit(f"{scene_path}: the report compares in NED; give the scene frame = \"NED\"")
+    return scene
+
+
+def scene_truth(scene) -> Truth:
+    """The scene's truth, timed from its first sample (as the stream counts: its first sample's deadline)."""
+    from imu_emulator.runtime.simulation import Simulation
+    block = Simulation(scene, truth=True).block(0, scene.n_samples)
+    return Truth(t=block.t_s - block.t_s[0], position_ned=block.truth["position"],
+                 velocity_ned=block.truth["velocity"], euler=block.truth["euler"], origin=scene.origin)
+
+
+class Recorder:
+    """Every message of the KINDS a runner watches, with its wall receive time (a subclass names its KINDS)."""
+
+    KINDS: tuple = ()
+
+    def __init__(self):
+        self.rows = {k: [] for k in self.KINDS}
+
+    def add(self, msg, received: float) -> None:
+        kind = msg.get_type()
+        if kind in self.rows:
+            self.rows[kind].append((received, msg.to_dict()))
+
+    def texts(self) -> list[tuple[float, str]]:
+        return [(w, r["text"]) for w, r in self.rows.get("STATUSTEXT", [])]
