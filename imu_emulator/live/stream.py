@@ -174,6 +174,17 @@ class Stream:
         else:
             self.dropped += 1
 
+    def send_samples(self, payloads: list) -> None:
+        """Several samples' payloads at once, in order (the send loop catching up after missed deadlines): replies
+        still waiting go first, as for one sample, then the payloads in one `Transport.send_many`."""
+        due = [p for p in payloads if p is not None]
+        self.idle += len(payloads) - len(due)
+        if not due:
+            return
+        sent = self.transport.send_many(due) if self.send_waiting_replies() else 0
+        self.sent += sent
+        self.dropped += len(due) - sent
+
     def sample_queue(self) -> None:
         queued = self.transport.queued()
         if queued is not None:

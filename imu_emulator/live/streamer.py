@@ -222,6 +222,7 @@ class Streamer:
         single = links[0] if len(links) == 1 else None
         # links whose other end sets the pace (a flight stack stepping in lockstep) are waited for before each sample
         pacing = [s.transport for s in streams if s.transport.sets_pace]
+        catch_up = not pacing       # behind, the samples already due go out together (not to a stepping stack)
         inputs = Inputs(streams, self._note)
         stats = self.stats
         classify = stats.classify
@@ -252,9 +253,11 @@ class Streamer:
                 # The next block is taken in the second half of this one, after a send that leaves slack before the
                 # next deadline: its handover is then never in a deadline's way (issue 25; at the block's end it
                 # still is when the producer was late).
-                take_from = len(current) // 2 if pacer else len(current)
+                n = len(current)
+                take_from = n // 2 if pacer else n
                 taken_at = -2       # the sample after which the next block was taken
-                for i in range(len(current)):
+                i = 0
+                while i < n:
                     j = j0 + i
                     if pacer:
                         deadline = start + int(j * period)
@@ -270,40 +273,68 @@ class Streamer:
                         payload = items[0][i] if device is None else stream.device_item(items[0], i)
                     else:
                         payloads = [p[i] if d is None else s.device_item(p, i) for (s, _, d), p in zip(links, items)]
+                    upto = i + 1        # the samples up to this one go out now
                     if pacer:
                         now = wait_until(deadline)
                         late = now - deadline
+                        if late > period and catch_up:
+                            # Behind (the host took the CPU away, or earlier work ran long): the samples already
+                            # due go out with this one, in one write per byte stream, as a UART's FIFO drains
+                            # after a stall. One write each would cost a system call per sample and stay behind
+                            # for longer than the machine's floor does (issue 25); a reader sees the same bytes.
+                            while upto < n and start + int((j0 + upto) * period) <= now:
+                                upto += 1
+                            if upto > i + 1:
+                                batch = self._catch_up(links, items, i, upto,
+                                                       [payload] if single is not None else payloads)
+                                now = time.monotonic_ns()
+                                late = now - deadline
                         stats.add(late)
                         seen = involuntary_switches()
                         if late > period:
+                            own = pacer.own_cpu_ns()
                             classify(miss_cause(i == 0 and waited and block_at > deadline, inputs.served_ns > deadline,
                                                 seen != switches, missed_before, pacer.arrived_ns > deadline,
-                                                (i == 0 or i == taken_at + 1) and block_at > deadline))
+                                                (i == 0 or i == taken_at + 1) and block_at > deadline,
+                                                late - own > period))
                             missed_before = True
                         else:
                             missed_before = False
                         switches = seen
+                        if upto > i + 1:
+                            # the others of the batch, handed over now: late after a miss is catching up, unless
+                            # a pacer with nothing to do would have been as late
+                            for k in range(j + 1, j0 + upto):
+                                late = now - start - int(k * period)
+                                stats.add(late)
+                                if late > period:
+                                    classify("stalled" if late - own > period else "catching_up")
+                                missed_before = late > period
                     for transport in pacing:
                         transport.await_turn()
-                    if single is not None:
+                    if upto > i + 1:
+                        for (stream, _, _), payloads in zip(links, batch):
+                            stream.send_samples(payloads)
+                    elif single is not None:
                         self._send(stream, transport, device, payload)
                     else:
                         for (stream, transport, device), payload in zip(links, payloads):
                             self._send(stream, transport, device, payload)
+                    count, i, j = upto - i, upto, j0 + upto - 1     # j: the last sample sent
                     if pacer and fds and deadline - pacer.watched_ns > _INPUT_STARVED_NS:
                         # No slack left to watch the links while waiting (high rates): look right after the send.
                         inputs.poll_all()
                         pacer.watched_ns = deadline
-                    if (block is _NOT_TAKEN and i >= take_from
+                    if (block is _NOT_TAKEN and i > take_from
                             and start + int((j + 1) * period) - time.monotonic_ns() > _HANDOVER_SLACK_NS
                             and blocks.poll(0)):
                         block = blocks.recv()
                         block_at = time.monotonic_ns()
-                        taken_at = i
-                    done += 1
-                    if done == 1:
+                        taken_at = i - 1
+                    if done == 0:
                         self._first_ns = time.monotonic_ns()
-                    if not pacer or j % 64 == 0:
+                    done += count
+                    if not pacer or count > 1 or j % 64 == 0:
                         now = time.monotonic_ns()
                         if now >= next_status:
                             self.samples_done = done
@@ -320,6 +351,18 @@ class Streamer:
                 self._last_ns = time.monotonic_ns()
         finally:
             self.samples_done = done
+
+    @staticmethod
+    def _catch_up(links, items, i: int, upto: int, first: list) -> list:
+        """Per stream, the payloads of samples i to upto - 1 (sample i's already made: `first`, one per stream),
+        a device asked for each in turn."""
+        batch = []
+        for (stream, _, device), block_items, payload in zip(links, items, first):
+            if device is None:
+                batch.append([payload, *(block_items[k] for k in range(i + 1, upto))])
+            else:
+                batch.append([payload, *(stream.device_item(block_items, k) for k in range(i + 1, upto))])
+        return batch
 
     @staticmethod
     def _send(stream, transport, device, payload) -> None:
@@ -362,18 +405,21 @@ class Streamer:
 
 
 def miss_cause(block_late: bool, serving: bool, preempted: bool, missed_before: bool, arrived_late: bool,
-               handover_late: bool = False) -> str:
+               handover_late: bool = False, stalled: bool = False) -> str:
     """Why a deadline was missed: the first of realtime.MISS_CAUSES that applies. block_late: the producer's block
     came after the deadline; serving: input was served past it; preempted: involuntary context switches since the
-    previous deadline; missed_before: the previous deadline was missed too; arrived_late: the loop came to wait
-    for this deadline after it had passed; handover_late: this deadline, a block's first or the one after the next
-    block was taken early, passed while that block was being taken."""
+    previous deadline; stalled: late by more than a period even without the sender's own CPU time since it was
+    last on time (Pacer.own_cpu_ns); missed_before: the previous deadline was missed too; arrived_late: the loop
+    came to wait for this deadline after it had passed; handover_late: this deadline, a block's first or the one
+    after the next block was taken early, passed while that block was being taken."""
     if block_late:
         return "producer"
     if serving:
         return "input"
     if preempted:
         return "preempted"
+    if stalled:
+        return "stalled"
     if missed_before:
         return "catching_up"
     if handover_late:

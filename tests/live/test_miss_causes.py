@@ -12,10 +12,13 @@ from types import SimpleNamespace
 
 import pytest
 
+from imu_emulator.live import realtime
 from imu_emulator.live import streamer as streamer_module
 from imu_emulator.live.config import RunOptions
 from imu_emulator.live.realtime import MISS_CAUSES, LatenessStats, Pacer
+from imu_emulator.live.stream import Stream
 from imu_emulator.live.streamer import Streamer, miss_cause
+from imu_emulator.live.transport.base import Transport
 
 pytestmark = pytest.mark.realtime
 
@@ -25,23 +28,26 @@ BLOCK = 20
 BLOCKS = 6
 
 
-class _Transport:
-    """A one-way link without a descriptor; every `slow_every`-th send takes three periods."""
-    sets_pace = False
+class _Transport(Transport):
+    """A one-way link without a descriptor; every `slow_every`-th send takes `slow_periods` periods. What was sent
+    is kept, one entry per send."""
 
-    def __init__(self, slow_every: int = 0):
-        self.slow_every = slow_every
+    def __init__(self, slow_every: int = 0, slow_periods: int = 3, joins_writes: bool = False):
+        self.slow_every, self.slow_periods = slow_every, slow_periods
+        self.joins_writes = joins_writes
         self.sends = 0
         self.slow = 0
+        self.payloads = []
 
     def fileno(self):
         return None
 
     def send(self, payload) -> bool:
         self.sends += 1
+        self.payloads.append(payload)
         if self.slow_every and self.sends % self.slow_every == 0:
             self.slow += 1
-            time.sleep(3 * PERIOD_NS / 1e9)
+            time.sleep(self.slow_periods * PERIOD_NS / 1e9)
         return True
 
 
@@ -83,21 +89,47 @@ class _Pipe:
         os.close(self.w)
 
 
+def _payload(j: int) -> bytes:
+    """Sample j's packet: each sample's its own, so order and losses show."""
+    return b"<%04d>" % j
+
+
 class _Block:
     def __init__(self, j0):
-        self.j0, self.items, self.saturated, self.counts = j0, [[b"x"] * BLOCK], [0], {}
+        self.j0, self.saturated, self.counts = j0, [0], {}
+        self.items = [[_payload(j) for j in range(j0, j0 + BLOCK)]]
 
     def __len__(self):
         return BLOCK
 
 
+class _Stream:
+    """A stream without a device around a double of a transport: the real stream's way of sending a catch-up."""
+    device = None
+    send_samples = Stream.send_samples
+
+    def __init__(self, transport):
+        self.transport = transport
+        self.sent = self.dropped = self.idle = self.saturated = 0
+
+    def send_waiting_replies(self) -> bool:
+        return True
+
+    def sample_queue(self) -> None:
+        pass
+
+
 def _stream(transport):
-    return SimpleNamespace(transport=transport, device=None, sent=0, dropped=0, idle=0, saturated=0,
-                           sample_queue=lambda: None)
+    return _Stream(transport)
 
 
-def _run(monkeypatch, transport, late_blocks=()) -> LatenessStats:
+def _run(monkeypatch, transport, late_blocks=(), host_stalls=False) -> LatenessStats:
+    """One run of the send loop. Unless host_stalls, the thread's CPU clock is the wall clock: a machine whose host
+    never takes the vCPU, where the doubles' sleeps are the sender's own work; with it, the real CPU clock, which
+    stops while they sleep, as it does while the host runs someone else."""
     monkeypatch.setattr(streamer_module, "involuntary_switches", lambda: 0)
+    if not host_stalls:
+        monkeypatch.setattr(realtime, "_cpu_ns", time.monotonic_ns)
     sim = SimpleNamespace(n_samples=BLOCK * BLOCKS)
     streamer = Streamer(sim, RATE, 0.0, [_stream(transport)], RunOptions(quiet=True))
     streamer.pacer = pacer = Pacer(False, PERIOD_NS, spin=False)
@@ -131,21 +163,71 @@ def test_a_send_longer_than_a_period_makes_the_next_deadline_the_previous_works(
     assert causes["previous_work"] >= 1 and causes["producer"] == 0
 
 
+def test_the_samples_a_stall_made_due_go_out_in_one_write_in_order(monkeypatch):
+    """Send 25 takes five periods: when it returns, the next five samples are due (a sleep never returns early) and
+    go out in one write (all of them the block still holds), each counted late by its own deadline; a byte
+    stream's reader sees every sample's packet, in order, as if they had been written one by one."""
+    transport = _Transport(slow_every=25, slow_periods=5, joins_writes=True)
+    stats = _run(monkeypatch, transport)
+    size = len(_payload(0))
+    assert b"".join(transport.payloads) == b"".join(map(_payload, range(BLOCK * BLOCKS)))
+    after = transport.payloads[25]      # the write after the slow one
+    first = int(after[1:5])
+    assert len(after) >= size * min(5, BLOCK - first % BLOCK)
+    assert transport.sends < BLOCK * BLOCKS
+    assert stats.count == BLOCK * BLOCKS              # every sample's lateness, batched or not
+    causes = stats.summary()["missed_by_cause"]
+    assert sum(causes.values()) == stats.missed
+    assert causes["catching_up"] >= 3                 # samples 26-28 at least: each more than a period late
+
+
+def test_a_link_that_cannot_join_writes_gets_one_send_per_sample(monkeypatch):
+    transport = _Transport(slow_every=25, slow_periods=5, joins_writes=False)
+    stats = _run(monkeypatch, transport)
+    assert transport.payloads == list(map(_payload, range(BLOCK * BLOCKS)))
+    assert stats.count == BLOCK * BLOCKS
+
+
+def test_a_stall_the_sender_did_not_spend_is_counted_as_the_floors(monkeypatch):
+    """The same five-period sends, but the CPU clock is the thread's own, which stands still while it sleeps: as
+    if the host had taken the vCPU. A pacer with nothing to do stopped alike would have missed those deadlines
+    too, so they are "stalled", not the sender's previous work or catching up; nothing else changes."""
+    transport = _Transport(slow_every=25, slow_periods=5, joins_writes=True)
+    stats = _run(monkeypatch, transport, host_stalls=True)
+    causes = stats.summary()["missed_by_cause"]
+    assert sum(causes.values()) == stats.missed
+    assert causes["stalled"] >= 3 * transport.slow     # four deadlines passed in each sleep: 3 of them by > 1 period
+    assert b"".join(transport.payloads) == b"".join(map(_payload, range(BLOCK * BLOCKS)))
+
+
+def test_own_cpu_is_counted_from_the_end_of_the_last_wait_begun_in_time(monkeypatch):
+    clock = [1_000]
+    monkeypatch.setattr(realtime, "_cpu_ns", lambda: clock[0])
+    pacer = Pacer(False, PERIOD_NS, spin=True)
+    assert pacer.own_cpu_ns() == 1_000                  # never waited yet: all of the thread's CPU is its own
+    clock[0] = 5_000
+    pacer.wait_until(time.monotonic_ns() + 300_000)     # begun in time: the clock is read at its end
+    clock[0] = 55_000
+    pacer.wait_until(time.monotonic_ns() - PERIOD_NS)   # begun after its deadline: not read
+    assert pacer.own_cpu_ns() == 50_000
+
+
 _PRECEDENCE = [
-    ((True, True, True, True, True, True), "producer"),
-    ((False, True, True, True, True, True), "input"),
-    ((False, False, True, True, True, True), "preempted"),
-    ((False, False, False, True, True, True), "catching_up"),
-    ((False, False, False, False, True, True), "block_handover"),
-    ((False, False, False, False, True, False), "previous_work"),
-    ((False, False, False, False, False, False), "woke_late"),
+    ((True, True, True, True, True, True, True), "producer"),
+    ((False, True, True, True, True, True, True), "input"),
+    ((False, False, True, True, True, True, True), "preempted"),
+    ((False, False, False, True, True, True, True), "stalled"),
+    ((False, False, False, False, True, True, True), "catching_up"),
+    ((False, False, False, False, False, True, True), "block_handover"),
+    ((False, False, False, False, False, True, False), "previous_work"),
+    ((False, False, False, False, False, False, False), "woke_late"),
 ]
 
 
 @pytest.mark.parametrize("flags, cause", _PRECEDENCE)
 def test_the_first_cause_that_applies_is_counted(flags, cause):
-    block_late, serving, preempted, missed_before, arrived_late, handover_late = flags
-    assert miss_cause(block_late, serving, preempted, missed_before, arrived_late, handover_late) == cause
+    block_late, serving, preempted, stalled, missed_before, arrived_late, handover_late = flags
+    assert miss_cause(block_late, serving, preempted, missed_before, arrived_late, handover_late, stalled) == cause
 
 
 def test_causes_are_documented_in_the_order_they_are_tried():

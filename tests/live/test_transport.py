@@ -1,4 +1,4 @@
-"""Target specs, whole-packet writes under backpressure, UART pacing, SLCAN lines."""
+"""Target specs, whole-packet writes under backpressure, UART pacing, SLCAN lines, catching up in one write."""
 import os
 import time
 import tty
@@ -9,8 +9,12 @@ import pytest
 
 from firmware_protocols import CAN_FRAME_DTYPE
 from imu_emulator.errors import TargetError
+from imu_emulator.live.config import StreamConfig
+from imu_emulator.live.stream import Stream
 from imu_emulator.live.transport import TargetOptions, link_capacity, parse_target
+from imu_emulator.live.transport.base import Transport
 from imu_emulator.live.transport.fdwriter import FdPacketWriter
+from imu_emulator.live.transport.pty import PtyTransport
 from imu_emulator.live.transport.slcan_pty import slcan_lines
 
 
@@ -126,3 +130,65 @@ def test_slcan_lines():
     rows[0]["data"][:3] = [0xEE, 0xC0, 0x87]
     rows[1]["can_id"], rows[1]["length"], rows[1]["fd"] = 0x123, 12, True
     assert slcan_lines(rows) == b"T1F03EB2A3EEC087\r" + b"d1239" + b"00" * 12 + b"\r"
+
+
+# - catching up: several samples' packets at once (Transport.send_many, Stream.send_samples) -
+
+def test_a_pty_takes_a_catch_up_in_one_write_and_counts_its_packets_when_left_unread():
+    """The joined write reaches the reader as the packets one after the other; when the reader leaves them unread,
+    they are lost as three packets (the sizes of the packets, not of the write)."""
+    transport = PtyTransport(TargetOptions())
+    reader = os.open(transport.pty.path, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
+    try:
+        assert transport.joins_writes
+        assert transport.send_many([b"a" * 10, b"b" * 20, b"c" * 30]) == 3
+        time.sleep(0.02)
+        assert os.read(reader, 100) == b"a" * 10 + b"b" * 20 + b"c" * 30
+        assert transport.send_many(_packets(3)) == 3
+    finally:
+        os.close(reader)
+    transport.finish()
+    assert transport.link_report()["unread_lost"] == {"packets": 3, "bytes": 225, "readers": 1}
+    transport.close()
+
+
+def test_a_modelled_uart_takes_a_catch_up_packet_by_packet():
+    """Its FIFO takes packets while what waits on the line fits, and drops the others one by one; a joined write
+    would be one packet, taken whole beyond the FIFO (or dropped whole, fitting ones too, behind a backlog)."""
+    transport = PtyTransport(TargetOptions(pace_baud=9600))
+    reader = os.open(transport.pty.path, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
+    try:
+        assert not transport.joins_writes
+        # 4096 bytes of FIFO: 54 packets of 75 bytes fit (and the one on the line), the rest of 80 are dropped
+        assert 50 <= transport.send_many(_packets(80)) < 80
+    finally:
+        os.close(reader)
+        transport.close()
+
+
+class _Link(Transport):
+    """A byte stream that refuses while `full`, keeping what it took."""
+    joins_writes = True
+
+    def __init__(self):
+        self.full, self.taken = False, []
+
+    def send(self, item) -> bool:
+        if not self.full:
+            self.taken.append(item)
+        return not self.full
+
+
+def test_a_stream_sends_waiting_replies_before_a_catch_up_and_drops_it_whole_while_they_wait():
+    import firmware_protocols
+    stream = Stream(StreamConfig("imu0", "mavlink-highres", "pty"), 0, firmware_protocols.get("mavlink-highres"),
+                    100.0)
+    stream.transport = link = _Link()
+    link.full = True
+    stream.send_reply(b"R")                     # refused: it waits, ahead of every sample
+    stream.send_samples([b"a", None, b"b"])
+    assert (stream.sent, stream.dropped, stream.idle, link.taken) == (0, 2, 1, [])
+    link.full = False
+    stream.send_samples([b"c", b"d", None])
+    assert link.taken == [b"R", b"cd"]
+    assert (stream.sent, stream.dropped, stream.idle, stream.replies_delayed) == (2, 2, 2, 1)

@@ -73,6 +73,8 @@ class _CaptureFile(Transport):
 
 class RawFileTransport(_CaptureFile):
 
+    joins_writes = True
+
     def __init__(self, path: str):
         self.lock, fd = _claim(path)
         self.file = open(fd, "wb")

@@ -21,6 +21,11 @@ def read_available(fd: int, limit: int = 65536) -> bytes:
         return b""
 
 
+# `Transport.joins_writes` of a link writing through an FdPacketWriter (`self.writer`): a modelled UART takes or
+# drops packet by packet what its FIFO can hold, which a joined write would turn into one packet.
+joins_writes_unless_paced = property(lambda self: not self.writer.paced)
+
+
 class FdPacketWriter:
     """Write packets to a non-blocking fd without ever leaving half a packet on the line.
 

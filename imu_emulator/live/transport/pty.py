@@ -15,7 +15,7 @@ from imu_emulator.errors import TargetError
 from imu_emulator.files import locks
 from imu_emulator.files.create import part_name, refuse_foreign
 from imu_emulator.live.transport.base import TargetOptions, Transport, output_queue
-from imu_emulator.live.transport.fdwriter import FdPacketWriter, read_available
+from imu_emulator.live.transport.fdwriter import FdPacketWriter, joins_writes_unless_paced, read_available
 
 _OPEN_FLAGS = os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK
 
@@ -128,6 +128,10 @@ class UnreadLosses:
     def written(self, size: int) -> None:
         self._sizes.append(size)
 
+    def forget_last(self) -> None:
+        if self._sizes:
+            self._sizes.pop()
+
     def lose(self, unread: int, unsent_tail: int) -> None:
         """`unread` bytes taken out of the pty unread, the last packet's `unsent_tail` bytes never written."""
         if not unread and not unsent_tail:
@@ -197,6 +201,16 @@ class PtyTransport(Transport):
             return False
         self.unread.written(len(payload))
         return True
+
+    joins_writes = joins_writes_unless_paced
+
+    def send_many(self, items: list) -> int:
+        sent = super().send_many(items)
+        if sent > 1 and self.joins_writes:  # counted as one packet: its packets' sizes, for the unread losses
+            self.unread.forget_last()
+            for item in items:
+                self.unread.written(len(item))
+        return sent
 
     def recv(self) -> bytes:
         return read_available(self.pty.master)

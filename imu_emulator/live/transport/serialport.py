@@ -7,7 +7,7 @@ import serial
 
 from imu_emulator.errors import TargetError
 from imu_emulator.live.transport.base import TargetOptions, Transport, output_queue
-from imu_emulator.live.transport.fdwriter import FdPacketWriter, read_available
+from imu_emulator.live.transport.fdwriter import FdPacketWriter, joins_writes_unless_paced, read_available
 
 
 class SerialTransport(Transport):
@@ -25,6 +25,8 @@ class SerialTransport(Transport):
 
     def send(self, payload: bytes) -> bool:
         return self.writer.send(payload)
+
+    joins_writes = joins_writes_unless_paced
 
     def recv(self) -> bytes:
         return read_available(self.port.fileno())
