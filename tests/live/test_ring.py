@@ -125,6 +125,10 @@ def _stream_udp(tmp_path: Path, monkeypatch, ring: bool) -> list[bytes]:
     from imu_emulator.cli import main
     monkeypatch.setattr(producer_module, "SHARED_RING", ring)
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    # Room for the whole run (1200 small datagrams take about 1.5 MB of socket memory): the receiving thread shares
+    # the GIL with the sender, and on a loaded machine it once read nothing while a stalled sender caught up (94
+    # datagrams lost in the kernel at a default 208 KiB buffer, CI 2026-12-02).
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
     sock.bind(("127.0.0.1", 0))
     sock.settimeout(0.5)
     got = []
