@@ -81,11 +81,14 @@ def cpu_clock_step_ns(limit_ns: int = 50_000_000) -> int:
 _cpu_ns = time.thread_time_ns
 
 
-def involuntary_switches() -> int:
-    """Times the kernel took the CPU from this thread for another runnable one (getrusage RUSAGE_THREAD
-    ru_nivcsw; about 0.7 us a call here). The host taking the vCPU from the whole guest does not count: the guest
-    never sees it: such a miss is told by the CPU clock instead ("stalled", see MISS_CAUSES)."""
-    return resource.getrusage(resource.RUSAGE_THREAD).ru_nivcsw
+def context_switches() -> tuple[int, int]:
+    """(involuntary, voluntary) context switches of this thread so far (getrusage RUSAGE_THREAD ru_nivcsw,
+    ru_nvcsw; about 1 us a call here). Involuntary: the kernel took the CPU for another runnable thread. Voluntary:
+    the thread slept, in its waits or blocked in a system call (a lock, a full buffer). The host taking the vCPU
+    from the whole guest is neither: the guest never sees it, and such a miss is told by the CPU clock instead
+    ("stalled", see MISS_CAUSES)."""
+    usage = resource.getrusage(resource.RUSAGE_THREAD)
+    return usage.ru_nivcsw, usage.ru_nvcsw
 
 
 def usable_cpus() -> int:
@@ -193,9 +196,11 @@ class Pacer:
         # When the sender last came to sleep_until: past the wake time, the previous sample's work (or a
         # block's arrival) made it late before any waiting began (the miss classification reads it).
         self.arrived_ns = 0
-        # The thread's CPU clock at the end of its last wait for a deadline begun in time (own_cpu_ns), and the
-        # wake time of the last sleep begun in time
+        # The thread's CPU clock at the end of its last wait for a deadline begun in time (own_cpu_ns), whether the
+        # last wait_until was one (the caller then notes its voluntary context switches), and the wake time of the
+        # last sleep begun in time
         self._on_time_cpu_ns = 0
+        self.on_time = False
         self._slept_for_ns = None
 
     def _normal_priority(self) -> None:
@@ -254,7 +259,8 @@ class Pacer:
         wake_ns = deadline_ns - self.spin_ns
         self.sleep_until(wake_ns, fds, on_ready)
         now = time.monotonic_ns()
-        if now < deadline_ns or self._slept_for_ns == wake_ns:
+        self.on_time = now < deadline_ns or self._slept_for_ns == wake_ns
+        if self.on_time:
             while now < deadline_ns:
                 now = time.monotonic_ns()
             # It waited for this deadline (here, or in the caller's sleep_until to the same wake time): the
@@ -301,8 +307,8 @@ MISS_CAUSES = {
     "preempted": "preempted: the kernel ran another thread on this CPU since the previous deadline "
                  "(involuntary context switch)",
     "stalled": "stalled: a pacer with nothing to do, stopped alike, would have missed it too (the lateness less the "
-               "sender's own CPU time since it was last on time is still more than a period): the host took the "
-               "vCPU, the floor's kind",
+               "sender's own CPU time since it was last on time is still more than a period, and it did not block "
+               "in the kernel since): the host took the vCPU, the floor's kind",
     "catching_up": "still behind after the previous deadline's miss",
     "block_handover": "taking the producer's next block (early, after a send that left slack, or at the current "
                       "block's end; it was there) ended after the deadline that followed",

@@ -34,7 +34,7 @@ from imu_emulator.live.config import RunOptions, StreamConfig, StreamError, enco
 from imu_emulator.live.inputs import Inputs
 from imu_emulator.live.producer import Producer, ProducerFailure, reap
 from imu_emulator.live.realtime import (LatenessStats, Pacer, drop_realtime, enable_realtime,
-                                         involuntary_switches)
+                                         context_switches)
 from imu_emulator.live.stream import Stream, build_streams
 from imu_emulator.output.atomic import AtomicOutput
 from imu_emulator.runtime.samples import counts_text
@@ -230,7 +230,10 @@ class Streamer:
         show_status = not self.options.quiet
         done = 0
         missed_before = False       # the previous deadline was missed (a miss now is catching up)
-        switches = involuntary_switches()
+        switches, _ = context_switches()
+        # voluntary context switches when the sender was last on time: one since means it blocked in the kernel (a
+        # lock, a full buffer), its own doing, which the CPU clock does not count
+        on_time_voluntary = 0
         if pacer:
             spin_ns, sleep_until, wait_until = pacer.spin_ns, pacer.sleep_until, pacer.wait_until
         fds, ready, unwatched = inputs.fds, inputs.ready, inputs.unwatched
@@ -290,9 +293,12 @@ class Streamer:
                                 now = time.monotonic_ns()
                                 late = now - deadline
                         stats.add(late)
-                        seen = involuntary_switches()
+                        seen, voluntary = context_switches()
+                        if pacer.on_time:
+                            on_time_voluntary = voluntary
                         if late > period:
-                            own = pacer.own_cpu_ns()
+                            # a pacer with nothing to do is this much less late (none when the sender blocked)
+                            own = pacer.own_cpu_ns() if voluntary == on_time_voluntary else late
                             classify(miss_cause(i == 0 and waited and block_at > deadline, inputs.served_ns > deadline,
                                                 seen != switches, missed_before, pacer.arrived_ns > deadline,
                                                 (i == 0 or i == taken_at + 1) and block_at > deadline,

@@ -37,6 +37,7 @@ class _Transport(Transport):
         self.joins_writes = joins_writes
         self.sends = 0
         self.slow = 0
+        self.slept_ns = 0       # wall time spent in the slow sends' sleeps
         self.payloads = []
 
     def fileno(self):
@@ -47,7 +48,9 @@ class _Transport(Transport):
         self.payloads.append(payload)
         if self.slow_every and self.sends % self.slow_every == 0:
             self.slow += 1
+            began = time.monotonic_ns()
             time.sleep(self.slow_periods * PERIOD_NS / 1e9)
+            self.slept_ns += time.monotonic_ns() - began
         return True
 
 
@@ -123,13 +126,15 @@ def _stream(transport):
     return _Stream(transport)
 
 
-def _run(monkeypatch, transport, late_blocks=(), host_stalls=False) -> LatenessStats:
-    """One run of the send loop. Unless host_stalls, the thread's CPU clock is the wall clock: a machine whose host
-    never takes the vCPU, where the doubles' sleeps are the sender's own work; with it, the real CPU clock, which
-    stops while they sleep, as it does while the host runs someone else."""
-    monkeypatch.setattr(streamer_module, "involuntary_switches", lambda: 0)
-    if not host_stalls:
-        monkeypatch.setattr(realtime, "_cpu_ns", time.monotonic_ns)
+def _run(monkeypatch, transport, late_blocks=(), host_stalls=False, switches=lambda: (0, 0)) -> LatenessStats:
+    """One run of the send loop. The thread's CPU clock is the wall clock (a machine whose host never takes the
+    vCPU: the doubles' sleeps are the sender's own work), or with host_stalls the wall clock less the slow sends'
+    sleeps (they stand for the host taking the vCPU: the clock stops, and nothing else can look like it). `switches`:
+    the thread's (involuntary, voluntary) context switches, constant unless given (so the kernel preempting the
+    test changes no cause)."""
+    monkeypatch.setattr(streamer_module, "context_switches", switches)
+    monkeypatch.setattr(realtime, "_cpu_ns", (lambda: time.monotonic_ns() - transport.slept_ns) if host_stalls
+                        else time.monotonic_ns)
     sim = SimpleNamespace(n_samples=BLOCK * BLOCKS)
     streamer = Streamer(sim, RATE, 0.0, [_stream(transport)], RunOptions(quiet=True))
     streamer.pacer = pacer = Pacer(False, PERIOD_NS, spin=False)
@@ -189,8 +194,8 @@ def test_a_link_that_cannot_join_writes_gets_one_send_per_sample(monkeypatch):
 
 
 def test_a_stall_the_sender_did_not_spend_is_counted_as_the_floors(monkeypatch):
-    """The same five-period sends, but the CPU clock is the thread's own, which stands still while it sleeps: as
-    if the host had taken the vCPU. A pacer with nothing to do stopped alike would have missed those deadlines
+    """The same five-period sends, but the CPU clock stands still while they sleep: as if the host had taken the
+    vCPU. A pacer with nothing to do stopped alike would have missed those deadlines
     too, so they are "stalled", not the sender's previous work or catching up; nothing else changes."""
     transport = _Transport(slow_every=25, slow_periods=5, joins_writes=True)
     stats = _run(monkeypatch, transport, host_stalls=True)
@@ -198,6 +203,16 @@ def test_a_stall_the_sender_did_not_spend_is_counted_as_the_floors(monkeypatch):
     assert sum(causes.values()) == stats.missed
     assert causes["stalled"] >= 3 * transport.slow     # four deadlines passed in each sleep: 3 of them by > 1 period
     assert b"".join(transport.payloads) == b"".join(map(_payload, range(BLOCK * BLOCKS)))
+
+
+def test_a_sender_that_blocked_in_the_kernel_is_not_stalled(monkeypatch):
+    """The same sleeping sends and CPU clock, but each sleep is seen as what it is, a voluntary context switch (as
+    a write blocked on a lock would be): the sender's own doing, whatever its CPU clock says."""
+    transport = _Transport(slow_every=25, slow_periods=5, joins_writes=True)
+    stats = _run(monkeypatch, transport, host_stalls=True, switches=lambda: (0, transport.slow))
+    causes = stats.summary()["missed_by_cause"]
+    assert sum(causes.values()) == stats.missed >= 3 * transport.slow
+    assert causes["stalled"] == 0
 
 
 def test_own_cpu_is_counted_from_the_end_of_the_last_wait_begun_in_time(monkeypatch):
