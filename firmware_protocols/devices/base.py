@@ -77,6 +77,12 @@ class Device:
         """Everything sent for sample i of `samples` (b"" / an empty frame array when nothing is due)."""
         raise NotImplementedError
 
+    def output_many(self, samples: Samples, i: int, k: int) -> list:
+        """What `output` gives for samples i to k - 1 one after the other, in a list: a sender catching up after a
+        stall asks for the samples already due at once, and a device may encode them in one call. This default
+        asks `output` for each."""
+        return [self.output(samples, m) for m in range(i, k)]
+
     def warm_up(self, samples: Samples) -> None:
         """Compile now what a driver's configuration command could make the device compile later: the streamer
         calls it on a throwaway device before the first deadline. A reply delayed by a compile (seconds on a cold

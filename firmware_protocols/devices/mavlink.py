@@ -225,6 +225,19 @@ class MavlinkDevice(Device):
         self._once.clear()
         return b"".join(parts)
 
+    def output_many(self, samples: Samples, i: int, k: int) -> list:
+        """The main message alone at every sample of the range (no other message, none asked for once, no reading
+        held back, no heartbeat due in it): one encoder call for the range, which numbers the packets in turn as
+        `output` would; otherwise sample by sample."""
+        n, heartbeat = k - i, self.heartbeat
+        if (n < 2 or self.extra or self._once or self._unsent or self.imu.divider != 1
+                or heartbeat.count == 0 or heartbeat.count + n > heartbeat.period_samples):
+            return super().output_many(samples, i, k)
+        encoded = self.encoder.encode(samples.slice(i, k))
+        heartbeat.count = (heartbeat.count + n) % heartbeat.period_samples
+        data, offsets = bytes(encoded.data), encoded.offsets.tolist()
+        return [data[offsets[m]:offsets[m + 1]] for m in range(n)]
+
     def _encode(self, msgid: int, encoder, samples: Samples, i: int, requested: bool) -> bytes:
         """Sample i as the message: a reading new at this sample, or at one its divider skipped since it was last
         sent (a rate command thinning it), is new here (the reading held is the newest), so the consumer still sees

@@ -205,7 +205,13 @@ class Stream:
 
     def device_item(self, samples, i: int):
         """What the device sends for sample i now, prepared for the transport; None when nothing is due."""
-        out = self.device.output(samples, i)
+        return self._prepared(self.device.output(samples, i), samples, i)
+
+    def device_items(self, samples, i: int, k: int) -> list:
+        """device_item for samples i to k - 1, asked of the device at once (Device.output_many)."""
+        return [self._prepared(out, samples, m) for m, out in enumerate(self.device.output_many(samples, i, k), i)]
+
+    def _prepared(self, out, samples, i: int):
         if not len(out):
             return None
         if self.info.kind == "serial":

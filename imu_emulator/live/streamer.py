@@ -361,13 +361,13 @@ class Streamer:
     @staticmethod
     def _catch_up(links, items, i: int, upto: int, first: list) -> list:
         """Per stream, the payloads of samples i to upto - 1 (sample i's already made: `first`, one per stream),
-        a device asked for each in turn."""
+        a device asked for the others at once."""
         batch = []
         for (stream, _, device), block_items, payload in zip(links, items, first):
             if device is None:
                 batch.append([payload, *(block_items[k] for k in range(i + 1, upto))])
             else:
-                batch.append([payload, *(stream.device_item(block_items, k) for k in range(i + 1, upto))])
+                batch.append([payload, *stream.device_items(block_items, i + 1, upto)])
         return batch
 
     @staticmethod
