@@ -121,15 +121,20 @@ def preset_settings(presets: dict, preset: str, fields_given: bool) -> dict:
 
 
 def single(samples: Samples, i: int) -> Samples:
-    """Sample i as a block of one (views, no copies), for encoders that take blocks. The block's arrays are
-    already contiguous float64 (Samples.__post_init__ saw to it), so their one-row slices are too and the
-    checks are skipped: half the cost of Samples.slice, which this runs per sample in the sender."""
-    one = Samples.__new__(Samples)
+    """Sample i as a block of one (views, no copies), for encoders that take blocks."""
+    return view(samples, i, i + 1)
+
+
+def view(samples: Samples, i: int, k: int) -> Samples:
+    """Samples i to k - 1 as a block (views, no copies). The block's arrays are already contiguous float64
+    (Samples.__post_init__ saw to it), so their row slices are too and the checks are skipped: half the cost of
+    Samples.slice, which the sender pays per sample (single) or per catch-up (Device.output_many)."""
+    rows = Samples.__new__(Samples)
     for name in _SAMPLE_FIELDS:
         value = getattr(samples, name)
-        setattr(one, name, None if value is None else value[i:i + 1])
-    one.start_ns = samples.start_ns
-    return one
+        setattr(rows, name, None if value is None else value[i:k])
+    rows.start_ns = samples.start_ns
+    return rows
 
 
 class SinceLastOutput:

@@ -53,7 +53,7 @@ import numpy as np
 
 from firmware_protocols.base import Samples
 from firmware_protocols.crc import crc16_mcrf4xx_bytes
-from firmware_protocols.devices.base import Device, Divider, Periodic, single
+from firmware_protocols.devices.base import Device, Divider, Periodic, single, view
 from firmware_protocols.wire_formats.mavlink import (HEADER_LEN, INCOMPAT_SIGNED, MESSAGES, P_COMPID, P_SEQ, P_SYSID,
                                                      SIGNATURE_LEN, STX_V1, STX_V2, MavlinkEncoder)
 from firmware_protocols.wire_formats.mavlink import pack_frame as wire_frame
@@ -67,6 +67,8 @@ MAV_RESULT_ACCEPTED, MAV_RESULT_DENIED, MAV_RESULT_UNSUPPORTED = 0, 2, 3
 MAV_TYPE_IMU, MAV_AUTOPILOT_INVALID, MAV_STATE_ACTIVE = 40, 8, 4
 MAVLINK_VERSION = 3
 _COMMAND_LONG = struct.Struct("<7fHBBB")
+# Ranges shorter than this are encoded sample by sample: one call for a range costs about three samples' calls.
+_MANY_AT_ONCE = 4
 _COMMAND_LONG_LEN = _COMMAND_LONG.size   # 33
 _STX = re.compile(bytes([ord("["), STX_V2, STX_V1, ord("]")]))
 _INT32_MAX = 2 ** 31 - 1     # MESSAGE_INTERVAL.interval_us is an int32: a longer interval could not be read back
@@ -230,10 +232,10 @@ class MavlinkDevice(Device):
         held back, no heartbeat due in it): one encoder call for the range, which numbers the packets in turn as
         `output` would; otherwise sample by sample."""
         n, heartbeat = k - i, self.heartbeat
-        if (n < 2 or self.extra or self._once or self._unsent or self.imu.divider != 1
+        if (n < _MANY_AT_ONCE or self.extra or self._once or self._unsent or self.imu.divider != 1
                 or heartbeat.count == 0 or heartbeat.count + n > heartbeat.period_samples):
             return super().output_many(samples, i, k)
-        encoded = self.encoder.encode(samples.slice(i, k))
+        encoded = self.encoder.encode(view(samples, i, k))
         heartbeat.count = (heartbeat.count + n) % heartbeat.period_samples
         data, offsets = bytes(encoded.data), encoded.offsets.tolist()
         return [data[offsets[m]:offsets[m + 1]] for m in range(n)]
