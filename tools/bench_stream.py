@@ -196,8 +196,8 @@ def compare(directory: Path, rate: float, seconds: float, pairs: int, base: Path
         print(f"{'':>7s}  {k:>5s}: misses % each round "
               + ", ".join(f"{r['missed_ratio'] * 100:.3f}" for r in runs[k]), flush=True)
     # Misses not "stalled" by the CPU clock: the emulator's own, and host time the clock counts as the thread's
-    # (not steal: some 16 times a second here a single iteration's CPU clock moved 0.17-0.6 ms where the work takes
-    # 20-80 us). The floor, classified by the same rule, has only the latter: the difference is the emulator's.
+    # (not steal: tools/bench_catch_up.py counts such gaps in a bare loop). The floor, classified by the same
+    # rule, has only the latter: the difference is the emulator's.
     own = {k: [own_misses(r) for r in runs[k]] for k in kinds}
     for k in kinds:
         if None not in own[k]:

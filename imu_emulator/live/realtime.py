@@ -73,11 +73,11 @@ def cpu_clock_step_ns(limit_ns: int = 50_000_000) -> int:
 
 
 # The sender thread's CPU clock. With paravirtual steal-time accounting (KVM guests, as here) it stops while the
-# host runs someone else on the vCPU: a bare spin loop here saw wall gaps of 1.5 ms with 21 us of CPU in them
-# (2026-12-02). What it does not exclude counts as the sender's own work, so the "stalled" cause (MISS_CAUSES) is
-# then not given and the attribution errs towards blaming the emulator: interrupts (charged to the running
-# thread without CONFIG_IRQ_TIME_ACCOUNTING, as here), and host time that is not steal (here, 0.25-1.2 ms of the
-# sender's CPU clock in one iteration, some 16 times a second, in iterations whose work is 20-70 us).
+# host runs someone else on the vCPU: a bare loop here saw wall gaps of 0.1-3.7 ms with 2-3 us of CPU in them
+# (tools/bench_catch_up.py, 2026-12-02). What it does not exclude counts as the sender's own work, so the
+# "stalled" cause (MISS_CAUSES) is then not given and the attribution errs towards blaming the emulator:
+# interrupts (charged to the running thread without CONFIG_IRQ_TIME_ACCOUNTING, as here), and host time that is
+# not steal (the same loop: 2-4 gaps a second of 0.1-1.2 ms that the CPU clock counts in full).
 _cpu_ns = time.thread_time_ns
 
 

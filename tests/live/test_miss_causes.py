@@ -122,10 +122,6 @@ class _Stream:
         pass
 
 
-def _stream(transport):
-    return _Stream(transport)
-
-
 def _run(monkeypatch, transport, late_blocks=(), host_stalls=False, switches=lambda: (0, 0)) -> LatenessStats:
     """One run of the send loop. The thread's CPU clock is the wall clock (a machine whose host never takes the
     vCPU: the doubles' sleeps are the sender's own work), or with host_stalls the wall clock less the slow sends'
@@ -136,7 +132,7 @@ def _run(monkeypatch, transport, late_blocks=(), host_stalls=False, switches=lam
     monkeypatch.setattr(realtime, "_cpu_ns", (lambda: time.monotonic_ns() - transport.slept_ns) if host_stalls
                         else time.monotonic_ns)
     sim = SimpleNamespace(n_samples=BLOCK * BLOCKS)
-    streamer = Streamer(sim, RATE, 0.0, [_stream(transport)], RunOptions(quiet=True))
+    streamer = Streamer(sim, RATE, 0.0, [_Stream(transport)], RunOptions(quiet=True))
     streamer.pacer = pacer = Pacer(False, PERIOD_NS, spin=False)
     start = time.monotonic_ns() + 5 * PERIOD_NS
     pipe = _Pipe(start, late_blocks)
