@@ -6,7 +6,11 @@
   on the emulator); per second and their sizes;
 - a pty write: thread CPU per 62-byte packet to a pty whose reader (`cat`) waits, one packet every 100 us;
 - a device asked for a range: the MAVLink device's output_many over ranges of 4-50 samples against output sample
-  by sample on an identical device, thread CPU per call, min of --repeat.
+  by sample on an identical device, both encoding one sample per call (ahead = 1), thread CPU per call, min of
+  --repeat;
+- a device encoding ahead: the MAVLink device's `output`, one sample every 100 us as the send loop asks, with its
+  default `ahead` (a range encoded at once, handed out one by one) against ahead = 1, interleaved sample by sample;
+  thread CPU per sample: mean (the ranges' cost included), median and p99.
 
     .venv/bin/python tools/bench_catch_up.py [--seconds 5] [--repeat 20]
 """
@@ -83,6 +87,7 @@ def device_ranges(repeat: int) -> None:
     samples = _samples(int(rate) * (len(sizes) * repeat + 2))
     many = firmware_protocols.create_device("mavlink-highres", rate)
     one = firmware_protocols.create_device("mavlink-highres", rate)
+    many.ahead = one.ahead = 1
     many.output(samples, 0)
     one.output(samples, 0)
     best = {n: [np.inf, np.inf] for n in sizes}
@@ -104,6 +109,27 @@ def device_ranges(repeat: int) -> None:
           f"{repeat}): " + "; ".join(f"{n} samples {a / 1e3:.0f} us vs {b / 1e3:.0f} us" for n, (a, b) in best.items()))
 
 
+def device_ahead(count: int = 20000) -> None:
+    rate = 10000.0
+    samples = _samples(count + 1)
+    devices = {"ahead": firmware_protocols.create_device("mavlink-highres", rate),
+               "one by one": firmware_protocols.create_device("mavlink-highres", rate)}
+    devices["one by one"].ahead = 1
+    cpu = {name: [] for name in devices}
+    for q in range(count):
+        for name, device in devices.items():
+            until = time.monotonic_ns() + 50_000
+            while time.monotonic_ns() < until:
+                pass
+            c0 = time.thread_time_ns()
+            device.output(samples, q)
+            cpu[name].append(time.thread_time_ns() - c0)
+    ahead = devices["ahead"].ahead
+    print(f"MAVLink device, output every 100 us, {count} samples (thread CPU per sample, mean / median / p99): " + "; ".join(
+        f"{name} ({ahead if name == 'ahead' else 1} at once) {np.mean(c) / 1e3:.1f} / {np.median(c) / 1e3:.1f} / "
+        f"{np.percentile(c, 99) / 1e3:.1f} us" for name, c in cpu.items()))
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=float, default=5.0, help="duration of the host-gap loop")
@@ -116,6 +142,7 @@ def main() -> int:
     host_gaps(args.seconds)
     pty_write()
     device_ranges(args.repeat)
+    device_ahead()
     print(f"load average at end {load()}")
     return 0
 

@@ -83,6 +83,11 @@ class Device:
         asks `output` for each."""
         return [self.output(samples, m) for m in range(i, k)]
 
+    def prepare(self, samples: Samples, i: int) -> None:
+        """The sender has time to spare before sample i is due: do now what `output` would do for it and may do
+        early, undone if what is due changes before (a device that encodes several samples at once). This default
+        has nothing to do early."""
+
     def warm_up(self, samples: Samples) -> None:
         """Compile now what a driver's configuration command could make the device compile later: the streamer
         calls it on a throwaway device before the first deadline. A reply delayed by a compile (seconds on a cold

@@ -51,7 +51,7 @@ import struct
 import numpy as np
 
 
-from firmware_protocols.base import Samples
+from firmware_protocols.base import EncodeError, Samples
 from firmware_protocols.crc import crc16_mcrf4xx_bytes
 from firmware_protocols.devices.base import Device, Divider, Periodic, single, view
 from firmware_protocols.wire_formats.mavlink import (HEADER_LEN, INCOMPAT_SIGNED, MESSAGES, P_COMPID, P_SEQ, P_SYSID,
@@ -69,6 +69,10 @@ MAVLINK_VERSION = 3
 _COMMAND_LONG = struct.Struct("<7fHBBB")
 # Ranges shorter than this are encoded sample by sample: one call for a range costs about three samples' calls.
 _MANY_AT_ONCE = 4
+# Samples `output` encodes at once (MavlinkDevice.ahead): one encoder call per sample was most of the live sender's
+# work at 10 kHz (25 us hot, about 40 in the send loop, where caches are cold, of the 100 us a sample has;
+# tools/bench_catch_up.py), and a call for 16 samples costs about as much as three single ones.
+_AHEAD = 16
 _COMMAND_LONG_LEN = _COMMAND_LONG.size   # 33
 _STX = re.compile(bytes([ord("["), STX_V2, STX_V1, ord("]")]))
 _INT32_MAX = 2 ** 31 - 1     # MESSAGE_INTERVAL.interval_us is an int32: a longer interval could not be read back
@@ -144,8 +148,25 @@ class _FrameReader:
         return total
 
 
+class _Ahead:
+    """Packets encoded at once for samples start to start + n - 1 of one block, handed out one by one by `output`
+    (next: the next to hand out), with the sequence number and heartbeat count before the first."""
+    __slots__ = ("samples", "start", "next", "end", "packets", "seq", "beat")
+
+    def __init__(self, samples, start: int, n: int, packets: list, seq: int, beat: int):
+        self.samples, self.start, self.next, self.end = samples, start, start, start + n
+        self.packets, self.seq, self.beat = packets, seq, beat
+
+
 class MavlinkDevice(Device):
-    """The IMU message of `message` at the scene's rate (or as asked), HEARTBEAT at 1 Hz, COMMAND_ACKs."""
+    """The IMU message of `message` at the scene's rate (or as asked), HEARTBEAT at 1 Hz, COMMAND_ACKs.
+
+    Encoding ahead: while `output` would send the main message alone at every sample, it encodes the next `ahead`
+    samples of the block in one call and hands their packets out one by one. Anything that could change what is
+    due takes the unsent ones back first (_rewind: input from the driver, a sample asked for out of turn, a range
+    asked for), so every packet is the one `output` sample by sample gives under the configuration in force."""
+
+    ahead = _AHEAD        # samples encoded at once by `output` (1: one at a time)
 
     def __init__(self, rate_hz: float, message: str = "mavlink-highres", heartbeat_type: int = MAV_TYPE_IMU,
                  heartbeat_autopilot: int = MAV_AUTOPILOT_INVALID, also="", **encoder_options):
@@ -160,6 +181,7 @@ class MavlinkDevice(Device):
         else:
             self.encoder = MavlinkEncoder(message, **encoder_options)
         self.spec = self.encoder.spec
+        self._encodes_ranges = isinstance(self.encoder, MavlinkEncoder)
         for name, value in (("heartbeat_type", heartbeat_type), ("heartbeat_autopilot", heartbeat_autopilot)):
             if not 0 <= int(value) <= 255:
                 raise ValueError(f"{name}: must be 0..255, got {value}")
@@ -168,6 +190,8 @@ class MavlinkDevice(Device):
         self.imu = Divider(1)
         self.heartbeat = Periodic.every(1.0, rate_hz)
         self._once: set = set()          # message ids asked for once with REQUEST_MESSAGE
+        self._ahead = None               # _Ahead: packets encoded ahead, not yet handed out
+        self._plain_until = (None, 0)    # (block, sample): no range encoded ahead from here; one by one up to there
         self._unsent: dict = {}          # message id -> new-reading flags seen on samples its divider skipped
         self._reader = _FrameReader()
         self.sysid, self.compid = self.encoder_ids(self.encoder)
@@ -210,6 +234,17 @@ class MavlinkDevice(Device):
 
     # - output -
     def output(self, samples: Samples, i: int) -> bytes:
+        ahead = self._ahead
+        if ahead is not None and not (ahead.samples is samples and ahead.next == i):
+            self._rewind()
+            ahead = None
+        if ahead is None:
+            ahead = self._encode_ahead(samples, i)
+        if ahead is not None:
+            ahead.next = i + 1
+            if ahead.next == ahead.end:
+                self._ahead = None
+            return ahead.packets[i - ahead.start]
         parts = []
         if self.heartbeat.due() or HEARTBEAT in self._once:
             parts.append(self._frame(HEARTBEAT, self.heartbeat_payload))
@@ -227,18 +262,81 @@ class MavlinkDevice(Device):
         self._once.clear()
         return b"".join(parts)
 
+    def prepare(self, samples: Samples, i: int) -> None:
+        """Encode ahead from sample i now, if `output` would (Device.prepare)."""
+        if self._ahead is None:
+            self._encode_ahead(samples, i)
+
+    def _encode_ahead(self, samples: Samples, i: int) -> _Ahead | None:
+        """Samples i on to the block's end or `ahead` samples encoded at once, as `output` will hand them out (the
+        range `_range` allows); None when they are not (then sample by sample up to there)."""
+        n = min(self.ahead, len(samples.time_ns) - i)
+        if n <= 1 or (samples is self._plain_until[0] and i < self._plain_until[1]):
+            return None
+        seq, beat = self._next_seq(), self.heartbeat.count
+        packets = self._range(samples, i, i + n, ahead=True)
+        if packets is None:
+            self._plain_until = (samples, i + n)
+            return None
+        self._ahead = _Ahead(samples, i, n, packets, seq, beat)
+        return self._ahead
+
     def output_many(self, samples: Samples, i: int, k: int) -> list:
-        """The main message alone at every sample of the range (no other message, none asked for once, no reading
-        held back, no heartbeat due in it): one encoder call for the range, which numbers the packets in turn as
-        `output` would; otherwise sample by sample."""
+        """The packets encoded ahead for the range's first samples, then one encoder call for the rest when
+        `_range` can, else sample by sample (Device.output_many)."""
+        ahead, taken = self._ahead, []
+        if ahead is not None and ahead.samples is samples and ahead.next == i:
+            m = min(k, ahead.end)
+            taken = ahead.packets[i - ahead.start:m - ahead.start]
+            ahead.next = i = m
+            if m == ahead.end:
+                self._ahead = None
+            if i == k:
+                return taken
+        if self._ahead is not None:
+            self._rewind()
+        packets = self._range(samples, i, k, ahead=False)
+        return taken + (super().output_many(samples, i, k) if packets is None else packets)
+
+    def _range(self, samples: Samples, i: int, k: int, ahead: bool) -> list | None:
+        """Samples i to k - 1 in one encoder call, each one's packet as `output` would give it in turn (numbered
+        in turn), when that is all `output` would send: the main message alone at every sample (no other message,
+        none asked for once, no reading held back, no heartbeat due in the range); None otherwise, the device
+        unchanged. `ahead` (encoding before the samples are due): also None, the device unchanged, on a signed
+        link (a signature's timestamp is not taken back by _rewind) and when a value saturated or is not finite:
+        the counts must follow what was sent, and the error come at its sample."""
         n, heartbeat = k - i, self.heartbeat
         if (n < _MANY_AT_ONCE or self.extra or self._once or self._unsent or self.imu.divider != 1
-                or heartbeat.count == 0 or heartbeat.count + n > heartbeat.period_samples):
-            return super().output_many(samples, i, k)
-        encoded = self.encoder.encode(view(samples, i, k))
+                or heartbeat.count == 0 or heartbeat.count + n > heartbeat.period_samples
+                or (ahead and self.link is not None)):
+            return None
+        # the IMU messages' encoder takes the block and the range: no view to make
+        args = (samples, i, k) if self._encodes_ranges else (view(samples, i, k),)
+        if not ahead:
+            encoded = self.encoder.encode(*args)
+        else:
+            saturated = self.encoder.saturated
+            seq, counts = self._next_seq(), dict(saturated.counts)
+            try:
+                encoded = self.encoder.encode(*args)
+            except EncodeError:
+                encoded = None
+            if encoded is None or saturated.counts != counts:
+                saturated.counts = counts
+                self._set_seq(seq)
+                return None
         heartbeat.count = (heartbeat.count + n) % heartbeat.period_samples
         data, offsets = bytes(encoded.data), encoded.offsets.tolist()
         return [data[offsets[m]:offsets[m + 1]] for m in range(n)]
+
+    def _rewind(self) -> None:
+        """Forget the packets encoded ahead and not handed out: the device is as if `output` had been asked for the
+        samples handed out so far only (their sequence numbers: one per packet, a GNSS message has none between
+        fixes; the heartbeat count)."""
+        ahead, self._ahead = self._ahead, None
+        sent = ahead.next - ahead.start
+        self._set_seq(ahead.seq + sum(1 for packet in ahead.packets[:sent] if packet))
+        self.heartbeat.count = (ahead.beat + sent) % self.heartbeat.period_samples
 
     def _encode(self, msgid: int, encoder, samples: Samples, i: int, requested: bool) -> bytes:
         """Sample i as the message: a reading new at this sample, or at one its divider skipped since it was last
@@ -261,6 +359,8 @@ class MavlinkDevice(Device):
 
     # - input -
     def _receive(self, data: bytes, now_ns: int) -> list:
+        if self._ahead is not None:     # a command may change what is due from the next sample on
+            self._rewind()
         replies = []
         skipped = self._reader.skipped
         for msgid, payload, sysid, compid, signed, v2 in self._reader.feed(data):

@@ -547,8 +547,10 @@ class MavlinkEncoder:
         """Sequence number of the next packet."""
         return int(self._params[P_SEQ])
 
-    def encode(self, samples: Samples) -> SerialBatch:
-        n = len(samples.time_ns)
+    def encode(self, samples: Samples, lo: int = 0, hi: int | None = None) -> SerialBatch:
+        """Samples lo to hi - 1 of the block (all by default): a device encoding a few samples of a block at once
+        passes the whole block and the range, which spares it a view of every field (about 9 us a call)."""
+        n = len(samples.time_ns) if hi is None else hi
         mag, pressure, temperature = samples.mag, samples.pressure_pa, samples.temperature_c
         params, link = self._params, self.signing_link
         link_state = _NO_LINK if link is None else link.state
@@ -562,21 +564,21 @@ class MavlinkEncoder:
                   _NO_ROWS if temperature is None else temperature,
                   self._updated_bits(samples),
                   self._layout, self._lsb, self._consts, params, link_state)
-        offsets = np.empty(n + 1, dtype=np.int64)
+        offsets = np.empty(n + 1, dtype=np.int64)      # those of samples lo to n are set
         scratch, sat = self._scratch, self._sat
         # Big blocks are packed chunk by chunk into a cache-sized scratch buffer and streamed into a
         # BytesIO, whose getvalue() hands over its buffer without a copy: one large allocation
         # instead of two, which matters because first-touch page faults cost as much as the packing.
-        sink = io.BytesIO() if n > _CHUNK else None
+        sink = io.BytesIO() if n - lo > _CHUNK else None
         seq0, ts0 = params[P_SEQ], link_state[0]
-        saturated, base = 0, 0
-        for lo in range(0, max(n, 1), _CHUNK):
+        saturated, base, first = 0, 0, lo
+        for lo in range(first, max(n, first + 1), _CHUNK):
             hi = min(lo + _CHUNK, n)
             bad, nbytes, nsat = _encode_block(*arrays, lo, hi, base, sat, scratch, offsets)
             if bad >= 0:
                 params[P_SEQ], link_state[0] = seq0, ts0
                 sat[:] = 0
-                samples.require_finite(self._checked)
+                samples.require_finite(self._checked, np.arange(first, n))
                 raise EncodeError(f"non-finite value at sample {bad}")   # unreachable unless arrays changed
             if link is not None:
                 link.sign(scratch, offsets[lo:hi + 1], base)
@@ -590,7 +592,7 @@ class MavlinkEncoder:
             for field, count in zip(self.spec.fields, sat.tolist()):
                 self.saturated.add(field.name, count)
             sat[:] = 0
-        return SerialBatch(data if sink is None else sink.getvalue(), offsets)
+        return SerialBatch(data if sink is None else sink.getvalue(), offsets[first:])
 
 
 # --- decoder ------------------------------------------------------------------------------------

@@ -28,6 +28,7 @@ import threading
 import time
 
 import firmware_protocols
+from firmware_protocols.devices.base import Device
 from imu_emulator.errors import ImuEmulatorError, TargetError
 from imu_emulator.live.budget import link_budget_problem, link_text
 from imu_emulator.live.config import RunOptions, StreamConfig, StreamError, encoders_navigate
@@ -220,6 +221,8 @@ class Streamer:
         # (stream, transport, device) per stream: a device answers its driver and is asked for each sample's output
         links = [(s, s.transport, s.device) for s in streams]
         single = links[0] if len(links) == 1 else None
+        devices = [d for _, _, d in links]
+        prepares = any(d is not None and type(d).prepare is not Device.prepare for d in devices)
         # links whose other end sets the pace (a flight stack stepping in lockstep) are waited for before each sample
         pacing = [s.transport for s in streams if s.transport.sets_pace]
         catch_up = not pacing       # behind, the samples already due go out together (not to a stepping stack)
@@ -331,12 +334,18 @@ class Streamer:
                         # No slack left to watch the links while waiting (high rates): look right after the send.
                         inputs.poll_all()
                         pacer.watched_ns = deadline
-                    if (block is _NOT_TAKEN and i > take_from
-                            and start + int((j + 1) * period) - time.monotonic_ns() > _HANDOVER_SLACK_NS
-                            and blocks.poll(0)):
-                        block = blocks.recv()
-                        block_at = time.monotonic_ns()
-                        taken_at = i - 1
+                    if pacer and start + int((j + 1) * period) - time.monotonic_ns() > _HANDOVER_SLACK_NS:
+                        # Slack before the next deadline: take the next block, or let the devices work ahead.
+                        if block is _NOT_TAKEN and i > take_from and blocks.poll(0):
+                            block = blocks.recv()
+                            block_at = time.monotonic_ns()
+                            taken_at = i - 1
+                        elif prepares:
+                            # the next sample: in this block, or the first of the next one when it is taken
+                            ahead, at = (items, i) if i < n else (getattr(block, "items", None), 0)
+                            for device, device_items in zip(devices, ahead or ()):
+                                if device is not None:
+                                    device.prepare(device_items, at)
                     if done == 0:
                         self._first_ns = time.monotonic_ns()
                     done += count

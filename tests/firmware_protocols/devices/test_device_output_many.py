@@ -30,6 +30,7 @@ def _both(fmt, commands, **options):
     devices just before that sample (the ranges start there)."""
     samples = _samples()
     one = firmware_protocols.create_device(fmt, RATE, **options)
+    one.ahead = 1           # one encoder call per sample (test_device_mavlink_ahead.py: `output` encoding ahead)
     many = firmware_protocols.create_device(fmt, RATE, **options)
     expected = []
     for m in range(N):
