@@ -44,13 +44,16 @@ def _commands(msgid):
             333: command_long(msgid, command=GET_INTERVAL)}  # a reply only
 
 
-def _wire(device, samples, commands):
+def _wire(device, samples, commands, prepare=False):
     """Per sample, the replies to the commands arriving before it, then what the device sends for it; the
-    samples go to the device block by block, as the sender's blocks."""
+    samples go to the device block by block, as the sender's blocks. `prepare`: the device is told to prepare
+    each sample before the commands arrive, as the send loop does when it has slack."""
     out = []
     for a, b in zip(BLOCKS, BLOCKS[1:]):
         block = view(samples, a, b)
         for m in range(a, b):
+            if prepare:
+                device.prepare(block, m - a)
             replies = b"".join(device.receive(commands[m])) if m in commands else b""
             out.append((replies, device.output(block, m - a)))
     return out
@@ -68,10 +71,11 @@ def _pair(fmt, **options):
     ("mavlink-highres", HIGHRES, None, {}),
     ("mavlink-hil-gps", HIL_GPS, 20, {}),          # packets at new fixes only: sequence numbers skip none
     ("mavlink-highres", HIGHRES, 20, {"also": "mavlink-hil-gps"})])
-def test_ahead_sends_what_one_sample_at_a_time_sends(fmt, msgid, gnss_every, options):
+@pytest.mark.parametrize("prepare", [False, True])
+def test_ahead_sends_what_one_sample_at_a_time_sends(fmt, msgid, gnss_every, options, prepare):
     samples, commands = _samples(gnss_every=gnss_every), _commands(msgid)
     ahead, one = _pair(fmt, **options)
-    got, expected = _wire(ahead, samples, commands), _wire(one, samples, commands)
+    got, expected = _wire(ahead, samples, commands, prepare), _wire(one, samples, commands)
     assert got == expected
     assert sum(len(packet) for _, packet in got) > 0
 
