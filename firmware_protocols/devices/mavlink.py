@@ -268,9 +268,10 @@ class MavlinkDevice(Device):
             self._encode_ahead(samples, i)
 
     def _encode_ahead(self, samples: Samples, i: int) -> _Ahead | None:
-        """Samples i on to the block's end or `ahead` samples encoded at once, as `output` will hand them out (the
-        range `_range` allows); None when they are not (then sample by sample up to there)."""
-        n = min(self.ahead, len(samples.time_ns) - i)
+        """Samples i on to the block's end, the next heartbeat or `ahead` samples, encoded at once as `output` will
+        hand them out (the range `_range` allows); None when they are not (then sample by sample up to there)."""
+        beat = self.heartbeat
+        n = min(self.ahead, len(samples.time_ns) - i, beat.period_samples - beat.count if beat.count else 0)
         if n <= 1 or (samples is self._plain_until[0] and i < self._plain_until[1]):
             return None
         seq, beat = self._next_seq(), self.heartbeat.count
