@@ -270,11 +270,12 @@ class MavlinkDevice(Device):
     def _encode_ahead(self, samples: Samples, i: int) -> _Ahead | None:
         """Samples i on to the block's end, the next heartbeat or `ahead` samples, encoded at once as `output` will
         hand them out (the range `_range` allows); None when they are not (then sample by sample up to there)."""
-        beat = self.heartbeat
-        n = min(self.ahead, len(samples.time_ns) - i, beat.period_samples - beat.count if beat.count else 0)
+        heartbeat = self.heartbeat
+        n = min(self.ahead, len(samples.time_ns) - i,
+                heartbeat.period_samples - heartbeat.count if heartbeat.count else 0)
         if n <= 1 or (samples is self._plain_until[0] and i < self._plain_until[1]):
             return None
-        seq, beat = self._next_seq(), self.heartbeat.count
+        seq, beat = self._next_seq(), heartbeat.count
         packets = self._range(samples, i, i + n, ahead=True)
         if packets is None:
             self._plain_until = (samples, i + n)
