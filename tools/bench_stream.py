@@ -160,6 +160,15 @@ def _load() -> str:
     return " ".join(Path("/proc/loadavg").read_text().split()[:3])
 
 
+def _steal_ms() -> float:
+    """The guest's steal time so far, all CPUs, in ms (/proc/stat, in USER_HZ ticks): the host running someone
+    else on our vCPUs. A stream keeps both vCPUs of these guests busy (sender, producer, reader), the floor one."""
+    for line in Path("/proc/stat").read_text().splitlines():
+        if line.startswith("cpu "):
+            return int(line.split()[8]) * 1000 / os.sysconf("SC_CLK_TCK")
+    return 0.0
+
+
 def _cpu_model() -> str:
     for line in Path("/proc/cpuinfo").read_text().splitlines():
         if line.startswith("model name"):
@@ -174,18 +183,21 @@ def compare(directory: Path, rate: float, seconds: float, pairs: int, base: Path
     shown = LatenessStats.shown
     for round_ in range(pairs):
         for kind in kinds[round_ % 3:] + kinds[:round_ % 3]:
+            stolen = _steal_ms()
             if kind == "floor":
                 late, cpu = baseline(rate, seconds), None
             else:
                 s = lateness(directory, rate, seconds, REPO if kind == "tree" else base)
                 late, cpu = s["lateness"], s.get("sender_cpu_ratio")
+            stolen = (_steal_ms() - stolen) / seconds
             runs[kind].append(late)
             causes = LatenessStats.causes_text(late.get("missed_by_cause", {}))
             own = own_misses(late)
             print(f"  round {round_ + 1} {kind:>5s}: missed {late['missed_ratio']:.4%}, p50 {shown(late['p50_us'])} us, "
                   f"p99 {shown(late['p99_us'])} us" + ("" if cpu is None else f", sender CPU {cpu:.2f} s/s")
                   + (f"; misses: {causes}" if causes else "")
-                  + ("" if own is None else f"; its own (not stalled): {own:.4f} %") + f" (load {_load()})", flush=True)
+                  + ("" if own is None else f"; its own (not stalled): {own:.4f} %")
+                  + f" (load {_load()}; host steal {stolen:.1f} ms/s, both CPUs)", flush=True)
     median = {k: float(np.median([r["missed_ratio"] for r in runs[k]])) * 100 for k in kinds}
     above = {k: median[k] - median["floor"] for k in ("base", "tree")}
     print(f"{rate:>7.0f} Hz, {pairs} rounds of {seconds:g} s, median misses: floor {median['floor']:.3f} %, "
@@ -230,8 +242,9 @@ def main() -> int:
     parser.add_argument("--baseline", type=Path, help="another checkout to compare with, interleaved (e.g. /work/main)")
     parser.add_argument("--pairs", type=int, default=3, help="rounds of (floor, baseline, this tree) with --baseline")
     parser.add_argument("--device", choices=("on", "off"), default="on",
-                        help="the stream's --device: on (default) answers a driver, and its samples cross from the "
-                             "producer pickled; off sends packets encoded ahead, through shared memory")
+                        help="the stream's --device: on (default) answers a driver, and the sender encodes (the "
+                             "MAVLink device 16 samples at a time, in its slack); off sends packets the producer "
+                             "encoded")
     args = parser.parse_args()
     STREAM_OPTIONS[:] = ["--device", args.device]
     print(f"{_cpu_model()}, {os.cpu_count()} CPUs; load average at start {_load()}", flush=True)
