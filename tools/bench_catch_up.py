@@ -124,9 +124,8 @@ def device_ahead(count: int = 20000) -> None:
             c0 = time.thread_time_ns()
             device.output(samples, q)
             cpu[name].append(time.thread_time_ns() - c0)
-    ahead = devices["ahead"].ahead
     print(f"MAVLink device, output every 100 us, {count} samples (thread CPU per sample, mean / median / p99): " + "; ".join(
-        f"{name} ({ahead if name == 'ahead' else 1} at once) {np.mean(c) / 1e3:.1f} / {np.median(c) / 1e3:.1f} / "
+        f"{name} ({devices[name].ahead} at once) {np.mean(c) / 1e3:.1f} / {np.median(c) / 1e3:.1f} / "
         f"{np.percentile(c, 99) / 1e3:.1f} us" for name, c in cpu.items()))
 
 
