@@ -10,9 +10,13 @@
   --repeat;
 - a device encoding ahead: the MAVLink device's `output`, one sample every 100 us as the send loop asks, with its
   default `ahead` (a range encoded at once, handed out one by one) against ahead = 1, interleaved sample by sample;
-  thread CPU per sample: mean (the ranges' cost included), median and p99.
+  thread CPU per sample: mean (the ranges' cost included), median and p99;
+- a device's block taken from the ring: the sender's copy of one block of 200 raw samples, with every field present
+  and with bench_stream's (imu_emulator.live.ring._samples), one block per ms with the thread asleep between (its caches go cold as in the
+  send loop), thread CPU per block, median and p90; with --baseline, the same from another checkout's ring module,
+  interleaved block by block.
 
-    .venv/bin/python tools/bench_catch_up.py [--seconds 5] [--repeat 20]
+    .venv/bin/python tools/bench_catch_up.py [--seconds 5] [--repeat 20] [--baseline DIR]
 """
 from __future__ import annotations
 
@@ -132,10 +136,36 @@ def device_ahead(count: int = 20000) -> None:
         f"{np.percentile(c, 99) / 1e3:.1f} us" for name, c in cpu.items()))
 
 
+def ring_take(baseline: str | None, blocks: int = 600) -> None:
+    from imu_emulator.live import ring
+    takes = {"this tree": ring._samples}
+    if baseline:
+        path = Path(baseline) / "imu_emulator" / "live" / "ring.py"
+        other: dict = {"__name__": "baseline_ring"}
+        exec(compile(path.read_text(), str(path), "exec"), other)    # the checkout's module, on this tree's imports
+        takes[f"{baseline}"] = other["_samples"]
+    n, fields = 200, [name for name, _ in ring._SAMPLE_FIELDS]
+    for label, names in (("every field", fields), ("the fields of bench_stream's scene", ("accel", "gyro", "quat", "euler"))):
+        mask = sum(1 << fields.index(name) for name in names)
+        words = n + sum(n * (width or 1) for bit, (_, width) in enumerate(ring._SAMPLE_FIELDS) if mask >> bit & 1)
+        data = memoryview(np.random.default_rng(1).normal(size=words)).cast("B")
+        cpu = {name: [] for name in takes}
+        for _ in range(blocks):
+            for name, take in takes.items():
+                time.sleep(0.001)
+                c0 = time.thread_time_ns()
+                take(data, 0, n, mask, 0)
+                cpu[name].append(time.thread_time_ns() - c0)
+        print(f"a device's block from the ring, {n} samples, {label} ({len(names)}, {words * 8 // 1024} KiB), one per "
+              f"ms (thread CPU per block, median / p90): " + "; ".join(
+                  f"{name} {np.median(c) / 1e3:.1f} / {np.percentile(c, 90) / 1e3:.1f} us" for name, c in cpu.items()))
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=float, default=5.0, help="duration of the host-gap loop")
     parser.add_argument("--repeat", type=int, default=20, help="rounds of the device ranges")
+    parser.add_argument("--baseline", help="another checkout whose ring module's block copy is measured beside")
     args = parser.parse_args()
     model = next((line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
                   if line.startswith("model name")), "unknown CPU")
@@ -145,6 +175,7 @@ def main() -> int:
     pty_write()
     device_ranges(args.repeat)
     device_ahead()
+    ring_take(args.baseline)
     print(f"load average at end {load()}")
     return 0
 
