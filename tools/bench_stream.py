@@ -9,8 +9,9 @@
   0.2-5 ms, even from a loop that never sleeps); no pacing inside the guest can beat that floor.
 
 With --baseline PATH (another checkout, e.g. /work/main) the lateness runs become a comparison: for each rate,
---pairs rounds of (floor, PATH's emulator, this tree's emulator), the order rotated each round, so the machine's
-load hits all three alike; per run it prints misses %, lateness p50/p99, the sender thread's CPU per second of
+--pairs rounds of (floor, PATH's emulator, this tree's emulator; with --loaded-floor also the floor with another
+CPU kept as busy as a stream keeps it besides its sender), the order rotated each round, so the machine's
+load hits all alike; per run it prints misses %, lateness p50/p99, the sender thread's CPU per second of
 streaming, and this tree's misses by cause; then the medians and the misses above the floor, this tree against
 PATH, in percentage points and as a ratio. The CPU model and the load average (start, end) are printed.
 The host's stalls differ from one run to the next by more than the emulator's own misses, so each run's misses
@@ -25,6 +26,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import select
 import subprocess
 import sys
@@ -99,10 +101,19 @@ STREAM_OPTIONS: list = []
 
 
 def lateness(directory: Path, rate: float, seconds: float, repo: Path = REPO) -> dict:
+    """The emulator's statistics; with "other_cpu_ratio" added: the CPU a second of streaming took besides the
+    sender thread's (the producer, the emulator's other threads and start-up, this reader), which --loaded-floor
+    gives the floor."""
     stats = directory / "stats.json"
+    children, own = resource.getrusage(resource.RUSAGE_CHILDREN), time.process_time()
     proc, fd, _ = launch(directory, rate, seconds, stats, extra=tuple(STREAM_OPTIONS), repo=repo)
     read_until_exit(proc, fd)
-    return json.loads(stats.read_text())
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    summary = json.loads(stats.read_text())
+    total = (after.ru_utime + after.ru_stime - children.ru_utime - children.ru_stime) + (time.process_time() - own)
+    if "sender_cpu_ratio" in summary:
+        summary["other_cpu_ratio"] = max(0.0, total / seconds - summary["sender_cpu_ratio"])
+    return summary
 
 
 def drift(directory: Path, seconds: float) -> tuple[float, float]:
@@ -143,10 +154,34 @@ print(json.dumps(stats.summary()))
 """
 
 
-def baseline(rate: float, seconds: float) -> dict:
-    """The machine's floor: the same pacer with nothing to send, no producer, no reader."""
-    out = subprocess.run([sys.executable, "-c", BASELINE, str(rate), str(seconds)], capture_output=True,
-                         text=True, check=True, cwd=REPO)
+# --loaded-floor: the other vCPU kept as busy as a stream keeps it (producer, reader), in slices of a millisecond,
+# which a stream's many short wake-ups resemble more than one long busy stretch would.
+LOAD = """
+import sys, time
+duty, seconds = float(sys.argv[1]), float(sys.argv[2])
+end = time.monotonic() + seconds
+while time.monotonic() < end:
+    busy = time.monotonic() + duty * 1e-3
+    while time.monotonic() < busy:
+        pass
+    time.sleep((1 - duty) * 1e-3)
+"""
+
+
+def baseline(rate: float, seconds: float, load: float = 0.0) -> dict:
+    """The machine's floor: the same pacer with nothing to send, no producer, no reader; with `load` (CPU s/s,
+    below 1) a process keeps another CPU that busy meanwhile."""
+    helper = None
+    if load > 0:
+        helper = subprocess.Popen([sys.executable, "-c", LOAD, str(min(load, 0.95)), str(seconds + 1.0)])
+        time.sleep(0.2)
+    try:
+        out = subprocess.run([sys.executable, "-c", BASELINE, str(rate), str(seconds)], capture_output=True,
+                             text=True, check=True, cwd=REPO)
+    finally:
+        if helper is not None:
+            helper.kill()
+            helper.wait()
     return json.loads(out.stdout)
 
 
@@ -176,25 +211,31 @@ def _cpu_model() -> str:
     return "unknown CPU"
 
 
-def compare(directory: Path, rate: float, seconds: float, pairs: int, base: Path) -> None:
-    """Floor, `base`'s emulator and this tree's, interleaved (order rotated each round); medians and ratio."""
-    kinds = ["floor", "base", "tree"]
+def compare(directory: Path, rate: float, seconds: float, pairs: int, base: Path, loaded_floor: bool = False) -> None:
+    """Floor, `base`'s emulator and this tree's, interleaved (order rotated each round); medians and ratio.
+    loaded_floor: a fourth kind, "load": the floor with another CPU kept as busy as this tree's last run kept the
+    machine besides its sender (0.3 s/s until this tree has run)."""
+    kinds = ["floor", "base", "tree"] + (["load"] if loaded_floor else [])
     runs = {k: [] for k in kinds}
     shown = LatenessStats.shown
+    other = 0.3
     for round_ in range(pairs):
-        for kind in kinds[round_ % 3:] + kinds[:round_ % 3]:
+        for kind in kinds[round_ % len(kinds):] + kinds[:round_ % len(kinds)]:
             stolen = _steal_ms()
-            if kind == "floor":
-                late, cpu = baseline(rate, seconds), None
+            if kind in ("floor", "load"):
+                late, cpu = baseline(rate, seconds, other if kind == "load" else 0.0), None
             else:
                 s = lateness(directory, rate, seconds, REPO if kind == "tree" else base)
                 late, cpu = s["lateness"], s.get("sender_cpu_ratio")
+                if kind == "tree" and "other_cpu_ratio" in s:
+                    other = s["other_cpu_ratio"]
             stolen = (_steal_ms() - stolen) / seconds
             runs[kind].append(late)
             causes = LatenessStats.causes_text(late.get("missed_by_cause", {}))
             own = own_misses(late)
             print(f"  round {round_ + 1} {kind:>5s}: missed {late['missed_ratio']:.4%}, p50 {shown(late['p50_us'])} us, "
                   f"p99 {shown(late['p99_us'])} us" + ("" if cpu is None else f", sender CPU {cpu:.2f} s/s")
+                  + (f", another CPU kept busy {min(other, 0.95):.2f} s/s" if kind == "load" else "")
                   + (f"; misses: {causes}" if causes else "")
                   + ("" if own is None else f"; its own (not stalled): {own:.4f} %")
                   + f" (load {_load()}; host steal {stolen:.1f} ms/s, both CPUs)", flush=True)
@@ -216,9 +257,13 @@ def compare(directory: Path, rate: float, seconds: float, pairs: int, base: Path
             print(f"{'':>7s}  {k:>5s}: misses not stalled (a pacer with nothing to do, stopped alike, would not have "
                   f"had them), % of deadlines: median {np.median(own[k]):.4f}, each round "
                   + ", ".join(f"{o:.4f}" for o in own[k]), flush=True)
-    if None not in own["tree"] + own["floor"]:
-        print(f"{'':>7s}  this tree's misses not stalled, above the floor's: "
-              f"{np.median(own['tree']) - np.median(own['floor']):+.4f} pp (medians)", flush=True)
+    for floor in [k for k in ("floor", "load") if k in kinds]:
+        if None not in own["tree"] + own[floor]:
+            print(f"{'':>7s}  this tree's misses not stalled, above the {floor}'s: "
+                  f"{np.median(own['tree']) - np.median(own[floor]):+.4f} pp (medians)", flush=True)
+    if "load" in kinds:
+        print(f"{'':>7s}  median misses above the loaded floor: this tree {median['tree'] - median['load']:+.3f} pp, "
+              f"{base} {median['base'] - median['load']:+.3f} pp", flush=True)
 
 
 def own_misses(late: dict) -> float | None:
@@ -241,6 +286,9 @@ def main() -> int:
     parser.add_argument("--drift-seconds", type=float, default=600.0, help="duration of the drift run (0 = skip)")
     parser.add_argument("--baseline", type=Path, help="another checkout to compare with, interleaved (e.g. /work/main)")
     parser.add_argument("--pairs", type=int, default=3, help="rounds of (floor, baseline, this tree) with --baseline")
+    parser.add_argument("--loaded-floor", action="store_true",
+                        help="with --baseline: also the floor with another CPU kept as busy as a stream keeps it "
+                             "besides its sender (producer, reader)")
     parser.add_argument("--device", choices=("on", "off"), default="on",
                         help="the stream's --device: on (default) answers a driver, and the sender encodes (the "
                              "MAVLink device 16 samples at a time, in its slack); off sends packets the producer "
@@ -255,7 +303,7 @@ def main() -> int:
         if args.baseline:
             lateness(directory, 1000, 1.0, args.baseline)     # its numba caches too
         for rate in args.rates if args.baseline else ():
-            compare(directory, rate, args.seconds, args.pairs, args.baseline)
+            compare(directory, rate, args.seconds, args.pairs, args.baseline, args.loaded_floor)
         for rate in args.rates if not args.baseline else ():
             s = lateness(directory, rate, args.seconds)
             late = s["lateness"]
