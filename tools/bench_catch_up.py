@@ -14,9 +14,11 @@
 - a device's block taken from the ring: the sender's copy of one block of 200 raw samples, with every field present
   and with bench_stream's (imu_emulator.live.ring._samples), one block per ms with the thread asleep between (its caches go cold as in the
   send loop), thread CPU per block, median and p90; with --baseline, the same from another checkout's ring module,
-  interleaved block by block.
+  interleaved block by block;
+- with --all-devices, every format's device at 10 kHz: `output` one sample every 100 us as the send loop asks (the
+  samples carry accel, gyro, quat and euler only), thread CPU per sample: mean, median and p99, against the period.
 
-    .venv/bin/python tools/bench_catch_up.py [--seconds 5] [--repeat 20] [--baseline DIR]
+    .venv/bin/python tools/bench_catch_up.py [--seconds 5] [--repeat 20] [--baseline DIR] [--all-devices]
 """
 from __future__ import annotations
 
@@ -161,10 +163,34 @@ def ring_take(baseline: str | None, blocks: int = 600) -> None:
                   f"{name} {np.median(c) / 1e3:.1f} / {np.percentile(c, 90) / 1e3:.1f} us" for name, c in cpu.items()))
 
 
+def all_devices(count: int = 3000) -> None:
+    from firmware_protocols import registry
+    samples = _samples(count + 41)
+    print(f"every format's device, output every 100 us, {count} samples (thread CPU per sample, mean / median / p99):")
+    for name in registry.formats():
+        if registry.get(name).device is None:
+            continue
+        device = registry.create_device(name, 10000.0)
+        for q in range(40):       # the encoder's first calls load its machine code
+            device.output(samples, q)
+        cpu = []
+        for q in range(40, 40 + count):
+            until = time.monotonic_ns() + 50_000
+            while time.monotonic_ns() < until:
+                pass
+            c0 = time.thread_time_ns()
+            device.output(samples, q)
+            cpu.append(time.thread_time_ns() - c0)
+        mean = np.mean(cpu) / 1e3
+        print(f"  {name:28s} {mean:6.1f} / {np.median(cpu) / 1e3:6.1f} / {np.percentile(cpu, 99) / 1e3:6.1f} us"
+              + ("  (more than the 100 us period)" if mean > 100 else ""), flush=True)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=float, default=5.0, help="duration of the host-gap loop")
     parser.add_argument("--repeat", type=int, default=20, help="rounds of the device ranges")
+    parser.add_argument("--all-devices", action="store_true", help="also every format's device at 10 kHz")
     parser.add_argument("--baseline", help="another checkout whose ring module's block copy is measured beside")
     args = parser.parse_args()
     model = next((line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
@@ -176,6 +202,8 @@ def main() -> int:
     device_ranges(args.repeat)
     device_ahead()
     ring_take(args.baseline)
+    if args.all_devices:
+        all_devices()
     print(f"load average at end {load()}")
     return 0
 

@@ -10,7 +10,8 @@
 
 With --baseline PATH (another checkout, e.g. /work/main) the lateness runs become a comparison: for each rate,
 --pairs rounds of (floor, PATH's emulator, this tree's emulator; with --loaded-floor also the floor with another
-CPU kept as busy as a stream keeps it besides its sender), the order rotated each round, so the machine's
+CPU kept as busy as a stream keeps it besides its sender; with --pty-floor also the floor writing a packet a
+deadline to a pty this process reads), the order rotated each round, so the machine's
 load hits all alike; per run it prints misses %, lateness p50/p99, the sender thread's CPU per second of
 streaming, and this tree's misses by cause; then the medians and the misses above the floor, this tree against
 PATH, in percentage points and as a ratio. The CPU model and the load average (start, end) are printed.
@@ -20,6 +21,7 @@ the misses not stalled, this tree's against the floor's, compare the two on the 
 
     python tools/bench_stream.py [--seconds 30] [--rates 1000 10000] [--drift-seconds 600]
     python tools/bench_stream.py --baseline /work/main --rates 10000 --seconds 20 --pairs 3 --drift-seconds 0
+    python tools/bench_stream.py --baseline . --device off --baseline-device on --rates 10000 --drift-seconds 0
 """
 from __future__ import annotations
 
@@ -96,17 +98,18 @@ def read_until_exit(proc, fd, on_data=None):
     return first
 
 
-# Extra options of every lateness run (--device off).
+# Extra options of every lateness run (--device off), and of the --baseline checkout's runs (--baseline-device).
 STREAM_OPTIONS: list = []
+BASELINE_OPTIONS: list = []
 
 
-def lateness(directory: Path, rate: float, seconds: float, repo: Path = REPO) -> dict:
+def lateness(directory: Path, rate: float, seconds: float, repo: Path = REPO, options: list = STREAM_OPTIONS) -> dict:
     """The emulator's statistics; with "other_cpu_ratio" added: the CPU a second of streaming took besides the
     sender thread's (the producer, the emulator's other threads and start-up, this reader), which --loaded-floor
     gives the floor."""
     stats = directory / "stats.json"
     children, own = resource.getrusage(resource.RUSAGE_CHILDREN), time.process_time()
-    proc, fd, _ = launch(directory, rate, seconds, stats, extra=tuple(STREAM_OPTIONS), repo=repo)
+    proc, fd, _ = launch(directory, rate, seconds, stats, extra=tuple(options), repo=repo)
     read_until_exit(proc, fd)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     summary = json.loads(stats.read_text())
@@ -136,17 +139,28 @@ def drift(directory: Path, seconds: float) -> tuple[float, float]:
 
 
 BASELINE = """
-import gc, json, sys, time
+import gc, json, os, sys, time, tty
 from imu_emulator.live.realtime import LatenessStats, Pacer, enable_realtime
-rate, seconds = float(sys.argv[1]), float(sys.argv[2])
+rate, seconds, pty = float(sys.argv[1]), float(sys.argv[2]), len(sys.argv) > 3
 rt = enable_realtime()
+if pty:     # a HIGHRES_IMU-sized packet to a pty each deadline, for a reader in another process (--pty-floor)
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    os.set_blocking(master, False)
+    packet, refused = bytes(int(sys.argv[3])), 0
+    print("-> " + os.ttyname(slave), flush=True)
 gc.freeze(); gc.disable()
 period = 1e9 / rate
 pacer, stats = Pacer(rt.fifo, period, spin=rt.spin), LatenessStats(period)
-start = time.monotonic_ns() + 10_000_000
+start = time.monotonic_ns() + (500_000_000 if pty else 10_000_000)     # the reader opens the pty meanwhile
 for k in range(int(rate * seconds)):
     deadline = start + int(k * period)
     late = pacer.wait_until(deadline) - deadline
+    if pty:
+        try:
+            os.write(master, packet)
+        except BlockingIOError:
+            refused += 1
     stats.add(late)
     if late > period:     # the emulator's rule for "stalled"; the rest is host time its CPU clock counts
         stats.classify("stalled" if late - pacer.own_cpu_ns() > period else "woke_late")
@@ -171,6 +185,8 @@ while time.monotonic() < end:
 def baseline(rate: float, seconds: float, load: float = 0.0) -> dict:
     """The machine's floor: the same pacer with nothing to send, no producer, no reader; with `load` (CPU s/s,
     below 1) a process keeps another CPU that busy meanwhile."""
+    if load < 0:
+        return pty_floor(rate, seconds)
     helper = None
     if load > 0:
         helper = subprocess.Popen([sys.executable, "-c", LOAD, str(min(load, 0.95)), str(seconds + 1.0)])
@@ -183,6 +199,27 @@ def baseline(rate: float, seconds: float, load: float = 0.0) -> dict:
             helper.kill()
             helper.wait()
     return json.loads(out.stdout)
+
+
+def pty_floor(rate: float, seconds: float, size: int = 62) -> dict:
+    """The same pacer writing a `size`-byte packet to a pty at each deadline (after it, as the emulator's send loop
+    does), read by this process as bench runs read the emulator's: what talking to a reader costs on this machine
+    (each write wakes the reader's CPU), with no encoding, no producer, no block."""
+    proc = subprocess.Popen([sys.executable, "-c", BASELINE, str(rate), str(seconds), str(size)],
+                            stdout=subprocess.PIPE, text=True, cwd=REPO)
+    path = proc.stdout.readline().split("-> ")[1].strip()
+    fd = os.open(path, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
+    while True:     # as read_until_exit, but the floor's statistics follow on its stdout
+        data = b""
+        if select.select([fd], [], [], 0.2)[0]:
+            try:
+                data = os.read(fd, 1 << 16)
+            except OSError:     # EIO: the floor has closed its side
+                pass
+        if not data and proc.poll() is not None:
+            break
+    os.close(fd)
+    return json.loads(proc.stdout.read())
 
 
 def first_packet(directory: Path) -> float:
@@ -211,21 +248,24 @@ def _cpu_model() -> str:
     return "unknown CPU"
 
 
-def compare(directory: Path, rate: float, seconds: float, pairs: int, base: Path, loaded_floor: bool = False) -> None:
+def compare(directory: Path, rate: float, seconds: float, pairs: int, base: Path, loaded_floor: bool = False,
+            pty_floor: bool = False) -> None:
     """Floor, `base`'s emulator and this tree's, interleaved (order rotated each round); medians and ratio.
-    loaded_floor: a fourth kind, "load": the floor with another CPU kept as busy as this tree's last run kept the
-    machine besides its sender (0.3 s/s until this tree has run)."""
-    kinds = ["floor", "base", "tree"] + (["load"] if loaded_floor else [])
+    loaded_floor: a kind "load": the floor with another CPU kept as busy as this tree's last run kept the machine
+    besides its sender (0.3 s/s until this tree has run). pty_floor: a kind "pty", the floor writing a packet to a
+    pty read here at each deadline (pty_floor)."""
+    kinds = ["floor", "base", "tree"] + (["load"] if loaded_floor else []) + (["pty"] if pty_floor else [])
     runs = {k: [] for k in kinds}
     shown = LatenessStats.shown
     other = 0.3
     for round_ in range(pairs):
         for kind in kinds[round_ % len(kinds):] + kinds[:round_ % len(kinds)]:
             stolen = _steal_ms()
-            if kind in ("floor", "load"):
-                late, cpu = baseline(rate, seconds, other if kind == "load" else 0.0), None
+            if kind in ("floor", "load", "pty"):
+                late, cpu = baseline(rate, seconds, {"floor": 0.0, "load": other, "pty": -1}[kind]), None
             else:
-                s = lateness(directory, rate, seconds, REPO if kind == "tree" else base)
+                s = (lateness(directory, rate, seconds) if kind == "tree"
+                     else lateness(directory, rate, seconds, base, BASELINE_OPTIONS))
                 late, cpu = s["lateness"], s.get("sender_cpu_ratio")
                 if kind == "tree" and "other_cpu_ratio" in s:
                     other = s["other_cpu_ratio"]
@@ -257,13 +297,14 @@ def compare(directory: Path, rate: float, seconds: float, pairs: int, base: Path
             print(f"{'':>7s}  {k:>5s}: misses not stalled (a pacer with nothing to do, stopped alike, would not have "
                   f"had them), % of deadlines: median {np.median(own[k]):.4f}, each round "
                   + ", ".join(f"{o:.4f}" for o in own[k]), flush=True)
-    for floor in [k for k in ("floor", "load") if k in kinds]:
+    for floor in [k for k in ("floor", "load", "pty") if k in kinds]:
         if None not in own["tree"] + own[floor]:
             print(f"{'':>7s}  this tree's misses not stalled, above the {floor}'s: "
                   f"{np.median(own['tree']) - np.median(own[floor]):+.4f} pp (medians)", flush=True)
-    if "load" in kinds:
-        print(f"{'':>7s}  median misses above the loaded floor: this tree {median['tree'] - median['load']:+.3f} pp, "
-              f"{base} {median['base'] - median['load']:+.3f} pp", flush=True)
+    for floor, name in (("load", "the loaded floor"), ("pty", "the pty floor")):
+        if floor in kinds:
+            print(f"{'':>7s}  median misses above {name}: this tree {median['tree'] - median[floor]:+.3f} pp, "
+                  f"{base} {median['base'] - median[floor]:+.3f} pp", flush=True)
 
 
 def own_misses(late: dict) -> float | None:
@@ -289,21 +330,28 @@ def main() -> int:
     parser.add_argument("--loaded-floor", action="store_true",
                         help="with --baseline: also the floor with another CPU kept as busy as a stream keeps it "
                              "besides its sender (producer, reader)")
+    parser.add_argument("--pty-floor", action="store_true",
+                        help="with --baseline: also the floor writing a 62-byte packet to a pty read by this process "
+                             "at each deadline (what talking to a reader costs, without the emulator)")
     parser.add_argument("--device", choices=("on", "off"), default="on",
                         help="the stream's --device: on (default) answers a driver, and the sender encodes (the "
                              "MAVLink device 16 samples at a time, in its slack); off sends packets the producer "
                              "encoded")
+    parser.add_argument("--baseline-device", choices=("on", "off"),
+                        help="the --baseline checkout's --device, when not --device's (e.g. --baseline . --device off "
+                             "--baseline-device on: what encoding in the sender costs, in one interleaved run)")
     args = parser.parse_args()
     STREAM_OPTIONS[:] = ["--device", args.device]
+    BASELINE_OPTIONS[:] = ["--device", args.baseline_device or args.device]
     print(f"{_cpu_model()}, {os.cpu_count()} CPUs; load average at start {_load()}", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         directory = Path(tmp)
         first_packet(directory)   # warm the numba caches
         print(f"first packet after launch (warm cache): {first_packet(directory) * 1e3:.0f} ms")
         if args.baseline:
-            lateness(directory, 1000, 1.0, args.baseline)     # its numba caches too
+            lateness(directory, 1000, 1.0, args.baseline, BASELINE_OPTIONS)     # its numba caches too
         for rate in args.rates if args.baseline else ():
-            compare(directory, rate, args.seconds, args.pairs, args.baseline, args.loaded_floor)
+            compare(directory, rate, args.seconds, args.pairs, args.baseline, args.loaded_floor, args.pty_floor)
         for rate in args.rates if not args.baseline else ():
             s = lateness(directory, rate, args.seconds)
             late = s["lateness"]
