@@ -12,7 +12,7 @@ With --baseline PATH (another checkout, e.g. /work/main) the lateness runs becom
 --pairs rounds of (floor, PATH's emulator, this tree's emulator; with --loaded-floor also the floor with another
 CPU kept as busy as a stream keeps it besides its sender; with --pty-floor also the floor writing a packet a
 deadline to a pty this process reads), the order rotated each round, so the machine's
-load hits all alike; per run it prints misses %, lateness p50/p99, the sender thread's CPU per second of
+load hits all alike; per run it prints misses %, lateness p50/p99, the sender thread's (a floor's pacing thread's) CPU per second of
 streaming, and this tree's misses by cause; then the medians and the misses above the floor, this tree against
 PATH, in percentage points and as a ratio. The CPU model and the load average (start, end) are printed.
 The host's stalls differ from one run to the next by more than the emulator's own misses, so each run's misses
@@ -153,6 +153,7 @@ gc.freeze(); gc.disable()
 period = 1e9 / rate
 pacer, stats = Pacer(rt.fifo, period, spin=rt.spin), LatenessStats(period)
 start = time.monotonic_ns() + (500_000_000 if pty else 10_000_000)     # the reader opens the pty meanwhile
+cpu = time.thread_time_ns()
 for k in range(int(rate * seconds)):
     deadline = start + int(k * period)
     late = pacer.wait_until(deadline) - deadline
@@ -164,7 +165,10 @@ for k in range(int(rate * seconds)):
     stats.add(late)
     if late > period:     # the emulator's rule for "stalled"; the rest is host time its CPU clock counts
         stats.classify("stalled" if late - pacer.own_cpu_ns() > period else "woke_late")
-print(json.dumps(stats.summary()))
+summary = stats.summary()
+# the pacing thread's CPU per second, as the emulator's sender_cpu_ratio counts its send loop's
+summary["sender_cpu_ratio"] = (time.thread_time_ns() - cpu) / (time.monotonic_ns() - start)
+print(json.dumps(summary))
 """
 
 
@@ -262,7 +266,8 @@ def compare(directory: Path, rate: float, seconds: float, pairs: int, base: Path
         for kind in kinds[round_ % len(kinds):] + kinds[:round_ % len(kinds)]:
             stolen = _steal_ms()
             if kind in ("floor", "load", "pty"):
-                late, cpu = baseline(rate, seconds, {"floor": 0.0, "load": other, "pty": -1}[kind]), None
+                late = baseline(rate, seconds, {"floor": 0.0, "load": other, "pty": -1}[kind])
+                cpu = late.pop("sender_cpu_ratio", None)
             else:
                 s = (lateness(directory, rate, seconds) if kind == "tree"
                      else lateness(directory, rate, seconds, base, BASELINE_OPTIONS))
