@@ -11,10 +11,10 @@
 - a device encoding ahead: the MAVLink device's `output`, one sample every 100 us as the send loop asks, with its
   default `ahead` (a range encoded at once, handed out one by one) against ahead = 1, interleaved sample by sample;
   thread CPU per sample: mean (the ranges' cost included), median and p99;
-- a device's block taken from the ring: the sender's copy of one block of 200 raw samples, with every field present
-  and with bench_stream's (imu_emulator.live.ring._samples), one block per ms with the thread asleep between (its caches go cold as in the
-  send loop), thread CPU per block, median and p90; with --baseline, the same from another checkout's ring module,
-  interleaved block by block;
+- a device's block taken from the ring: the sender's copy of one block of 200 raw samples
+  (imu_emulator.live.ring._samples), with every field present and with bench_stream's scene's, one block per ms
+  with the thread asleep between (its caches go cold as in the send loop), thread CPU per block, median and p90;
+  with --baseline, the same from another checkout's ring module, interleaved block by block;
 - with --all-devices, every format's device at 10 kHz: `output` one sample every 100 us as the send loop asks (the
   samples carry accel, gyro, quat and euler only), thread CPU per sample: mean, median and p99, against the period.
 
@@ -145,7 +145,7 @@ def ring_take(baseline: str | None, blocks: int = 600) -> None:
         path = Path(baseline) / "imu_emulator" / "live" / "ring.py"
         other: dict = {"__name__": "baseline_ring"}
         exec(compile(path.read_text(), str(path), "exec"), other)    # the checkout's module, on this tree's imports
-        takes[f"{baseline}"] = other["_samples"]
+        takes[baseline] = other["_samples"]
     n, fields = 200, [name for name, _ in ring._SAMPLE_FIELDS]
     for label, names in (("every field", fields), ("the fields of bench_stream's scene", ("accel", "gyro", "quat", "euler"))):
         mask = sum(1 << fields.index(name) for name in names)
