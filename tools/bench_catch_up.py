@@ -147,7 +147,8 @@ def ring_take(baseline: str | None, blocks: int = 600) -> None:
         exec(compile(path.read_text(), str(path), "exec"), other)    # the checkout's module, on this tree's imports
         takes[baseline] = other["_samples"]
     n, fields = 200, [name for name, _ in ring._SAMPLE_FIELDS]
-    for label, names in (("every field", fields), ("the fields of bench_stream's scene", ("accel", "gyro", "quat", "euler"))):
+    scene_fields = ("accel", "gyro", "quat", "euler")
+    for label, names in (("every field", fields), ("the fields of bench_stream's scene", scene_fields)):
         mask = sum(1 << fields.index(name) for name in names)
         words = n + sum(n * (width or 1) for bit, (_, width) in enumerate(ring._SAMPLE_FIELDS) if mask >> bit & 1)
         data = memoryview(np.random.default_rng(1).normal(size=words)).cast("B")

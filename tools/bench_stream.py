@@ -11,8 +11,8 @@
 With --baseline PATH (another checkout, e.g. /work/main) the lateness runs become a comparison: for each rate,
 --pairs rounds of (floor, PATH's emulator, this tree's emulator; with --loaded-floor also the floor with another
 CPU kept as busy as a stream keeps it besides its sender; with --pty-floor also the floor writing a packet a
-deadline to a pty this process reads), the order rotated each round, so the machine's
-load hits all alike; per run it prints misses %, lateness p50/p99, the sender thread's (a floor's pacing thread's) CPU per second of
+deadline to a pty this process reads), the order rotated each round, so the machine's load hits all alike; per
+run it prints misses %, lateness p50/p99, the sender thread's (a floor's pacing thread's) CPU per second of
 streaming, and this tree's misses by cause; then the medians and the misses above the floor, this tree against
 PATH, in percentage points and as a ratio. The CPU model and the load average (start, end) are printed.
 The host's stalls differ from one run to the next by more than the emulator's own misses, so each run's misses
@@ -160,7 +160,7 @@ for k in range(int(rate * seconds)):
     if pty:
         try:
             os.write(master, packet)
-        except BlockingIOError:
+        except BlockingIOError:     # the pty full: counted, printed with the run
             refused += 1
     stats.add(late)
     if late > period:     # the emulator's rule for "stalled"; the rest is host time its CPU clock counts
@@ -168,6 +168,8 @@ for k in range(int(rate * seconds)):
 summary = stats.summary()
 # the pacing thread's CPU per second, as the emulator's sender_cpu_ratio counts its send loop's
 summary["sender_cpu_ratio"] = (time.thread_time_ns() - cpu) / (time.monotonic_ns() - start)
+if pty:
+    summary["refused_writes"] = refused
 print(json.dumps(summary))
 """
 
@@ -189,8 +191,6 @@ while time.monotonic() < end:
 def baseline(rate: float, seconds: float, load: float = 0.0) -> dict:
     """The machine's floor: the same pacer with nothing to send, no producer, no reader; with `load` (CPU s/s,
     below 1) a process keeps another CPU that busy meanwhile."""
-    if load < 0:
-        return pty_floor(rate, seconds)
     helper = None
     if load > 0:
         helper = subprocess.Popen([sys.executable, "-c", LOAD, str(min(load, 0.95)), str(seconds + 1.0)])
@@ -212,18 +212,8 @@ def pty_floor(rate: float, seconds: float, size: int = 62) -> dict:
     proc = subprocess.Popen([sys.executable, "-c", BASELINE, str(rate), str(seconds), str(size)],
                             stdout=subprocess.PIPE, text=True, cwd=REPO)
     path = proc.stdout.readline().split("-> ")[1].strip()
-    fd = os.open(path, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
-    while True:     # as read_until_exit, but the floor's statistics follow on its stdout
-        data = b""
-        if select.select([fd], [], [], 0.2)[0]:
-            try:
-                data = os.read(fd, 1 << 16)
-            except OSError:     # EIO: the floor has closed its side
-                pass
-        if not data and proc.poll() is not None:
-            break
-    os.close(fd)
-    return json.loads(proc.stdout.read())
+    read_until_exit(proc, os.open(path, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK))
+    return json.loads(proc.stdout.read())     # its statistics, a line that waited in the pipe
 
 
 def first_packet(directory: Path) -> float:
@@ -265,9 +255,11 @@ def compare(directory: Path, rate: float, seconds: float, pairs: int, base: Path
     for round_ in range(pairs):
         for kind in kinds[round_ % len(kinds):] + kinds[:round_ % len(kinds)]:
             stolen = _steal_ms()
+            refused = None
             if kind in ("floor", "load", "pty"):
-                late = baseline(rate, seconds, {"floor": 0.0, "load": other, "pty": -1}[kind])
-                cpu = late.pop("sender_cpu_ratio", None)
+                late = pty_floor(rate, seconds) if kind == "pty" else baseline(rate, seconds,
+                                                                               other if kind == "load" else 0.0)
+                cpu, refused = late.pop("sender_cpu_ratio", None), late.pop("refused_writes", None)
             else:
                 s = (lateness(directory, rate, seconds) if kind == "tree"
                      else lateness(directory, rate, seconds, base, BASELINE_OPTIONS))
@@ -281,6 +273,7 @@ def compare(directory: Path, rate: float, seconds: float, pairs: int, base: Path
             print(f"  round {round_ + 1} {kind:>5s}: missed {late['missed_ratio']:.4%}, p50 {shown(late['p50_us'])} us, "
                   f"p99 {shown(late['p99_us'])} us" + ("" if cpu is None else f", sender CPU {cpu:.2f} s/s")
                   + (f", another CPU kept busy {min(other, 0.95):.2f} s/s" if kind == "load" else "")
+                  + (f", {refused} writes refused (the pty full)" if refused else "")
                   + (f"; misses: {causes}" if causes else "")
                   + ("" if own is None else f"; its own (not stalled): {own:.4f} %")
                   + f" (load {_load()}; host steal {stolen:.1f} ms/s, both CPUs)", flush=True)
