@@ -16,7 +16,7 @@ pytestmark = [pytest.mark.subprocess, pytest.mark.streams]
 
 def _check_rawimu(frames, scene_path, imu=0, minimum=100, dropped=0):
     """The transfers decode to the scene's samples, in order, none twice. `dropped`: whole transfers the emulator
-    counted as dropped (the pty full while the reader was starved); exactly that many may be missing between
+    counted as dropped (the pty full while the reader was starved); at most that many may be missing between
     the first and the last received, each having used its transfer ID as it would on a bus."""
     scene, _, accel, gyro = reference(scene_path, imu)
     transfers = dronecan_rawimu(frames)
