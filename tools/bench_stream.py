@@ -243,12 +243,12 @@ def _cpu_model() -> str:
 
 
 def compare(directory: Path, rate: float, seconds: float, pairs: int, base: Path, loaded_floor: bool = False,
-            pty_floor: bool = False) -> None:
+            with_pty_floor: bool = False) -> None:
     """Floor, `base`'s emulator and this tree's, interleaved (order rotated each round); medians and ratio.
     loaded_floor: a kind "load": the floor with another CPU kept as busy as this tree's last run kept the machine
-    besides its sender (0.3 s/s until this tree has run). pty_floor: a kind "pty", the floor writing a packet to a
-    pty read here at each deadline (pty_floor)."""
-    kinds = ["floor", "base", "tree"] + (["load"] if loaded_floor else []) + (["pty"] if pty_floor else [])
+    besides its sender (0.3 s/s until this tree has run). with_pty_floor: a kind "pty", the floor writing a packet
+    to a pty read here at each deadline (pty_floor)."""
+    kinds = ["floor", "base", "tree"] + (["load"] if loaded_floor else []) + (["pty"] if with_pty_floor else [])
     runs = {k: [] for k in kinds}
     shown = LatenessStats.shown
     other = 0.3
