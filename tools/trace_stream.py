@@ -5,7 +5,8 @@ traced from inside the emulator's process:
 - every missed deadline: its cause (realtime.MISS_CAUSES), lateness and the sender's own CPU time it was judged by;
 - every send to the pty that took more than --slow-us of wall time: its wall and CPU time and whether the thread
   switched (voluntary: it blocked in the kernel; involuntary: preempted);
-- the misses that are not `stalled`, split by whether a slow send came within 1.5 ms before them.
+- the misses that are not `stalled`, split by what came within 1.5 ms before them: a slow send, else a `stalled`
+  miss (the sender still catching up from the host's stall), else neither.
 
     .venv/bin/python tools/trace_stream.py [--seconds 20] [--rate 10000] [--device off] [--slow-us 60]
 
@@ -73,6 +74,24 @@ def _inside(out: str, slow_ns: int, argv: list) -> int:
     return main(argv)
 
 
+def _follow(misses: np.ndarray, sends: np.ndarray, stalled: int, window_ns: int = 1_500_000) -> list:
+    """The misses not stalled, by what came within `window_ns` before each: a slow send first, else a stalled
+    miss (the host's stall the sender is still catching up from), else neither."""
+    stalls = misses[misses[:, 1] == stalled, 3]
+    found, neither = Counter(), []
+    for row in misses[misses[:, 1] != stalled]:
+        t = row[3]
+        if ((sends[:, 0] < t) & (sends[:, 0] > t - window_ns)).any():
+            found["within 1.5 ms after a slow send"] += 1
+        elif ((stalls < t) & (stalls > t - window_ns)).any():
+            found["after a stalled miss (no slow send)"] += 1
+        else:
+            found["after neither"] += 1
+            neither.append(row)
+    return [(what, found[what]) for what in ("within 1.5 ms after a slow send", "after a stalled miss (no slow send)",
+                                             "after neither")], neither
+
+
 def main() -> int:
     if len(sys.argv) > 1 and sys.argv[1] == "--inside":
         return _inside(sys.argv[2], int(sys.argv[3]), sys.argv[4:])
@@ -107,8 +126,11 @@ def main() -> int:
              f"{int((sends[:, 4] > 0).sum())} preempted" if len(sends) else ""))
     stalled = causes.index("stalled")
     own = misses[misses[:, 1] != stalled]
-    after = sum(bool(((sends[:, 0] < t) & (sends[:, 0] > t - 1_500_000)).any()) for t in own[:, 3])
-    print(f"misses not stalled: {len(own)}; {after} within 1.5 ms after a slow send, {len(own) - after} not")
+    split, neither = _follow(misses, sends, stalled)
+    print(f"misses not stalled: {len(own)}; " + ", ".join(f"{n} {what}" for what, n in split))
+    if neither:
+        print("  after neither (cause, lateness us, sender CPU us since last on time): " + "; ".join(
+            f"{causes[c]} {late / 1e3:.0f} {cpu / 1e3:.0f}" for late, c, cpu, _ in neither[:20]))
     print(f"load average at end {bench_stream._load()}")
     return 0
 
