@@ -2,7 +2,9 @@
 # Developer set-up on a Debian/Ubuntu machine (users install the wheel: pip install imu-emulator):
 #   1. Debian packages for the real-SocketCAN tests (User Mode Linux, kmod's insmod, can-utils' candump, iproute2),
 #      when root or passwordless sudo is available; skipped with the reason otherwise;
-#   2. a virtual environment in .venv (kept if it is there) with the package, editable, and its test and plot extras.
+#   2. a User Mode Linux that starts on this CPU: Debian's, or where it cannot (AVX-512/AMX CPUs) Debian
+#      unstable's, unpacked into .uml/ (tests/support/uml/newer_uml.sh);
+#   3. a virtual environment in .venv (kept if it is there) with the package, editable, and its test and plot extras.
 # Safe to run again: installed packages and an existing venv are left as they are.
 #   ./install.sh [--dry-run]     --dry-run prints each step's commands without running them
 # Environment: PYTHON (default python3) makes the venv.
@@ -26,7 +28,7 @@ run() {
     [ "$DRY_RUN" -eq 1 ] || "$@"
 }
 
-step "1/2 Debian packages for the SocketCAN tests: ${DEBIAN_PACKAGES[*]}"
+step "1/3 Debian packages for the SocketCAN tests: ${DEBIAN_PACKAGES[*]}"
 if ! command -v apt-get >/dev/null 2>&1; then
     echo "    no apt-get here; SocketCAN tests will be skipped (they need Debian's user-mode-linux)"
 else
@@ -53,7 +55,26 @@ else
     fi
 fi
 
-step "2/2 virtual environment .venv with the package (editable) and its test and plot extras"
+step "2/3 User Mode Linux that starts on this CPU, for the SocketCAN tests"
+uml_check=(tests/support/uml/boot.py --check)
+if ! command -v linux.uml >/dev/null 2>&1; then
+    echo "    no linux.uml: SocketCAN tests will be skipped"
+elif [ "$DRY_RUN" -eq 1 ]; then
+    echo "    \$ $PYTHON ${uml_check[*]}   (where Debian's UML cannot start on this CPU: tests/support/uml/newer_uml.sh)"
+elif said=$("$PYTHON" "${uml_check[@]}" 2>&1); then
+    echo "    $said"
+elif grep -q "ptrace set fp regs failed" <<<"$said"; then
+    echo "    Debian's UML cannot start on this CPU: fetching Debian unstable's into .uml/"
+    if tests/support/uml/newer_uml.sh "$PYTHON" && said=$("$PYTHON" "${uml_check[@]}" 2>&1); then
+        echo "    $said"
+    else
+        echo "    SocketCAN tests will be skipped: $said"
+    fi
+else
+    echo "    SocketCAN tests will be skipped: $said"
+fi
+
+step "3/3 virtual environment .venv with the package (editable) and its test and plot extras"
 if [ -x .venv/bin/python ]; then
     echo "    .venv exists: kept"
 else

@@ -26,8 +26,9 @@ def _stub(bin_dir: Path, name: str, body: str) -> None:
 
 
 def _dry_run(tmp_path: Path, *, uid: int, sudo_ok: bool, apt: bool, installed: bool = False,
-             venv: bool = False) -> subprocess.CompletedProcess:
+             venv: bool = False, uml: bool = False) -> subprocess.CompletedProcess:
     """Runs a copy of install.sh (it works in its own folder: no .venv there unless venv) with stand-ins."""
+    tmp_path.mkdir(exist_ok=True)
     work = tmp_path / "checkout"
     work.mkdir()
     shutil.copy(REPO / "install.sh", work / "install.sh")
@@ -44,6 +45,8 @@ def _dry_run(tmp_path: Path, *, uid: int, sudo_ok: bool, apt: bool, installed: b
     _stub(bin_dir, "python3", "exit 0")
     if apt:
         _stub(bin_dir, "apt-get", "echo 'apt-get ran in a dry run' >&2; exit 1")
+    if uml:
+        _stub(bin_dir, "linux.uml", "echo 'linux.uml ran in a dry run' >&2; exit 1")
     return subprocess.run([BASH, str(work / "install.sh"), "--dry-run"], capture_output=True, text=True,
                           env={"PATH": str(bin_dir), "HOME": str(tmp_path)})
 
@@ -87,6 +90,17 @@ def test_nothing_to_install_says_why_and_a_second_run_keeps_the_venv(tmp_path, c
     expected = "no apt-get here; SocketCAN tests will be skipped" if case == "no apt-get" else "all installed already"
     assert expected in out.stdout
     assert ".venv exists: kept" in out.stdout and "-m venv" not in out.stdout
+
+
+def test_user_mode_linux_is_checked_where_installed_and_skipped_where_not(tmp_path):
+    """Whether Debian's UML starts on this CPU is checked by booting it, so a dry run only says how."""
+    out = _dry_run(tmp_path / "with", uid=0, sudo_ok=True, apt=True, installed=True, uml=True)
+    assert out.returncode == 0, out.stderr
+    assert ("$ python3 tests/support/uml/boot.py --check   (where Debian's UML cannot start on this CPU: "
+            "tests/support/uml/newer_uml.sh)") in out.stdout
+    assert "linux.uml ran" not in out.stderr
+    out = _dry_run(tmp_path / "without", uid=0, sudo_ok=True, apt=True, installed=True)
+    assert "no linux.uml: SocketCAN tests will be skipped" in out.stdout
 
 
 def test_an_unknown_option_is_one_line_and_exit_2(tmp_path):

@@ -8,7 +8,7 @@ mount -t sysfs sysfs /sys
 mount -t tmpfs tmpfs /run
 mkdir -p /dev/shm && mount -t tmpfs tmpfs /dev/shm   # /dev is the guest's devtmpfs: no shm directory until made
 mkdir -p /dev/pts && mount -t devpts devpts /dev/pts
-modules=/usr/lib/uml/modules/$(uname -r)/kernel
+modules=${UML_MODULES:-/usr/lib/uml/modules}/$(uname -r)/kernel   # UML_MODULES: .uml/'s newer UML
 for module in net/can/can.ko net/can/can-raw.ko drivers/net/can/dev/can-dev.ko drivers/net/can/vcan.ko; do
     insmod "$modules/$module" 2>>"$UML_RESULT_DIR/output.txt"
 done
