@@ -74,9 +74,10 @@ def _inside(out: str, slow_ns: int, argv: list) -> int:
     return main(argv)
 
 
-def _follow(misses: np.ndarray, sends: np.ndarray, stalled: int, window_ns: int = 1_500_000) -> list:
+def _follow(misses: np.ndarray, sends: np.ndarray, stalled: int, window_ns: int = 1_500_000) -> tuple:
     """The misses not stalled, by what came within `window_ns` before each: a slow send first, else a stalled
-    miss (the host's stall the sender is still catching up from), else neither."""
+    miss (the host's stall the sender is still catching up from), else neither. Returns ([(what, count)], the
+    miss rows after neither)."""
     stalls = misses[misses[:, 1] == stalled, 3]
     found, neither = Counter(), []
     for row in misses[misses[:, 1] != stalled]:

@@ -58,3 +58,13 @@ def test_boot_runs_nothing_from_the_repository_that_others_may_write(tmp_path, m
     binary.chmod(0o755)
     os.chmod(tmp_path / "root/usr", 0o777)       # a directory on the way
     assert not boot._trusted(binary)
+    os.chmod(tmp_path / "root/usr", 0o755)
+    module_dir = tmp_path / "root/usr/lib/uml/modules/7.2.7/kernel"
+    module_dir.mkdir(parents=True)
+    for p in [module_dir, *module_dir.parents]:
+        if p == tmp_path:
+            break
+        os.chmod(p, 0o755)
+    assert boot._trusted_tree(tmp_path / "root/usr/lib/uml/modules")
+    os.chmod(module_dir, 0o777)                  # the guest would load whatever someone put there
+    assert not boot._trusted_tree(tmp_path / "root/usr/lib/uml/modules")

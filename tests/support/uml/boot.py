@@ -34,16 +34,23 @@ def _trusted(path: Path) -> bool:
     return False
 
 
+def _trusted_tree(top: Path) -> bool:
+    """_trusted for `top` and everything under it (the guest loads these kernel modules)."""
+    return _trusted(top) and all(_trusted(Path(d) / name) for d, dirs, files in os.walk(top) for name in dirs + files)
+
+
 def _newer() -> tuple[str, dict, str] | None:
     """(binary, environment additions, modules directory) of .uml/'s UML, when install.sh made it and it is safe."""
-    binary, shim = NEWER / "root/usr/bin/linux.uml", NEWER / "libisoc23.so"
-    if not binary.is_file() or not _trusted(binary) or (shim.exists() and not _trusted(shim)):
+    binary, shim, modules = NEWER / "root/usr/bin/linux.uml", NEWER / "libisoc23.so", NEWER / "root/usr/lib/uml/modules"
+    if (not binary.is_file() or not _trusted(binary) or (shim.exists() and not _trusted(shim))
+            or not modules.is_dir() or not _trusted_tree(modules)):
         return None
     env = {"LD_PRELOAD": str(shim)} if shim.exists() else {}
-    return str(binary), env, str(NEWER / "root/usr/lib/uml/modules")
+    return str(binary), env, str(modules)
 
 
-UML = _newer()[0] if _newer() else shutil.which("linux.uml")
+_NEWER = _newer()
+UML = _NEWER[0] if _NEWER else shutil.which("linux.uml")
 
 
 @dataclass
@@ -57,7 +64,7 @@ def unavailable() -> str | None:
     """Why UML cannot run here, or None."""
     if UML is None:
         return "linux.uml not installed (apt-get install user-mode-linux kmod can-utils)"
-    if _newer() is None and not Path("/usr/lib/uml/modules").is_dir():
+    if _NEWER is None and not Path("/usr/lib/uml/modules").is_dir():
         return "user-mode-linux's kernel modules are missing (/usr/lib/uml/modules)"
     return None
 
@@ -71,9 +78,8 @@ def boot(result_dir: Path, script: Path | None = None, timeout: float = 600, mem
     output_file = result_dir / "output.txt"
     output_file.touch()
     # Guest RAM is a file under TMPDIR: it must be a mount without noexec and with room for mem=.
-    newer = _newer()
-    env = {**os.environ, "TMPDIR": "/dev/shm", **(newer[1] if newer else {})}
-    modules = [f"UML_MODULES={newer[2]}"] if newer else []
+    env = {**os.environ, "TMPDIR": "/dev/shm", **(_NEWER[1] if _NEWER else {})}
+    modules = [f"UML_MODULES={_NEWER[2]}"] if _NEWER else []
     command = [UML, f"mem={mem}", "root=/dev/root", "rootfstype=hostfs", "hostfs=/", "rw", "quiet", "loglevel=4",
                f"init={HERE / 'init.sh'}", "con=null", "con0=null,fd:1", f"umid=imu-{uuid.uuid4().hex[:12]}",
                f"UML_RESULT_DIR={result_dir}", f"UML_REPO={REPO}", f"UML_PYTHON={sys.executable}", *modules]
@@ -91,7 +97,7 @@ def boot(result_dir: Path, script: Path | None = None, timeout: float = 600, mem
         if FP_REGS_FAILED in said:
             reason = (f"{UML} cannot start on this CPU ({FP_REGS_FAILED}: Debian bookworm's UML 6.1 keeps the "
                       "XSAVE state in a fixed-size buffer, and the host kernel takes nothing less than this CPU's "
-                      "whole area, larger with AVX-512 or AMX); ./install.sh as root fetches a newer UML into .uml/")
+                      "whole area, larger with AVX-512 or AMX); ./install.sh fetches a newer UML into .uml/")
         else:
             reason = said.strip()[-500:]
         return Boot(False, None, f"User Mode Linux could not boot here (exit {run.returncode}): {reason}")
